@@ -1,0 +1,664 @@
+//! COLMAP's camera models, with its exact camera→pixel projection in f64.
+//!
+//! Each model is a zero-sized type implementing [`Projection`]; [`Camera::project_many`]
+//! matches on the model once per batch and then runs a monomorphised loop, so a pinhole
+//! camera runs `f·x/z + c` and nothing else: models without distortion pay for none.
+//!
+//! Conventions follow COLMAP: the upper-left pixel's centre is (0.5, 0.5); a point with
+//! camera-space z below `f64::EPSILON` is not visible (this also bounds fisheye models to
+//! the forward hemisphere, i.e. incidence angles below 90°).
+
+use glam::{DVec2, DVec3};
+
+/// The camera models COLMAP defines that this crate projects; ids are COLMAP's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum CameraModel {
+    SimplePinhole,
+    Pinhole,
+    SimpleRadial,
+    Radial,
+    OpenCv,
+    OpenCvFisheye,
+    FullOpenCv,
+    Fov,
+    SimpleRadialFisheye,
+    RadialFisheye,
+    ThinPrismFisheye,
+    RadTanThinPrismFisheye,
+    SimpleFisheye,
+    Fisheye,
+}
+
+impl CameraModel {
+    /// Every supported model, in COLMAP id order.
+    pub const ALL: [CameraModel; 14] = [
+        CameraModel::SimplePinhole,
+        CameraModel::Pinhole,
+        CameraModel::SimpleRadial,
+        CameraModel::Radial,
+        CameraModel::OpenCv,
+        CameraModel::OpenCvFisheye,
+        CameraModel::FullOpenCv,
+        CameraModel::Fov,
+        CameraModel::SimpleRadialFisheye,
+        CameraModel::RadialFisheye,
+        CameraModel::ThinPrismFisheye,
+        CameraModel::RadTanThinPrismFisheye,
+        CameraModel::SimpleFisheye,
+        CameraModel::Fisheye,
+    ];
+
+    /// COLMAP's numeric model id, as stored in cameras.bin.
+    pub fn id(self) -> i32 {
+        match self {
+            CameraModel::SimplePinhole => 0,
+            CameraModel::Pinhole => 1,
+            CameraModel::SimpleRadial => 2,
+            CameraModel::Radial => 3,
+            CameraModel::OpenCv => 4,
+            CameraModel::OpenCvFisheye => 5,
+            CameraModel::FullOpenCv => 6,
+            CameraModel::Fov => 7,
+            CameraModel::SimpleRadialFisheye => 8,
+            CameraModel::RadialFisheye => 9,
+            CameraModel::ThinPrismFisheye => 10,
+            CameraModel::RadTanThinPrismFisheye => 11,
+            CameraModel::SimpleFisheye => 14,
+            CameraModel::Fisheye => 15,
+        }
+    }
+
+    /// The model for a cameras.bin id; `None` for ids COLMAP does not define or we do not project.
+    pub fn from_id(id: i32) -> Option<CameraModel> {
+        CameraModel::ALL.into_iter().find(|m| m.id() == id)
+    }
+
+    /// COLMAP's model name, as written in cameras.txt.
+    pub fn name(self) -> &'static str {
+        match self {
+            CameraModel::SimplePinhole => "SIMPLE_PINHOLE",
+            CameraModel::Pinhole => "PINHOLE",
+            CameraModel::SimpleRadial => "SIMPLE_RADIAL",
+            CameraModel::Radial => "RADIAL",
+            CameraModel::OpenCv => "OPENCV",
+            CameraModel::OpenCvFisheye => "OPENCV_FISHEYE",
+            CameraModel::FullOpenCv => "FULL_OPENCV",
+            CameraModel::Fov => "FOV",
+            CameraModel::SimpleRadialFisheye => "SIMPLE_RADIAL_FISHEYE",
+            CameraModel::RadialFisheye => "RADIAL_FISHEYE",
+            CameraModel::ThinPrismFisheye => "THIN_PRISM_FISHEYE",
+            CameraModel::RadTanThinPrismFisheye => "RAD_TAN_THIN_PRISM_FISHEYE",
+            CameraModel::SimpleFisheye => "SIMPLE_FISHEYE",
+            CameraModel::Fisheye => "FISHEYE",
+        }
+    }
+
+    /// The model for a cameras.txt name.
+    pub fn from_name(name: &str) -> Option<CameraModel> {
+        CameraModel::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// Parameter names in file order, so errors and tables can name them.
+    pub fn param_names(self) -> &'static [&'static str] {
+        match self {
+            CameraModel::SimplePinhole | CameraModel::SimpleFisheye => &["f", "cx", "cy"],
+            CameraModel::Pinhole | CameraModel::Fisheye => &["fx", "fy", "cx", "cy"],
+            CameraModel::SimpleRadial | CameraModel::SimpleRadialFisheye => &["f", "cx", "cy", "k"],
+            CameraModel::Radial | CameraModel::RadialFisheye => &["f", "cx", "cy", "k1", "k2"],
+            CameraModel::OpenCv => &["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"],
+            CameraModel::OpenCvFisheye => &["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
+            CameraModel::FullOpenCv => &[
+                "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6",
+            ],
+            CameraModel::Fov => &["fx", "fy", "cx", "cy", "omega"],
+            CameraModel::ThinPrismFisheye => &[
+                "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "sx1", "sy1",
+            ],
+            CameraModel::RadTanThinPrismFisheye => &[
+                "fx", "fy", "cx", "cy", "k0", "k1", "k2", "k3", "k4", "k5", "p0", "p1", "s0", "s1",
+                "s2", "s3",
+            ],
+        }
+    }
+
+    /// How many parameters a camera of this model stores.
+    pub fn num_params(self) -> usize {
+        self.param_names().len()
+    }
+
+    /// Whether the model has a single focal length (f) rather than fx, fy.
+    pub fn single_focal(self) -> bool {
+        self.param_names()[0] == "f"
+    }
+
+    /// Whether projecting through this model does more than `f·x/z + c`.
+    pub fn has_distortion(self) -> bool {
+        !matches!(self, CameraModel::SimplePinhole | CameraModel::Pinhole)
+    }
+}
+
+impl std::fmt::Display for CameraModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Run `$body` with `$m` bound to the zero-sized projection type of `$model`.
+macro_rules! dispatch {
+    ($model:expr, $m:ident => $body:expr) => {
+        match $model {
+            CameraModel::SimplePinhole => {
+                type $m = SimplePinholeP;
+                $body
+            }
+            CameraModel::Pinhole => {
+                type $m = PinholeP;
+                $body
+            }
+            CameraModel::SimpleRadial => {
+                type $m = SimpleRadialP;
+                $body
+            }
+            CameraModel::Radial => {
+                type $m = RadialP;
+                $body
+            }
+            CameraModel::OpenCv => {
+                type $m = OpenCvP;
+                $body
+            }
+            CameraModel::OpenCvFisheye => {
+                type $m = OpenCvFisheyeP;
+                $body
+            }
+            CameraModel::FullOpenCv => {
+                type $m = FullOpenCvP;
+                $body
+            }
+            CameraModel::Fov => {
+                type $m = FovP;
+                $body
+            }
+            CameraModel::SimpleRadialFisheye => {
+                type $m = SimpleRadialFisheyeP;
+                $body
+            }
+            CameraModel::RadialFisheye => {
+                type $m = RadialFisheyeP;
+                $body
+            }
+            CameraModel::ThinPrismFisheye => {
+                type $m = ThinPrismFisheyeP;
+                $body
+            }
+            CameraModel::RadTanThinPrismFisheye => {
+                type $m = RadTanThinPrismFisheyeP;
+                $body
+            }
+            CameraModel::SimpleFisheye => {
+                type $m = SimpleFisheyeP;
+                $body
+            }
+            CameraModel::Fisheye => {
+                type $m = FisheyeP;
+                $body
+            }
+        }
+    };
+}
+
+/// A calibrated camera as COLMAP stores it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Camera {
+    pub id: u32,
+    pub model: CameraModel,
+    pub width: u64,
+    pub height: u64,
+    /// Parameters in COLMAP's order (see [`CameraModel::param_names`]); length is checked on read.
+    pub params: Vec<f64>,
+}
+
+impl Camera {
+    /// Project a camera-space point to pixels; `None` where COLMAP's projection is undefined.
+    #[inline]
+    pub fn img_from_cam(&self, p: DVec3) -> Option<DVec2> {
+        dispatch!(self.model, M => M::project(&self.params, p))
+    }
+
+    /// Project many points, matching on the model once for the whole batch.
+    pub fn project_many(&self, points: &[DVec3], out: &mut Vec<Option<DVec2>>) {
+        out.clear();
+        out.reserve(points.len());
+        let params = self.params.as_slice();
+        dispatch!(self.model, M => out.extend(points.iter().map(|&p| M::project(params, p))))
+    }
+
+    /// Focal lengths (fx, fy); models with one focal length return it twice.
+    pub fn focal(&self) -> DVec2 {
+        if self.model.single_focal() {
+            DVec2::splat(self.params[0])
+        } else {
+            DVec2::new(self.params[0], self.params[1])
+        }
+    }
+
+    /// Principal point (cx, cy) in pixels.
+    pub fn principal_point(&self) -> DVec2 {
+        let i = if self.model.single_focal() { 1 } else { 2 };
+        DVec2::new(self.params[i], self.params[i + 1])
+    }
+
+    /// The same lens on an image resized by (sx, sy): focal and principal point scale, distortion does not.
+    ///
+    /// With one focal length COLMAP scales f by the mean of sx and sy; resizing with equal
+    /// factors keeps that exact.
+    pub fn scaled(&self, sx: f64, sy: f64, width: u64, height: u64) -> Camera {
+        let mut params = self.params.clone();
+        if self.model.single_focal() {
+            params[0] *= 0.5 * (sx + sy);
+            params[1] *= sx;
+            params[2] *= sy;
+        } else {
+            params[0] *= sx;
+            params[1] *= sy;
+            params[2] *= sx;
+            params[3] *= sy;
+        }
+        Camera {
+            id: self.id,
+            model: self.model,
+            width,
+            height,
+            params,
+        }
+    }
+}
+
+/// One camera model's projection, implemented by a zero-sized type so loops monomorphise.
+pub trait Projection {
+    /// Camera-space point to pixel, exactly as COLMAP's `ImgFromCam`; `None` when undefined.
+    fn project(params: &[f64], p: DVec3) -> Option<DVec2>;
+}
+
+/// Normalised image-plane coordinates, or `None` behind or on the camera plane.
+#[inline(always)]
+fn normalise(p: DVec3) -> Option<(f64, f64)> {
+    // COLMAP rejects w < epsilon; `!(>=)` also rejects NaN.
+    if !(p.z >= f64::EPSILON) {
+        return None;
+    }
+    Some((p.x / p.z, p.y / p.z))
+}
+
+/// Finite pixel or `None`: a huge distortion polynomial can overflow, and overflow is not a pixel.
+#[inline(always)]
+fn finite(x: f64, y: f64) -> Option<DVec2> {
+    (x.is_finite() && y.is_finite()).then_some(DVec2::new(x, y))
+}
+
+/// Equidistant fisheye angle coordinates from normalised ones (COLMAP's FisheyeFromNormal).
+#[inline(always)]
+fn fisheye_from_normal(u: f64, v: f64) -> (f64, f64) {
+    let r = (u * u + v * v).sqrt();
+    if r > f64::EPSILON {
+        let s = r.atan() / r;
+        (u * s, v * s)
+    } else {
+        (u, v)
+    }
+}
+
+macro_rules! zst {
+    ($($name:ident),*) => { $(
+        #[doc = concat!("Projection of the `", stringify!($name), "` model.")]
+        #[derive(Debug, Clone, Copy)]
+        pub struct $name;
+    )* };
+}
+zst!(
+    SimplePinholeP,
+    PinholeP,
+    SimpleRadialP,
+    RadialP,
+    OpenCvP,
+    OpenCvFisheyeP,
+    FullOpenCvP,
+    FovP,
+    SimpleRadialFisheyeP,
+    RadialFisheyeP,
+    ThinPrismFisheyeP,
+    RadTanThinPrismFisheyeP,
+    SimpleFisheyeP,
+    FisheyeP
+);
+
+impl Projection for SimplePinholeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        finite(p_[0] * u + p_[1], p_[0] * v + p_[2])
+    }
+}
+
+impl Projection for PinholeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        finite(p_[0] * u + p_[2], p_[1] * v + p_[3])
+    }
+}
+
+impl Projection for SimpleRadialP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let radial = p_[3] * (u * u + v * v);
+        let (x, y) = (u + u * radial, v + v * radial);
+        finite(p_[0] * x + p_[1], p_[0] * y + p_[2])
+    }
+}
+
+impl Projection for RadialP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let r2 = u * u + v * v;
+        let radial = p_[3] * r2 + p_[4] * r2 * r2;
+        let (x, y) = (u + u * radial, v + v * radial);
+        finite(p_[0] * x + p_[1], p_[0] * y + p_[2])
+    }
+}
+
+/// OpenCV radial-tangential distortion increments (k1, k2, p1, p2).
+#[inline(always)]
+fn opencv_delta(k1: f64, k2: f64, p1: f64, p2: f64, u: f64, v: f64) -> (f64, f64) {
+    let (u2, uv, v2) = (u * u, u * v, v * v);
+    let r2 = u2 + v2;
+    let radial = k1 * r2 + k2 * r2 * r2;
+    (
+        u * radial + 2.0 * p1 * uv + p2 * (r2 + 2.0 * u2),
+        v * radial + 2.0 * p2 * uv + p1 * (r2 + 2.0 * v2),
+    )
+}
+
+impl Projection for OpenCvP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (du, dv) = opencv_delta(p_[4], p_[5], p_[6], p_[7], u, v);
+        finite(p_[0] * (u + du) + p_[2], p_[1] * (v + dv) + p_[3])
+    }
+}
+
+impl Projection for FullOpenCvP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (k1, k2, p1, p2, k3, k4, k5, k6) =
+            (p_[4], p_[5], p_[6], p_[7], p_[8], p_[9], p_[10], p_[11]);
+        let (u2, uv, v2) = (u * u, u * v, v * v);
+        let r2 = u2 + v2;
+        let r4 = r2 * r2;
+        let r6 = r4 * r2;
+        let radial = (1.0 + k1 * r2 + k2 * r4 + k3 * r6) / (1.0 + k4 * r2 + k5 * r4 + k6 * r6);
+        let du = u * radial + 2.0 * p1 * uv + p2 * (r2 + 2.0 * u2) - u;
+        let dv = v * radial + 2.0 * p2 * uv + p1 * (r2 + 2.0 * v2) - v;
+        finite(p_[0] * (u + du) + p_[2], p_[1] * (v + dv) + p_[3])
+    }
+}
+
+impl Projection for FovP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let omega = p_[4];
+        // COLMAP's switch points between the Taylor expansions and the closed form.
+        const EPS: f64 = 1e-4;
+        let radius2 = u * u + v * v;
+        let omega2 = omega * omega;
+        let factor = if omega2 < EPS {
+            (omega2 * radius2) / 3.0 - omega2 / 12.0 + 1.0
+        } else if radius2 < EPS {
+            let t = (omega / 2.0).tan();
+            (-2.0 * t * (4.0 * radius2 * t * t - 3.0)) / (3.0 * omega)
+        } else {
+            let radius = radius2.sqrt();
+            (radius * 2.0 * (omega / 2.0).tan()).atan() / (radius * omega)
+        };
+        finite(p_[0] * (u * factor) + p_[2], p_[1] * (v * factor) + p_[3])
+    }
+}
+
+impl Projection for OpenCvFisheyeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (uu, vv) = fisheye_from_normal(u, v);
+        let t2 = uu * uu + vv * vv;
+        let t4 = t2 * t2;
+        let radial = p_[4] * t2 + p_[5] * t4 + p_[6] * t4 * t2 + p_[7] * t4 * t4;
+        finite(
+            p_[0] * (uu + uu * radial) + p_[2],
+            p_[1] * (vv + vv * radial) + p_[3],
+        )
+    }
+}
+
+impl Projection for SimpleRadialFisheyeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (uu, vv) = fisheye_from_normal(u, v);
+        let radial = p_[3] * (uu * uu + vv * vv);
+        finite(
+            p_[0] * (uu + uu * radial) + p_[1],
+            p_[0] * (vv + vv * radial) + p_[2],
+        )
+    }
+}
+
+impl Projection for RadialFisheyeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (uu, vv) = fisheye_from_normal(u, v);
+        let t2 = uu * uu + vv * vv;
+        let radial = p_[3] * t2 + p_[4] * t2 * t2;
+        finite(
+            p_[0] * (uu + uu * radial) + p_[1],
+            p_[0] * (vv + vv * radial) + p_[2],
+        )
+    }
+}
+
+impl Projection for ThinPrismFisheyeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (uu, vv) = fisheye_from_normal(u, v);
+        let (k1, k2, p1, p2, k3, k4, sx1, sy1) =
+            (p_[4], p_[5], p_[6], p_[7], p_[8], p_[9], p_[10], p_[11]);
+        let (u2, uv, v2) = (uu * uu, uu * vv, vv * vv);
+        let r2 = u2 + v2;
+        let r4 = r2 * r2;
+        let r6 = r4 * r2;
+        let r8 = r6 * r2;
+        let radial = k1 * r2 + k2 * r4 + k3 * r6 + k4 * r8;
+        let du = uu * radial + 2.0 * p1 * uv + p2 * (r2 + 2.0 * u2) + sx1 * r2;
+        let dv = vv * radial + 2.0 * p2 * uv + p1 * (r2 + 2.0 * v2) + sy1 * r2;
+        finite(p_[0] * (uu + du) + p_[2], p_[1] * (vv + dv) + p_[3])
+    }
+}
+
+impl Projection for RadTanThinPrismFisheyeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (uu, vv) = fisheye_from_normal(u, v);
+        let e = &p_[4..16];
+        let theta2 = uu * uu + vv * vv;
+        let mut th_radial = 1.0;
+        let mut power = 1.0;
+        for k in &e[..6] {
+            power *= theta2;
+            th_radial += k * power;
+        }
+        let (p0, p1, s0, s1, s2, s3) = (e[6], e[7], e[8], e[9], e[10], e[11]);
+        let x = th_radial * uu;
+        let y = th_radial * vv;
+        let (x2, y2, xy) = (x * x, y * y, x * y);
+        let r2 = x2 + y2;
+        let r4 = r2 * r2;
+        let xd = x + (2.0 * p1 * xy + p0 * (r2 + 2.0 * x2)) + (s0 * r2 + s1 * r4);
+        let yd = y + (2.0 * p0 * xy + p1 * (r2 + 2.0 * y2)) + (s2 * r2 + s3 * r4);
+        // COLMAP forms du = xd - uu and then adds uu back; kept for bit-level parity.
+        let (du, dv) = (xd - uu, yd - vv);
+        finite(p_[0] * (uu + du) + p_[2], p_[1] * (vv + dv) + p_[3])
+    }
+}
+
+impl Projection for SimpleFisheyeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (uu, vv) = fisheye_from_normal(u, v);
+        finite(p_[0] * uu + p_[1], p_[0] * vv + p_[2])
+    }
+}
+
+impl Projection for FisheyeP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        let (u, v) = normalise(p)?;
+        let (uu, vv) = fisheye_from_normal(u, v);
+        finite(p_[0] * uu + p_[2], p_[1] * vv + p_[3])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam(model: CameraModel, params: &[f64]) -> Camera {
+        Camera {
+            id: 1,
+            model,
+            width: 100,
+            height: 80,
+            params: params.to_vec(),
+        }
+    }
+
+    #[test]
+    fn ids_and_names_round_trip() {
+        for m in CameraModel::ALL {
+            assert_eq!(CameraModel::from_id(m.id()), Some(m));
+            assert_eq!(CameraModel::from_name(m.name()), Some(m));
+        }
+        assert_eq!(CameraModel::from_id(12), None);
+        assert_eq!(CameraModel::from_id(-1), None);
+    }
+
+    #[test]
+    fn behind_on_and_nan_points_are_not_visible() {
+        for m in CameraModel::ALL {
+            let mut params = vec![0.0; m.num_params()];
+            params[0] = 100.0;
+            if !m.single_focal() {
+                params[1] = 100.0;
+            }
+            let c = cam(m, &params);
+            assert_eq!(
+                c.img_from_cam(DVec3::new(0.1, 0.2, 0.0)),
+                None,
+                "{m} on plane"
+            );
+            assert_eq!(
+                c.img_from_cam(DVec3::new(0.1, 0.2, -1.0)),
+                None,
+                "{m} behind"
+            );
+            assert_eq!(
+                c.img_from_cam(DVec3::new(0.1, 0.2, 1e-17)),
+                None,
+                "{m} below eps"
+            );
+            assert_eq!(
+                c.img_from_cam(DVec3::new(f64::NAN, 0.2, 1.0)),
+                None,
+                "{m} nan"
+            );
+            assert!(
+                c.img_from_cam(DVec3::new(0.1, 0.2, 1.0)).is_some(),
+                "{m} in front"
+            );
+        }
+    }
+
+    #[test]
+    fn principal_axis_hits_principal_point() {
+        let c = cam(
+            CameraModel::OpenCvFisheye,
+            &[500.0, 510.0, 320.5, 240.5, 0.1, 0.01, 0.0, 0.0],
+        );
+        assert_eq!(
+            c.img_from_cam(DVec3::new(0.0, 0.0, 3.0)),
+            Some(DVec2::new(320.5, 240.5))
+        );
+    }
+
+    #[test]
+    fn fisheye_beyond_90_degrees_is_not_visible() {
+        let c = cam(
+            CameraModel::OpenCvFisheye,
+            &[500.0, 500.0, 320.0, 240.0, 0.0, 0.0, 0.0, 0.0],
+        );
+        // 89.9° is visible and lands at f·θ from the centre; 90.1° is behind the camera.
+        let a = 89.9f64.to_radians();
+        let px = c.img_from_cam(DVec3::new(a.sin(), 0.0, a.cos())).unwrap();
+        assert!((px.x - (320.0 + 500.0 * a)).abs() < 1e-9);
+        let b = 90.1f64.to_radians();
+        assert_eq!(c.img_from_cam(DVec3::new(b.sin(), 0.0, b.cos())), None);
+    }
+
+    #[test]
+    fn overflowing_distortion_is_not_a_pixel() {
+        let c = cam(CameraModel::Radial, &[100.0, 50.0, 40.0, 1e300, 1e300]);
+        assert_eq!(c.img_from_cam(DVec3::new(1e10, 1e10, 1.0)), None);
+    }
+
+    #[test]
+    fn scaling_moves_focal_and_principal_point_only() {
+        let c = cam(CameraModel::SimpleRadial, &[1000.0, 50.0, 40.0, 0.1]);
+        let s = c.scaled(0.5, 0.5, 50, 40);
+        assert_eq!(s.params, vec![500.0, 25.0, 20.0, 0.1]);
+        let p = DVec3::new(0.01, -0.02, 1.0);
+        let a = c.img_from_cam(p).unwrap();
+        let b = s.img_from_cam(p).unwrap();
+        assert!((a * 0.5 - b).length() < 1e-12);
+    }
+
+    #[test]
+    fn project_many_equals_one_by_one() {
+        let c = cam(
+            CameraModel::FullOpenCv,
+            &[
+                500.0, 510.0, 320.0, 240.0, 0.1, -0.01, 0.001, 0.002, 0.001, 0.01, 0.001, 0.0001,
+            ],
+        );
+        let pts: Vec<DVec3> = (0..50)
+            .map(|i| {
+                DVec3::new(
+                    i as f64 * 0.01 - 0.25,
+                    0.1,
+                    if i % 7 == 0 { -1.0 } else { 1.0 },
+                )
+            })
+            .collect();
+        let mut out = Vec::new();
+        c.project_many(&pts, &mut out);
+        for (p, o) in pts.iter().zip(&out) {
+            assert_eq!(c.img_from_cam(*p), *o);
+        }
+    }
+}

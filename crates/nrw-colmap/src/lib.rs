@@ -1,0 +1,26 @@
+//! COLMAP reconstructions read into f64 geometry: sparse models in both encodings and both
+//! layouts (COLMAP 3, COLMAP 4 with rigs and frames), dense `fused.ply` clouds, and COLMAP's
+//! exact camera models. Every count read from a file is checked against the bytes left
+//! before anything is allocated, and every error names the file, the record and the field.
+
+mod bin;
+pub mod camera;
+pub mod error;
+mod load;
+pub mod model;
+mod parse;
+pub mod ply;
+pub mod pose;
+pub mod stats;
+mod txt;
+
+pub use camera::{Camera, CameraModel, Projection};
+pub use error::{ColmapError, Record, Result};
+pub use load::{detect_format, find_model_dir, read_model, read_scene, MODEL_FILES};
+pub use model::{
+    Format, Frame, Image, Point2D, Point3D, Reconstruction, Rig, SensorId, TrackElement, Warning,
+    NO_POINT3D,
+};
+pub use ply::{read_ply, PointCloud};
+pub use pose::{LocalRigid3, Rigid3};
+pub use stats::{reprojection_stats, ImageReprojection, ReprojectionStats};

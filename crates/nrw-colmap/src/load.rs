@@ -1,0 +1,345 @@
+//! Finding a model on disk, choosing its encoding, reading it and checking it as a whole.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use crate::error::{ColmapError, Record, Result};
+use crate::model::{Format, Reconstruction, SensorId, Warning};
+use crate::parse::PoseCheck;
+
+/// The three files every COLMAP sparse model has.
+pub const MODEL_FILES: [&str; 3] = ["cameras", "images", "points3D"];
+
+fn has_model(dir: &Path) -> bool {
+    [Format::Binary, Format::Text]
+        .iter()
+        .any(|f| dir.join(format!("cameras.{}", f.ext())).is_file())
+}
+
+/// The model folder of a scene: the folder itself, `sparse/0/` or `sparse/` below it.
+pub fn find_model_dir(scene: &Path) -> Result<PathBuf> {
+    let candidates = [
+        scene.to_path_buf(),
+        scene.join("sparse").join("0"),
+        scene.join("sparse"),
+    ];
+    for c in &candidates {
+        if has_model(c) {
+            return Ok(c.clone());
+        }
+    }
+    if !scene.exists() {
+        return Err(ColmapError::io(
+            scene,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or directory"),
+        ));
+    }
+    Err(ColmapError::NoModel {
+        path: scene.to_path_buf(),
+        looked: candidates
+            .iter()
+            .map(|c| c.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+    })
+}
+
+/// Which encoding a model folder holds: binary when all three .bin files exist, else text.
+pub fn detect_format(dir: &Path) -> Result<Format> {
+    for f in [Format::Binary, Format::Text] {
+        let present: Vec<bool> = MODEL_FILES
+            .iter()
+            .map(|n| dir.join(format!("{n}.{}", f.ext())).is_file())
+            .collect();
+        if present.iter().all(|&p| p) {
+            return Ok(f);
+        }
+        if present[0] {
+            let missing: Vec<String> = MODEL_FILES
+                .iter()
+                .zip(&present)
+                .filter(|(_, &p)| !p)
+                .map(|(n, _)| format!("{n}.{}", f.ext()))
+                .collect();
+            // A partial binary model next to a complete text one is fine: use the text one.
+            let other = if f == Format::Binary {
+                Format::Text
+            } else {
+                Format::Binary
+            };
+            if MODEL_FILES
+                .iter()
+                .all(|n| dir.join(format!("{n}.{}", other.ext())).is_file())
+            {
+                return Ok(other);
+            }
+            return Err(ColmapError::invalid(
+                dir,
+                Record::File,
+                "files",
+                format!("incomplete model: {} missing", missing.join(" and ")),
+            ));
+        }
+    }
+    Err(ColmapError::NoModel {
+        path: dir.to_path_buf(),
+        looked: dir.display().to_string(),
+    })
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| ColmapError::io(path, e))
+}
+
+fn read_text(path: &Path) -> Result<String> {
+    let bytes = read_bytes(path)?;
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+        ColmapError::invalid(
+            path,
+            Record::Line {
+                kind: "text",
+                line,
+                id: None,
+            },
+            "bytes",
+            format!("not UTF-8 text (byte offset {at})"),
+        )
+    })
+}
+
+/// Read the scene's model (see [`find_model_dir`]) in the encoding found there.
+pub fn read_scene(scene: &Path) -> Result<Reconstruction> {
+    let dir = find_model_dir(scene)?;
+    read_model(&dir, None)
+}
+
+/// Read a model folder; `format` forces an encoding, `None` prefers binary.
+pub fn read_model(dir: &Path, format: Option<Format>) -> Result<Reconstruction> {
+    let format = match format {
+        Some(f) => f,
+        None => detect_format(dir)?,
+    };
+    let file = |n: &str| dir.join(format!("{n}.{}", format.ext()));
+    let mut checks = PoseCheck::default();
+    let mut rec = Reconstruction {
+        format: Some(format),
+        ..Default::default()
+    };
+    let (cams, imgs, pts) = (file("cameras"), file("images"), file("points3D"));
+    let (rigs, frames) = (file("rigs"), file("frames"));
+    match format {
+        Format::Binary => {
+            rec.cameras = crate::bin::read_cameras(&cams, &read_bytes(&cams)?)?;
+            rec.images = crate::bin::read_images(&imgs, &read_bytes(&imgs)?, &mut checks)?;
+            rec.points = crate::bin::read_points(&pts, &read_bytes(&pts)?)?;
+            if rigs.is_file() {
+                rec.rigs = crate::bin::read_rigs(&rigs, &read_bytes(&rigs)?, &mut checks)?;
+            }
+            if frames.is_file() {
+                rec.frames = crate::bin::read_frames(&frames, &read_bytes(&frames)?, &mut checks)?;
+            }
+        }
+        Format::Text => {
+            rec.cameras = crate::txt::read_cameras(&cams, &read_text(&cams)?)?;
+            rec.images = crate::txt::read_images(&imgs, &read_text(&imgs)?, &mut checks)?;
+            rec.points = crate::txt::read_points(&pts, &read_text(&pts)?)?;
+            if rigs.is_file() {
+                rec.rigs = crate::txt::read_rigs(&rigs, &read_text(&rigs)?, &mut checks)?;
+            }
+            if frames.is_file() {
+                rec.frames = crate::txt::read_frames(&frames, &read_text(&frames)?, &mut checks)?;
+            }
+        }
+    }
+    rec.files = [
+        cams,
+        imgs.clone(),
+        pts.clone(),
+        rigs.clone(),
+        frames.clone(),
+    ]
+    .into_iter()
+    .filter(|p| p.is_file())
+    .collect();
+    rec.warnings = checks.warnings;
+    validate(&mut rec, &imgs, &pts, &frames)?;
+    Ok(rec)
+}
+
+/// Cross-reference checks: every id a record names must exist, and tracks must match keypoints.
+fn validate(rec: &mut Reconstruction, imgs: &Path, pts: &Path, frames: &Path) -> Result<()> {
+    let mut names: HashMap<&str, u32> = HashMap::with_capacity(rec.images.len());
+    let mut keypoint_links = 0usize;
+    for img in rec.images.values() {
+        let r = Record::Id {
+            kind: "image",
+            id: img.id as u64,
+        };
+        if !rec.cameras.contains_key(&img.camera_id) {
+            return Err(ColmapError::invalid(
+                imgs,
+                r,
+                "camera_id",
+                format!(
+                    "refers to camera {}, which the cameras file does not define",
+                    img.camera_id
+                ),
+            ));
+        }
+        if let Some(other) = names.insert(img.name.as_str(), img.id) {
+            return Err(ColmapError::invalid(
+                imgs,
+                r,
+                "name",
+                format!(
+                    "duplicate image name {:?}: image {other} has it too",
+                    img.name
+                ),
+            ));
+        }
+        for (k, p) in img.points2d.iter().enumerate() {
+            if p.has_point3d() {
+                if !rec.points.contains_key(&p.point3d_id) {
+                    return Err(ColmapError::invalid(
+                        imgs,
+                        r,
+                        format!("points2D[{k}].point3D_id"),
+                        format!(
+                            "refers to point {}, which the points3D file does not define",
+                            p.point3d_id
+                        ),
+                    ));
+                }
+                keypoint_links += 1;
+            }
+        }
+    }
+    let mut track_links = 0usize;
+    for p in rec.points.values() {
+        let r = Record::Id {
+            kind: "point3D",
+            id: p.id,
+        };
+        for (k, el) in p.track.iter().enumerate() {
+            let Some(img) = rec.images.get(&el.image_id) else {
+                return Err(ColmapError::invalid(
+                    pts,
+                    r,
+                    format!("track[{k}].image_id"),
+                    format!(
+                        "refers to image {}, which the images file does not define",
+                        el.image_id
+                    ),
+                ));
+            };
+            let Some(kp) = img.points2d.get(el.point2d_idx as usize) else {
+                return Err(ColmapError::invalid(
+                    pts,
+                    r,
+                    format!("track[{k}].point2D_idx"),
+                    format!(
+                        "keypoint {} does not exist: image {} has {} keypoints",
+                        el.point2d_idx,
+                        el.image_id,
+                        img.points2d.len()
+                    ),
+                ));
+            };
+            if kp.point3d_id != p.id {
+                return Err(ColmapError::invalid(
+                    pts,
+                    r,
+                    format!("track[{k}]"),
+                    format!(
+                        "image {} keypoint {} observes point {}, not this one",
+                        el.image_id,
+                        el.point2d_idx,
+                        if kp.has_point3d() {
+                            kp.point3d_id.to_string()
+                        } else {
+                            "none".into()
+                        }
+                    ),
+                ));
+            }
+            track_links += 1;
+        }
+    }
+    if track_links != keypoint_links {
+        return Err(ColmapError::invalid(
+            imgs,
+            Record::File,
+            "points2D.point3D_id",
+            format!(
+                "{keypoint_links} keypoints name a 3D point but the tracks list {track_links} observations"
+            ),
+        ));
+    }
+    let mut warnings: Vec<Warning> = Vec::new();
+    let rig_sensors: BTreeMap<u32, _> = rec.rigs.iter().map(|(id, r)| (*id, r)).collect();
+    for f in rec.frames.values() {
+        let r = Record::Id {
+            kind: "frame",
+            id: f.id as u64,
+        };
+        let Some(rig) = rig_sensors.get(&f.rig_id) else {
+            if rec.rigs.is_empty() {
+                continue; // frames without a rigs file: nothing to compose with
+            }
+            return Err(ColmapError::invalid(
+                frames,
+                r,
+                "rig_id",
+                format!(
+                    "refers to rig {}, which the rigs file does not define",
+                    f.rig_id
+                ),
+            ));
+        };
+        for (sensor, data_id) in &f.data {
+            if sensor.kind != SensorId::CAMERA {
+                continue;
+            }
+            let image_id = u32::try_from(*data_id).ok();
+            let Some(img) = image_id.and_then(|i| rec.images.get(&i)) else {
+                return Err(ColmapError::invalid(
+                    frames,
+                    r,
+                    "data_ids",
+                    format!("refers to image {data_id}, which the images file does not define"),
+                ));
+            };
+            // COLMAP 4 derives an image's pose from its frame; check the stored one agrees.
+            let sensor_from_rig = if rig.ref_sensor == Some(*sensor) {
+                Some(crate::pose::Rigid3::IDENTITY)
+            } else {
+                rig.sensors
+                    .iter()
+                    .find(|(s, _)| s == sensor)
+                    .and_then(|(_, p)| *p)
+            };
+            if let Some(s) = sensor_from_rig {
+                let composed = s.compose(&f.rig_from_world);
+                let stored = img.cam_from_world;
+                let dq = composed.rotation.dot(stored.rotation).abs();
+                let dt = (composed.translation - stored.translation).length();
+                let scale = stored.translation.length().max(1.0);
+                if 1.0 - dq > 1e-12 || dt > 1e-9 * scale {
+                    warnings.push(Warning {
+                        path: frames.to_path_buf(),
+                        record: r.to_string(),
+                        field: "rig_from_world".into(),
+                        message: format!(
+                            "image {} pose in the images file differs from its frame's pose (|Δt| = {dt:.3e}); the images file's pose is used",
+                            img.id
+                        ),
+                    });
+                }
+            }
+        }
+    }
+    rec.warnings.extend(warnings);
+    Ok(())
+}

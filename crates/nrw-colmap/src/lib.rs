@@ -13,6 +13,7 @@ pub mod ply;
 pub mod pose;
 pub mod stats;
 mod txt;
+mod write;
 
 pub use camera::{Camera, CameraModel, Projection};
 pub use error::{ColmapError, Record, Result};
@@ -23,4 +24,5 @@ pub use model::{
 };
 pub use ply::{read_ply, PointCloud};
 pub use pose::{LocalRigid3, Rigid3};
-pub use stats::{reprojection_stats, ImageReprojection, ReprojectionStats};
+pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};
+pub use write::write_model;

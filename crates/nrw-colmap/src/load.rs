@@ -93,6 +93,16 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 
 fn read_text(path: &Path) -> Result<String> {
     let bytes = read_bytes(path)?;
+    if bytes.last().is_some_and(|&b| b != b'\n') {
+        // COLMAP ends every text file with a newline; without it the last record may be cut.
+        let line = bytes.iter().filter(|&&b| b == b'\n').count() + 1;
+        return Err(ColmapError::invalid(
+            path,
+            Record::Line { kind: "last", line, id: None },
+            "end of file",
+            "file is truncated: the last line has no newline",
+        ));
+    }
     String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
         let line = e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count() + 1;

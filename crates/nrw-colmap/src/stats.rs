@@ -25,6 +25,25 @@ pub struct ReprojectionStats {
     pub per_image: BTreeMap<u32, ImageReprojection>,
 }
 
+/// Every track element's reprojection error in pixels, points in id order and tracks in
+/// file order; `None` where the point is not visible in that image.
+pub fn observation_errors(rec: &Reconstruction) -> Vec<Option<f64>> {
+    let origin = rec.scene_origin();
+    let local: BTreeMap<u32, crate::pose::LocalRigid3> =
+        rec.images.values().map(|i| (i.id, i.cam_from_world.recentred(origin))).collect();
+    let mut out = Vec::with_capacity(rec.num_observations());
+    for p in rec.points.values() {
+        let xyz = p.xyz - origin;
+        for el in &p.track {
+            let img = &rec.images[&el.image_id];
+            let cam = &rec.cameras[&img.camera_id];
+            let px = cam.img_from_cam(local[&el.image_id].transform(xyz));
+            out.push(px.map(|px| (px - img.points2d[el.point2d_idx as usize].xy).length()));
+        }
+    }
+    out
+}
+
 /// For every track element, the pixel distance between the projected point and its keypoint.
 ///
 /// Points are re-centred on [`Reconstruction::scene_origin`] in f64 first, so a model in

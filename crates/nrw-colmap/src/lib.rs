@@ -22,7 +22,7 @@ pub use model::{
     Format, Frame, Image, Point2D, Point3D, Reconstruction, Rig, SensorId, TrackElement, Warning,
     NO_POINT3D,
 };
-pub use ply::{read_ply, PointCloud};
+pub use ply::{read_ply, write_ply, PointCloud};
 pub use pose::{LocalRigid3, Rigid3};
 pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};
 pub use write::write_model;

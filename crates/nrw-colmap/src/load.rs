@@ -98,7 +98,11 @@ fn read_text(path: &Path) -> Result<String> {
         let line = bytes.iter().filter(|&&b| b == b'\n').count() + 1;
         return Err(ColmapError::invalid(
             path,
-            Record::Line { kind: "last", line, id: None },
+            Record::Line {
+                kind: "last",
+                line,
+                id: None,
+            },
             "end of file",
             "file is truncated: the last line has no newline",
         ));

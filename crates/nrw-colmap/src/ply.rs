@@ -37,28 +37,100 @@ impl PointCloud {
     }
 }
 
+/// One vertex as this module needs it, whichever channels the file has.
+trait VertexRow {
+    fn xyz(&self) -> [f64; 3];
+    fn normal(&self) -> Option<[f32; 3]> {
+        None
+    }
+    fn color(&self) -> Option<[u8; 3]> {
+        None
+    }
+}
+
+// One row type per channel set: serde-ply 0.2.2's fast binary path rejects structs with
+// `Option` fields the file lacks ("invalid length 3, expected struct with 9 elements"),
+// so every field of the chosen type must exist in the file.
 #[derive(Deserialize)]
-struct Row {
+struct Xyz {
     x: f64,
     y: f64,
     z: f64,
-    nx: Option<f32>,
-    ny: Option<f32>,
-    nz: Option<f32>,
-    red: Option<u8>,
-    green: Option<u8>,
-    blue: Option<u8>,
+}
+#[derive(Deserialize)]
+struct XyzN {
+    x: f64,
+    y: f64,
+    z: f64,
+    nx: f32,
+    ny: f32,
+    nz: f32,
+}
+#[derive(Deserialize)]
+struct XyzC {
+    x: f64,
+    y: f64,
+    z: f64,
+    red: u8,
+    green: u8,
+    blue: u8,
+}
+#[derive(Deserialize)]
+struct XyzNC {
+    x: f64,
+    y: f64,
+    z: f64,
+    nx: f32,
+    ny: f32,
+    nz: f32,
+    red: u8,
+    green: u8,
+    blue: u8,
+}
+
+impl VertexRow for Xyz {
+    fn xyz(&self) -> [f64; 3] {
+        [self.x, self.y, self.z]
+    }
+}
+impl VertexRow for XyzN {
+    fn xyz(&self) -> [f64; 3] {
+        [self.x, self.y, self.z]
+    }
+    fn normal(&self) -> Option<[f32; 3]> {
+        Some([self.nx, self.ny, self.nz])
+    }
+}
+impl VertexRow for XyzC {
+    fn xyz(&self) -> [f64; 3] {
+        [self.x, self.y, self.z]
+    }
+    fn color(&self) -> Option<[u8; 3]> {
+        Some([self.red, self.green, self.blue])
+    }
+}
+impl VertexRow for XyzNC {
+    fn xyz(&self) -> [f64; 3] {
+        [self.x, self.y, self.z]
+    }
+    fn normal(&self) -> Option<[f32; 3]> {
+        Some([self.nx, self.ny, self.nz])
+    }
+    fn color(&self) -> Option<[u8; 3]> {
+        Some([self.red, self.green, self.blue])
+    }
 }
 
 /// Receives rows straight into the cloud's columns, counting them so errors can name the row.
-struct Columns<'a> {
+struct Columns<'a, R> {
     cloud: &'a mut PointCloud,
     capacity: usize,
     rows: &'a mut u64,
     bad: &'a mut Option<(u64, &'static str, String)>,
+    row: std::marker::PhantomData<R>,
 }
 
-impl<'de> Visitor<'de> for Columns<'_> {
+impl<'de, R: VertexRow + Deserialize<'de>> Visitor<'de> for Columns<'_, R> {
     type Value = ();
 
     fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
@@ -74,28 +146,20 @@ impl<'de> Visitor<'de> for Columns<'_> {
         if let Some(n) = self.cloud.normals.as_mut() {
             n.reserve(cap);
         }
-        while let Some(r) = seq.next_element::<Row>()? {
+        while let Some(r) = seq.next_element::<R>()? {
             let i = *self.rows;
-            for (name, v) in [("x", r.x), ("y", r.y), ("z", r.z)] {
+            let p = r.xyz();
+            for (name, v) in ["x", "y", "z"].into_iter().zip(p) {
                 if !v.is_finite() {
                     *self.bad = Some((i, name, format!("not a finite number: {v}")));
                     return Ok(());
                 }
             }
-            self.cloud.positions.push(DVec3::new(r.x, r.y, r.z));
-            if let Some(c) = self.cloud.colors.as_mut() {
-                c.push([
-                    r.red.unwrap_or(0),
-                    r.green.unwrap_or(0),
-                    r.blue.unwrap_or(0),
-                ]);
+            self.cloud.positions.push(DVec3::from_array(p));
+            if let (Some(c), Some(v)) = (self.cloud.colors.as_mut(), r.color()) {
+                c.push(v);
             }
-            if let Some(n) = self.cloud.normals.as_mut() {
-                let v = [
-                    r.nx.unwrap_or(0.0),
-                    r.ny.unwrap_or(0.0),
-                    r.nz.unwrap_or(0.0),
-                ];
+            if let (Some(n), Some(v)) = (self.cloud.normals.as_mut(), r.normal()) {
                 if !v.iter().all(|c| c.is_finite()) {
                     *self.bad = Some((i, "nx/ny/nz", format!("normal not finite: {v:?}")));
                     return Ok(());
@@ -108,10 +172,55 @@ impl<'de> Visitor<'de> for Columns<'_> {
     }
 }
 
-/// Deserialize entry point for [`Columns`]: the element arrives as a sequence.
-struct ColumnsSeed<'a>(Columns<'a>);
+/// Consumes an element we do not read (faces, edges), row by row, storing nothing.
+struct SkipRows;
 
-impl<'de> serde::de::DeserializeSeed<'de> for ColumnsSeed<'_> {
+impl<'de> Deserialize<'de> for SkipRows {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct Rows;
+        impl<'de> Visitor<'de> for Rows {
+            type Value = SkipRows;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("rows")
+            }
+            fn visit_seq<A: SeqAccess<'de>>(
+                self,
+                mut s: A,
+            ) -> std::result::Result<SkipRows, A::Error> {
+                while s.next_element::<SkipRow>()?.is_some() {}
+                Ok(SkipRows)
+            }
+        }
+        d.deserialize_seq(Rows)
+    }
+}
+
+struct SkipRow;
+
+impl<'de> Deserialize<'de> for SkipRow {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct Row;
+        impl<'de> Visitor<'de> for Row {
+            type Value = SkipRow;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a row")
+            }
+            fn visit_map<A: MapAccess<'de>>(
+                self,
+                mut m: A,
+            ) -> std::result::Result<SkipRow, A::Error> {
+                while m.next_entry::<IgnoredAny, IgnoredAny>()?.is_some() {}
+                Ok(SkipRow)
+            }
+        }
+        d.deserialize_map(Row)
+    }
+}
+
+/// Deserialize entry point for [`Columns`]: the element arrives as a sequence.
+struct ColumnsSeed<'a, R>(Columns<'a, R>);
+
+impl<'de, R: VertexRow + Deserialize<'de>> serde::de::DeserializeSeed<'de> for ColumnsSeed<'_, R> {
     type Value = ();
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> std::result::Result<(), D::Error> {
         d.deserialize_seq(self.0)
@@ -131,7 +240,7 @@ pub fn read_ply(path: &Path) -> Result<PointCloud> {
     };
     for (index, elem) in header.elem_defs.iter().enumerate() {
         if elem.name != "vertex" {
-            reader.next_element::<IgnoredAny>().map_err(|e| {
+            reader.next_element::<SkipRows>().map_err(|e| {
                 ColmapError::invalid(
                     path,
                     Record::Nth {
@@ -192,14 +301,25 @@ pub fn read_ply(path: &Path) -> Result<PointCloud> {
         let capacity = (elem.count as u64).min(file_len / min_row) as usize;
         let mut rows = 0u64;
         let mut bad = None;
-        let seed = ColumnsSeed(Columns {
-            cloud: &mut cloud,
-            capacity,
-            rows: &mut rows,
-            bad: &mut bad,
-        });
         // PlyReader is a map of elements; take the current element's value with our seed.
-        let result = MapAccess::next_value_seed(&mut &mut reader, seed);
+        macro_rules! read_as {
+            ($row:ty) => {{
+                let seed = ColumnsSeed(Columns::<$row> {
+                    cloud: &mut cloud,
+                    capacity,
+                    rows: &mut rows,
+                    bad: &mut bad,
+                    row: std::marker::PhantomData,
+                });
+                MapAccess::next_value_seed(&mut &mut reader, seed)
+            }};
+        }
+        let result = match (has("nx"), has("red")) {
+            (false, false) => read_as!(Xyz),
+            (true, false) => read_as!(XyzN),
+            (false, true) => read_as!(XyzC),
+            (true, true) => read_as!(XyzNC),
+        };
         if let Some((i, field, problem)) = bad {
             return Err(ColmapError::invalid(
                 path,
@@ -232,4 +352,43 @@ pub fn read_ply(path: &Path) -> Result<PointCloud> {
         "element vertex",
         "the file has no vertex element",
     ))
+}
+
+/// Write a cloud as binary little-endian PLY in COLMAP's fused.ply layout (float x y z,
+/// float nx ny nz, uchar red green blue), leaving out the channels the cloud lacks.
+///
+/// Positions are stored as f32 like COLMAP's; precision is given up here, so callers with
+/// georeferenced clouds should write them re-centred.
+pub fn write_ply(cloud: &PointCloud, path: &Path) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
+        cloud.len()
+    );
+    header.push_str("property float x\nproperty float y\nproperty float z\n");
+    if cloud.normals.is_some() {
+        header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
+    }
+    if cloud.colors.is_some() {
+        header.push_str("property uchar red\nproperty uchar green\nproperty uchar blue\n");
+    }
+    header.push_str("end_header\n");
+    let tmp = path.with_extension("ply.tmp");
+    let mut w = std::io::BufWriter::new(File::create(&tmp)?);
+    w.write_all(header.as_bytes())?;
+    for i in 0..cloud.len() {
+        for v in cloud.positions[i].to_array() {
+            w.write_all(&(v as f32).to_le_bytes())?;
+        }
+        if let Some(n) = &cloud.normals {
+            for v in n[i] {
+                w.write_all(&v.to_le_bytes())?;
+            }
+        }
+        if let Some(c) = &cloud.colors {
+            w.write_all(&c[i])?;
+        }
+    }
+    w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+    std::fs::rename(&tmp, path)
 }

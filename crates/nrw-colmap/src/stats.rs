@@ -29,8 +29,11 @@ pub struct ReprojectionStats {
 /// file order; `None` where the point is not visible in that image.
 pub fn observation_errors(rec: &Reconstruction) -> Vec<Option<f64>> {
     let origin = rec.scene_origin();
-    let local: BTreeMap<u32, crate::pose::LocalRigid3> =
-        rec.images.values().map(|i| (i.id, i.cam_from_world.recentred(origin))).collect();
+    let local: BTreeMap<u32, crate::pose::LocalRigid3> = rec
+        .images
+        .values()
+        .map(|i| (i.id, i.cam_from_world.recentred(origin)))
+        .collect();
     let mut out = Vec::with_capacity(rec.num_observations());
     for p in rec.points.values() {
         let xyz = p.xyz - origin;

@@ -25,7 +25,10 @@ fn pose_le(out: &mut Vec<u8>, p: &Rigid3) {
 fn pose_txt(p: &Rigid3) -> String {
     let q = p.qvec();
     let t = p.translation;
-    format!("{} {} {} {} {} {} {}", q[0], q[1], q[2], q[3], t.x, t.y, t.z)
+    format!(
+        "{} {} {} {} {} {} {}",
+        q[0], q[1], q[2], q[3], t.x, t.y, t.z
+    )
 }
 
 /// Write `cameras`, `images`, `points3D` (and `rigs`, `frames` when present) into `dir`.
@@ -35,7 +38,10 @@ pub fn write_model(rec: &Reconstruction, dir: &Path, format: Format) -> std::io:
     std::fs::create_dir_all(dir)?;
     let files: Vec<(&str, Vec<u8>)> = match format {
         Format::Binary => binary(rec),
-        Format::Text => text(rec).into_iter().map(|(n, s)| (n, s.into_bytes())).collect(),
+        Format::Text => text(rec)
+            .into_iter()
+            .map(|(n, s)| (n, s.into_bytes()))
+            .collect(),
     };
     for (name, bytes) in files {
         let path = dir.join(format!("{name}.{}", format.ext()));
@@ -147,14 +153,25 @@ fn text(rec: &Reconstruction) -> Vec<(&'static str, String)> {
     );
     let _ = writeln!(imgs, "# Number of images: {}", rec.images.len());
     for i in rec.images.values() {
-        let _ = writeln!(imgs, "{} {} {} {}", i.id, pose_txt(&i.cam_from_world), i.camera_id, i.name);
+        let _ = writeln!(
+            imgs,
+            "{} {} {} {}",
+            i.id,
+            pose_txt(&i.cam_from_world),
+            i.camera_id,
+            i.name
+        );
         let mut first = true;
         for p in &i.points2d {
             if !first {
                 imgs.push(' ');
             }
             first = false;
-            let id: i64 = if p.point3d_id == NO_POINT3D { -1 } else { p.point3d_id as i64 };
+            let id: i64 = if p.point3d_id == NO_POINT3D {
+                -1
+            } else {
+                p.point3d_id as i64
+            };
             let _ = write!(imgs, "{} {} {id}", p.xy.x, p.xy.y);
         }
         imgs.push('\n');
@@ -183,7 +200,14 @@ fn text(rec: &Reconstruction) -> Vec<(&'static str, String)> {
                     let _ = writeln!(rigs, "{} 0", r.id);
                 }
                 Some(s) => {
-                    let _ = write!(rigs, "{} {} {} {}", r.id, 1 + r.sensors.len(), sensor_name(s.kind), s.id);
+                    let _ = write!(
+                        rigs,
+                        "{} {} {} {}",
+                        r.id,
+                        1 + r.sensors.len(),
+                        sensor_name(s.kind),
+                        s.id
+                    );
                     for (s, pose) in &r.sensors {
                         let _ = write!(rigs, " {} {}", sensor_name(s.kind), s.id);
                         match pose {
@@ -199,7 +223,14 @@ fn text(rec: &Reconstruction) -> Vec<(&'static str, String)> {
         }
         let mut frames = String::from("# Frame list with one line of data per frame:\n");
         for f in rec.frames.values() {
-            let _ = write!(frames, "{} {} {} {}", f.id, f.rig_id, pose_txt(&f.rig_from_world), f.data.len());
+            let _ = write!(
+                frames,
+                "{} {} {} {}",
+                f.id,
+                f.rig_id,
+                pose_txt(&f.rig_from_world),
+                f.data.len()
+            );
             for (s, d) in &f.data {
                 let _ = write!(frames, " {} {} {d}", sensor_name(s.kind), s.id);
             }

@@ -16,8 +16,12 @@ fn every_model_matches_pycolmap_to_1e9_px() {
         let name = case["model"].as_str().unwrap();
         let model = CameraModel::from_name(name).unwrap();
         seen.insert(model);
-        let params: Vec<f64> =
-            case["params"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        let params: Vec<f64> = case["params"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
         assert_eq!(params.len(), model.num_params(), "{name}");
         let cam = Camera {
             id: 1,
@@ -31,25 +35,44 @@ fn every_model_matches_pycolmap_to_1e9_px() {
             .unwrap()
             .iter()
             .map(|p| {
-                let a: Vec<f64> = p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+                let a: Vec<f64> = p
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect();
                 DVec3::new(a[0], a[1], a[2])
             })
             .collect();
         let mut ours = Vec::new();
         cam.project_many(&pts, &mut ours);
-        for ((p, want), got) in pts.iter().zip(case["pixels"].as_array().unwrap()).zip(&ours) {
+        for ((p, want), got) in pts
+            .iter()
+            .zip(case["pixels"].as_array().unwrap())
+            .zip(&ours)
+        {
             match (want.as_array(), got) {
                 (None, None) => invisible += 1,
                 (Some(w), Some(g)) => {
                     let (wx, wy) = (w[0].as_f64().unwrap(), w[1].as_f64().unwrap());
                     let d = ((g.x - wx).powi(2) + (g.y - wy).powi(2)).sqrt();
-                    assert!(d < 1e-9, "{name} {p:?}: ours {g:?}, pycolmap ({wx}, {wy}), |d| = {d:e}");
+                    assert!(
+                        d < 1e-9,
+                        "{name} {p:?}: ours {g:?}, pycolmap ({wx}, {wy}), |d| = {d:e}"
+                    );
                     compared += 1;
                 }
                 (w, g) => panic!("{name} {p:?}: pycolmap {w:?}, ours {g:?}"),
             }
         }
     }
-    assert_eq!(seen.len(), CameraModel::ALL.len(), "fixtures cover every model");
-    assert!(compared > 1000 && invisible > 100, "{compared} compared, {invisible} invisible");
+    assert_eq!(
+        seen.len(),
+        CameraModel::ALL.len(),
+        "fixtures cover every model"
+    );
+    assert!(
+        compared > 1000 && invisible > 100,
+        "{compared} compared, {invisible} invisible"
+    );
 }

@@ -6,12 +6,13 @@ use std::path::{Path, PathBuf};
 use glam::{DVec2, DVec3};
 use nrw_colmap::pose::dot3_plus;
 use nrw_colmap::{
-    observation_errors, read_model, reprojection_stats, write_model, Camera, CameraModel, Format, Image, Point2D,
-    Point3D, Reconstruction, Rigid3, TrackElement,
+    observation_errors, read_model, reprojection_stats, write_model, Camera, CameraModel, Format,
+    Image, Point2D, Point3D, Reconstruction, Rigid3, TrackElement,
 };
 
 fn sacre_coeur() -> Reconstruction {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/sacre_coeur/sparse/0");
+    let dir =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/sacre_coeur/sparse/0");
     read_model(&dir, Some(Format::Binary)).unwrap()
 }
 
@@ -55,40 +56,78 @@ fn utm_like_coordinates_give_the_same_reprojection_errors() {
             .map(|(a, b)| (a.unwrap() - b.unwrap()).abs())
             .fold(0.0f64, f64::max);
         eprintln!("{f:?}: worst per-observation difference {worst:e} px");
-        assert!(worst < 1e-6, "{f:?}: an observation's error moved by {worst:e} px");
+        assert!(
+            worst < 1e-6,
+            "{f:?}: an observation's error moved by {worst:e} px"
+        );
         let s = reprojection_stats(&far);
         assert_eq!(s.observations, base.observations);
         let dm = (s.mean_px.unwrap() - base.mean_px.unwrap()).abs();
         let dx = (s.max_px.unwrap() - base.max_px.unwrap()).abs();
-        assert!(dm < 1e-6 && dx < 1e-6, "{f:?}: mean differs by {dm:e}, max by {dx:e}");
+        assert!(
+            dm < 1e-6 && dx < 1e-6,
+            "{f:?}: mean differs by {dm:e}, max by {dx:e}"
+        );
         for (id, a) in &base.per_image {
             let b = &s.per_image[id];
             let di = (a.mean_px.unwrap() - b.mean_px.unwrap()).abs();
-            assert!(di < 1e-6, "{f:?} image {id}: per-image mean differs by {di:e}");
+            assert!(
+                di < 1e-6,
+                "{f:?} image {id}: per-image mean differs by {di:e}"
+            );
         }
     }
 }
 
 #[test]
 fn points_on_and_behind_the_camera_plane_are_counted_not_averaged() {
-    let cam = Camera { id: 1, model: CameraModel::SimpleRadial, width: 640, height: 480, params: vec![500.0, 320.0, 240.0, 0.01] };
+    let cam = Camera {
+        id: 1,
+        model: CameraModel::SimpleRadial,
+        width: 640,
+        height: 480,
+        params: vec![500.0, 320.0, 240.0, 0.01],
+    };
     let pose = Rigid3::IDENTITY;
     let mut rec = Reconstruction::default();
     rec.cameras.insert(1, cam.clone());
-    let pts = [DVec3::new(0.1, 0.2, 2.0), DVec3::new(0.1, 0.2, 0.0), DVec3::new(0.1, 0.2, -3.0)];
+    let pts = [
+        DVec3::new(0.1, 0.2, 2.0),
+        DVec3::new(0.1, 0.2, 0.0),
+        DVec3::new(0.1, 0.2, -3.0),
+    ];
     let mut points2d = Vec::new();
     for (k, p) in pts.iter().enumerate() {
         let xy = cam.img_from_cam(*p).unwrap_or(DVec2::new(10.0, 10.0)) + DVec2::new(0.3, 0.4);
-        points2d.push(Point2D { xy, point3d_id: k as u64 + 1 });
-        rec.points.insert(k as u64 + 1, Point3D {
-            id: k as u64 + 1,
-            xyz: *p,
-            rgb: [1, 2, 3],
-            error: 0.5,
-            track: vec![TrackElement { image_id: 1, point2d_idx: k as u32 }],
+        points2d.push(Point2D {
+            xy,
+            point3d_id: k as u64 + 1,
         });
+        rec.points.insert(
+            k as u64 + 1,
+            Point3D {
+                id: k as u64 + 1,
+                xyz: *p,
+                rgb: [1, 2, 3],
+                error: 0.5,
+                track: vec![TrackElement {
+                    image_id: 1,
+                    point2d_idx: k as u32,
+                }],
+            },
+        );
     }
-    rec.images.insert(1, Image { id: 1, name: "a.jpg".into(), camera_id: 1, cam_from_world: pose, stored_quat_norm: 1.0, points2d });
+    rec.images.insert(
+        1,
+        Image {
+            id: 1,
+            name: "a.jpg".into(),
+            camera_id: 1,
+            cam_from_world: pose,
+            stored_quat_norm: 1.0,
+            points2d,
+        },
+    );
     let (_tmp, back) = roundtrip(&rec, Format::Binary);
     let s = reprojection_stats(&back);
     assert_eq!((s.observations, s.not_visible), (1, 2));
@@ -108,7 +147,14 @@ fn zero_points_and_one_image_are_valid_models() {
     }
     for f in [Format::Binary, Format::Text] {
         let (_tmp, back) = roundtrip(&rec, f);
-        assert_eq!((back.images.len(), back.points.len(), back.num_observations()), (1, 0, 0));
+        assert_eq!(
+            (
+                back.images.len(),
+                back.points.len(),
+                back.num_observations()
+            ),
+            (1, 0, 0)
+        );
         let s = reprojection_stats(&back);
         assert_eq!((s.observations, s.mean_px, s.max_px), (0, None, None));
     }
@@ -148,7 +194,11 @@ fn unnormalised_quaternions_are_normalised_reported_and_harmless() {
     std::fs::write(&path, out).unwrap();
     let back = read_model(dir.path(), Some(Format::Text)).unwrap();
     assert_eq!(back.warnings.len(), rec.images.len());
-    assert!(back.warnings[0].message.contains("norm was 3.0"), "{}", back.warnings[0]);
+    assert!(
+        back.warnings[0].message.contains("norm was 3.0"),
+        "{}",
+        back.warnings[0]
+    );
     assert!(back.warnings[0].to_string().contains("images.txt"));
     let s = reprojection_stats(&back);
     assert!((s.mean_px.unwrap() - base.mean_px.unwrap()).abs() < 1e-12);

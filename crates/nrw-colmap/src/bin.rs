@@ -83,7 +83,7 @@ impl<'a> Bin<'a> {
                 rec,
                 field,
                 format!(
-                    "count {n} cannot be right: {} bytes remain, room for at most {fits} records of {min_record_bytes} bytes",
+                    "count {n} cannot be right (file truncated or corrupt): {} bytes remain, room for at most {fits} records of {min_record_bytes} bytes",
                     self.remaining()
                 ),
             ));

@@ -1,1 +1,15 @@
-pub fn x() {}
+//! Every byte format of an nrw-etl dataset: the Parquet tables and their documented schemas,
+//! the manifest, and atomic writes. The ETL and the trainer both go through this crate so
+//! they can never disagree about a byte.
+
+pub mod atomic;
+pub mod error;
+pub mod manifest;
+pub mod parquet_io;
+pub mod scene;
+pub mod schema;
+
+pub use error::{DatasetError, Result};
+pub use manifest::{FileEntry, Manifest, SceneSource, Tool, SCHEMA_VERSION};
+pub use scene::{cameras_schema, images_schema, write_scene_tables, CAMERAS_TABLE, IMAGES_TABLE};
+pub use schema::TableDoc;

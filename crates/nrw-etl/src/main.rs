@@ -1,1 +1,53 @@
-fn main() {}
+//! nrw-etl: turns a COLMAP-reconstructed photo collection into the aligned dataset that
+//! "Neural Rerendering in the Wild" (Meshry et al., CVPR 2019) trains on.
+
+mod cmd;
+mod error;
+
+use clap::{Parser, Subcommand};
+
+/// Command line of nrw-etl.
+#[derive(Debug, Parser)]
+#[command(
+    name = "nrw-etl",
+    version,
+    about = "Turn a COLMAP-reconstructed photo collection into the aligned dataset of Neural Rerendering in the Wild",
+    long_about = "Turn a COLMAP-reconstructed photo collection into the aligned dataset of \
+Neural Rerendering in the Wild (Meshry et al., CVPR 2019).\n\n\
+A scene folder is laid out as COLMAP writes it: sparse/0/{cameras,images,points3D}.{bin,txt} \
+(COLMAP 3 or 4), images/ with the photos, and optionally dense/fused.ply.\n\n\
+Start with `nrw-etl inspect SCENE` to check a model, then `nrw-etl ingest SCENE --out DATASET`.",
+    after_help = "Examples:\n  nrw-etl inspect ../shared/data/sceaux_castle\n  nrw-etl inspect ../shared/data/sacre_coeur --json\n  nrw-etl ingest ../shared/data/sceaux_castle --out /tmp/sceaux"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Summarise a COLMAP model and check it: counts, camera models, reprojection errors
+    Inspect(cmd::inspect::InspectArgs),
+    /// Read and validate a scene and write its dataset tables (scene/*.parquet) and manifest.json
+    Ingest(cmd::ingest::IngestArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Ingest(a) => cmd::ingest::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            let mut src = std::error::Error::source(&e);
+            while let Some(s) = src {
+                eprintln!("  caused by: {s}");
+                src = s.source();
+            }
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

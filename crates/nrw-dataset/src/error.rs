@@ -1,0 +1,54 @@
+//! Errors of reading and writing dataset files, each naming the file.
+
+use std::path::PathBuf;
+
+/// Every way a dataset read or write can fail.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: Parquet: {source}", path.display())]
+    Parquet {
+        path: PathBuf,
+        #[source]
+        source: parquet::errors::ParquetError,
+    },
+    #[error("{table}: Arrow: {source}")]
+    Arrow {
+        table: String,
+        #[source]
+        source: arrow_schema::ArrowError,
+    },
+    #[error("{}: {problem}", path.display())]
+    Schema { path: PathBuf, problem: String },
+    #[error("{}: record {record}: field `{field}`: {problem}", path.display())]
+    Value {
+        path: PathBuf,
+        record: String,
+        field: String,
+        problem: String,
+    },
+    #[error("{}: JSON: {source}", path.display())]
+    Json {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+}
+
+impl DatasetError {
+    /// Wrap an I/O error with its file.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        DatasetError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
+
+/// Result alias for this crate.
+pub type Result<T, E = DatasetError> = std::result::Result<T, E>;

@@ -1,0 +1,128 @@
+//! `manifest.json`: what a dataset was made from, with which parameters, and what it holds.
+//! Hashes let a later stage (or a person) tell whether inputs or tables changed.
+
+use std::io::Read;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::atomic::write_bytes_atomic;
+use crate::error::{DatasetError, Result};
+
+/// Bumped whenever a table's schema changes incompatibly.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// A file recorded in the manifest.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    /// Relative to the dataset (tables) or as given on the command line (inputs).
+    pub path: String,
+    pub bytes: u64,
+    pub sha256: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rows: Option<u64>,
+}
+
+impl FileEntry {
+    /// Size and SHA-256 of `base/rel`, recorded under the name `rel`.
+    pub fn of(base: &Path, rel: &str) -> Result<FileEntry> {
+        let path = base.join(rel);
+        let (bytes, sha256) = sha256_file(&path)?;
+        Ok(FileEntry {
+            path: rel.to_string(),
+            bytes,
+            sha256,
+            rows: None,
+        })
+    }
+}
+
+/// Streaming SHA-256 of a file: (size in bytes, lowercase hex digest).
+pub fn sha256_file(path: &Path) -> Result<(u64, String)> {
+    let mut f = std::fs::File::open(path).map_err(|e| DatasetError::io(path, e))?;
+    let mut h = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    let mut n = 0u64;
+    loop {
+        let k = f.read(&mut buf).map_err(|e| DatasetError::io(path, e))?;
+        if k == 0 {
+            break;
+        }
+        n += k as u64;
+        h.update(&buf[..k]);
+    }
+    Ok((n, hex(&h.finalize())))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Which tool wrote the dataset.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Tool {
+    pub name: String,
+    pub version: String,
+}
+
+/// Where the scene came from.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SceneSource {
+    pub scene_dir: String,
+    pub model_dir: String,
+    pub images_dir: Option<String>,
+    /// `bin` or `txt`.
+    pub encoding: String,
+    /// `colmap3` or `colmap4` (rigs and frames).
+    pub layout: String,
+}
+
+/// The dataset's table of contents.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub schema_version: u32,
+    pub tool: Tool,
+    pub scene: SceneSource,
+    pub inputs: Vec<FileEntry>,
+    /// Stage parameters as given (defaults filled in), so a run can be repeated.
+    pub parameters: serde_json::Map<String, serde_json::Value>,
+    pub tables: Vec<FileEntry>,
+    pub warnings: Vec<String>,
+}
+
+impl Manifest {
+    /// File name inside a dataset folder.
+    pub const FILE: &'static str = "manifest.json";
+
+    /// Write `manifest.json` atomically, pretty-printed for people.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        let path = dir.join(Self::FILE);
+        let mut text = serde_json::to_string_pretty(self).map_err(|e| DatasetError::Json {
+            path: path.clone(),
+            source: e,
+        })?;
+        text.push('\n');
+        write_bytes_atomic(&path, text.as_bytes())
+    }
+
+    /// Read a dataset's manifest, refusing other schema versions.
+    pub fn read(dir: &Path) -> Result<Manifest> {
+        let path = dir.join(Self::FILE);
+        let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, e))?;
+        let m: Manifest = serde_json::from_str(&text).map_err(|e| DatasetError::Json {
+            path: path.clone(),
+            source: e,
+        })?;
+        if m.schema_version != SCHEMA_VERSION {
+            return Err(DatasetError::Schema {
+                path,
+                problem: format!(
+                    "dataset schema version {} is not the {SCHEMA_VERSION} this tool reads; re-run ingest",
+                    m.schema_version
+                ),
+            });
+        }
+        Ok(m)
+    }
+}

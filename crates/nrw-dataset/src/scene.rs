@@ -1,0 +1,202 @@
+//! The scene tables: `scene/cameras.parquet` and `scene/images.parquet`, one row per COLMAP
+//! camera and per registered image. Later stages join on `camera_id` and `image_id`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
+use arrow_array::{ArrayRef, BooleanArray, Float64Array, RecordBatch, StringArray, UInt32Array};
+use arrow_schema::{DataType, Field, Schema, SchemaRef};
+use nrw_colmap::{pose::QUAT_NORM_TOLERANCE, Reconstruction};
+
+use crate::error::{DatasetError, Result};
+
+/// Table path of the cameras table inside a dataset.
+pub const CAMERAS_TABLE: &str = "scene/cameras.parquet";
+/// Table path of the images table inside a dataset.
+pub const IMAGES_TABLE: &str = "scene/images.parquet";
+
+fn list_of(item: DataType) -> DataType {
+    DataType::List(Arc::new(Field::new("item", item, false)))
+}
+
+/// Arrow schema of `scene/cameras.parquet` (documented in schemas/scene_cameras.toml).
+pub fn cameras_schema() -> SchemaRef {
+    Arc::new(Schema::new(vec![
+        Field::new("camera_id", DataType::UInt32, false),
+        Field::new("model", DataType::Utf8, false),
+        Field::new("width", DataType::UInt32, false),
+        Field::new("height", DataType::UInt32, false),
+        Field::new("params", list_of(DataType::Float64), false),
+        Field::new("param_names", list_of(DataType::Utf8), false),
+    ]))
+}
+
+/// Arrow schema of `scene/images.parquet` (documented in schemas/scene_images.toml).
+pub fn images_schema() -> SchemaRef {
+    let f64f = |n: &str| Field::new(n, DataType::Float64, false);
+    Arc::new(Schema::new(vec![
+        Field::new("image_id", DataType::UInt32, false),
+        Field::new("name", DataType::Utf8, false),
+        Field::new("camera_id", DataType::UInt32, false),
+        f64f("qw"),
+        f64f("qx"),
+        f64f("qy"),
+        f64f("qz"),
+        f64f("tx"),
+        f64f("ty"),
+        f64f("tz"),
+        f64f("center_x"),
+        f64f("center_y"),
+        f64f("center_z"),
+        Field::new("quat_renormalized", DataType::Boolean, false),
+        Field::new("photo_width", DataType::UInt32, true),
+        Field::new("photo_height", DataType::UInt32, true),
+        Field::new("photo_matches_camera", DataType::Boolean, true),
+        Field::new("num_points2d", DataType::UInt32, false),
+        Field::new("num_observations", DataType::UInt32, false),
+    ]))
+}
+
+fn to_u32(v: u64, table: &str, record: String, field: &str) -> Result<u32> {
+    u32::try_from(v).map_err(|_| DatasetError::Value {
+        path: table.into(),
+        record,
+        field: field.into(),
+        problem: format!("{v} does not fit in 32 bits"),
+    })
+}
+
+fn batch(table: &str, schema: SchemaRef, cols: Vec<ArrayRef>) -> Result<RecordBatch> {
+    RecordBatch::try_new(schema, cols).map_err(|e| DatasetError::Arrow {
+        table: table.into(),
+        source: e,
+    })
+}
+
+/// One row per camera, in id order.
+pub fn cameras_batch(rec: &Reconstruction) -> Result<RecordBatch> {
+    let cams: Vec<_> = rec.cameras.values().collect();
+    let mut widths = Vec::with_capacity(cams.len());
+    let mut heights = Vec::with_capacity(cams.len());
+    for c in &cams {
+        widths.push(to_u32(
+            c.width,
+            CAMERAS_TABLE,
+            format!("camera {}", c.id),
+            "width",
+        )?);
+        heights.push(to_u32(
+            c.height,
+            CAMERAS_TABLE,
+            format!("camera {}", c.id),
+            "height",
+        )?);
+    }
+    let schema = cameras_schema();
+    let item = |i: usize| match schema.field(i).data_type() {
+        DataType::List(f) => f.clone(),
+        _ => unreachable!("list column"),
+    };
+    let mut params = ListBuilder::new(Float64Builder::new()).with_field(item(4));
+    let mut names = ListBuilder::new(StringBuilder::new()).with_field(item(5));
+    for c in &cams {
+        params.values().append_slice(&c.params);
+        params.append(true);
+        for n in c.model.param_names() {
+            names.values().append_value(n);
+        }
+        names.append(true);
+    }
+    batch(
+        CAMERAS_TABLE,
+        schema.clone(),
+        vec![
+            Arc::new(UInt32Array::from_iter_values(cams.iter().map(|c| c.id))),
+            Arc::new(StringArray::from_iter_values(
+                cams.iter().map(|c| c.model.name()),
+            )),
+            Arc::new(UInt32Array::from(widths)),
+            Arc::new(UInt32Array::from(heights)),
+            Arc::new(params.finish()),
+            Arc::new(names.finish()),
+        ],
+    )
+}
+
+/// One row per registered image, in id order; `photos` gives each photo's pixel size if found.
+pub fn images_batch(
+    rec: &Reconstruction,
+    photos: &BTreeMap<u32, Option<(u32, u32)>>,
+) -> Result<RecordBatch> {
+    let imgs: Vec<_> = rec.images.values().collect();
+    let col = |f: &dyn Fn(&nrw_colmap::Image) -> f64| -> ArrayRef {
+        Arc::new(Float64Array::from_iter_values(imgs.iter().map(|i| f(i))))
+    };
+    let size = |i: &nrw_colmap::Image| photos.get(&i.id).copied().flatten();
+    let matches = |i: &nrw_colmap::Image| {
+        size(i).map(|(w, h)| {
+            let c = &rec.cameras[&i.camera_id];
+            w as u64 == c.width && h as u64 == c.height
+        })
+    };
+    let mut np = Vec::with_capacity(imgs.len());
+    let mut no = Vec::with_capacity(imgs.len());
+    for i in &imgs {
+        np.push(to_u32(
+            i.points2d.len() as u64,
+            IMAGES_TABLE,
+            format!("image {}", i.id),
+            "num_points2d",
+        )?);
+        no.push(i.num_observations() as u32);
+    }
+    batch(
+        IMAGES_TABLE,
+        images_schema(),
+        vec![
+            Arc::new(UInt32Array::from_iter_values(imgs.iter().map(|i| i.id))),
+            Arc::new(StringArray::from_iter_values(
+                imgs.iter().map(|i| i.name.as_str()),
+            )),
+            Arc::new(UInt32Array::from_iter_values(
+                imgs.iter().map(|i| i.camera_id),
+            )),
+            col(&|i| i.cam_from_world.qvec()[0]),
+            col(&|i| i.cam_from_world.qvec()[1]),
+            col(&|i| i.cam_from_world.qvec()[2]),
+            col(&|i| i.cam_from_world.qvec()[3]),
+            col(&|i| i.cam_from_world.translation.x),
+            col(&|i| i.cam_from_world.translation.y),
+            col(&|i| i.cam_from_world.translation.z),
+            col(&|i| i.cam_from_world.centre().x),
+            col(&|i| i.cam_from_world.centre().y),
+            col(&|i| i.cam_from_world.centre().z),
+            Arc::new(BooleanArray::from_iter(imgs.iter().map(|i| {
+                Some((i.stored_quat_norm - 1.0).abs() > QUAT_NORM_TOLERANCE)
+            }))),
+            Arc::new(UInt32Array::from_iter(
+                imgs.iter().map(|i| size(i).map(|s| s.0)),
+            )),
+            Arc::new(UInt32Array::from_iter(
+                imgs.iter().map(|i| size(i).map(|s| s.1)),
+            )),
+            Arc::new(BooleanArray::from_iter(imgs.iter().map(|i| matches(i)))),
+            Arc::new(UInt32Array::from(np)),
+            Arc::new(UInt32Array::from(no)),
+        ],
+    )
+}
+
+/// Write both scene tables into `dir`; returns their manifest entries.
+pub fn write_scene_tables(
+    dir: &Path,
+    rec: &Reconstruction,
+    photos: &BTreeMap<u32, Option<(u32, u32)>>,
+) -> Result<Vec<crate::manifest::FileEntry>> {
+    Ok(vec![
+        crate::parquet_io::write_table(dir, CAMERAS_TABLE, &cameras_batch(rec)?)?,
+        crate::parquet_io::write_table(dir, IMAGES_TABLE, &images_batch(rec, photos)?)?,
+    ])
+}

@@ -1,0 +1,47 @@
+//! One module per subcommand.
+
+pub mod ingest;
+pub mod inspect;
+
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
+
+/// `--format` values: which encoding of the model to read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Encoding {
+    /// cameras.bin, images.bin, points3D.bin (preferred when both exist)
+    Bin,
+    /// cameras.txt, images.txt, points3D.txt
+    Txt,
+}
+
+impl From<Encoding> for nrw_colmap::Format {
+    fn from(e: Encoding) -> Self {
+        match e {
+            Encoding::Bin => nrw_colmap::Format::Binary,
+            Encoding::Txt => nrw_colmap::Format::Text,
+        }
+    }
+}
+
+/// Find and read the model of a scene folder (or a model folder itself).
+pub fn load_model(
+    scene: &Path,
+    format: Option<Encoding>,
+) -> crate::error::Result<(PathBuf, nrw_colmap::Reconstruction)> {
+    let dir = nrw_colmap::find_model_dir(scene)?;
+    let rec = nrw_colmap::read_model(&dir, format.map(Into::into))?;
+    Ok((dir, rec))
+}
+
+/// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
+pub fn describe(rec: &nrw_colmap::Reconstruction) -> (&'static str, &'static str) {
+    let enc = rec.format.map_or("?", |f| f.ext());
+    let layout = if rec.is_colmap4() {
+        "colmap4"
+    } else {
+        "colmap3"
+    };
+    (enc, layout)
+}

@@ -1,0 +1,289 @@
+//! End-to-end tests of the `nrw-etl` binary on the real scenes in ../shared/data.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn data() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
+}
+
+fn nrw(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
+        .args(args)
+        .output()
+        .expect("binary runs")
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = nrw(args);
+    assert!(
+        o.status.success(),
+        "{args:?} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8(o.stdout).unwrap()
+}
+
+fn fails(args: &[&str]) -> String {
+    let o = nrw(args);
+    assert!(!o.status.success(), "{args:?} should fail");
+    assert_eq!(o.status.code(), Some(1), "a clean error exit, not a crash");
+    String::from_utf8(o.stderr).unwrap()
+}
+
+#[test]
+fn inspect_json_equals_pycolmap_on_every_copy_of_every_scene() {
+    let cases = [
+        ("sacre_coeur", "sacre_coeur", "bin"),
+        ("sacre_coeur", "sacre_coeur", "txt"),
+        ("sacre_coeur", "sacre_coeur/sparse_pycolmap421", "bin"),
+        ("sacre_coeur", "sacre_coeur/sparse_pycolmap421", "txt"),
+        ("sceaux_castle", "sceaux_castle", "bin"),
+        ("sceaux_castle", "sceaux_castle", "txt"),
+    ];
+    for (oracle, dir, enc) in cases {
+        let o: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(data().join(format!("{oracle}.oracle.json"))).unwrap(),
+        )
+        .unwrap();
+        let scene = data().join(dir);
+        let v: serde_json::Value = serde_json::from_str(&ok(&[
+            "inspect",
+            scene.to_str().unwrap(),
+            "--json",
+            "--format",
+            enc,
+        ]))
+        .unwrap();
+        for k in [
+            "cameras",
+            "images",
+            "points",
+            "observations",
+            "camera_models",
+        ] {
+            assert_eq!(v[k], o[k], "{dir} {enc}: {k}");
+        }
+        for k in ["mean_reprojection_error_px", "max_reprojection_error_px"] {
+            let (a, b) = (v[k].as_f64().unwrap(), o[k].as_f64().unwrap());
+            assert!((a - b).abs() / b < 1e-9, "{dir} {enc}: {k} {a} vs {b}");
+        }
+        assert_eq!(v["encoding"], enc);
+        assert_eq!(
+            v["layout"],
+            if dir.ends_with("421") {
+                "colmap4"
+            } else {
+                "colmap3"
+            }
+        );
+    }
+}
+
+#[test]
+fn inspect_summary_is_readable() {
+    let out = ok(&["inspect", data().join("sceaux_castle").to_str().unwrap()]);
+    assert!(out.contains("images       11"), "{out}");
+    assert!(
+        out.contains("reprojection mean 0.4048 px, max 3.8074 px over 35812 observations"),
+        "{out}"
+    );
+}
+
+#[test]
+fn ingest_writes_scene_tables_and_a_manifest_that_describes_them() {
+    use arrow_array::{Array, BooleanArray, StringArray, UInt32Array};
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+
+    let out = tempfile::tempdir().unwrap();
+    let scene = data().join("sacre_coeur");
+    ok(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
+    let rec = nrw_colmap::read_scene(&scene).unwrap();
+
+    let f = std::fs::File::open(out.path().join("scene/images.parquet")).unwrap();
+    let batches: Vec<_> = ParquetRecordBatchReaderBuilder::try_new(f)
+        .unwrap()
+        .build()
+        .unwrap()
+        .map(|b| b.unwrap())
+        .collect();
+    let b = &batches[0];
+    assert_eq!(b.num_rows(), rec.images.len());
+    let ids = b
+        .column_by_name("image_id")
+        .unwrap()
+        .as_any()
+        .downcast_ref::<UInt32Array>()
+        .unwrap();
+    let names = b
+        .column_by_name("name")
+        .unwrap()
+        .as_any()
+        .downcast_ref::<StringArray>()
+        .unwrap();
+    let widths = b
+        .column_by_name("photo_width")
+        .unwrap()
+        .as_any()
+        .downcast_ref::<UInt32Array>()
+        .unwrap();
+    let matches = b
+        .column_by_name("photo_matches_camera")
+        .unwrap()
+        .as_any()
+        .downcast_ref::<BooleanArray>()
+        .unwrap();
+    let nobs = b
+        .column_by_name("num_observations")
+        .unwrap()
+        .as_any()
+        .downcast_ref::<UInt32Array>()
+        .unwrap();
+    for row in 0..b.num_rows() {
+        let img = &rec.images[&ids.value(row)];
+        assert_eq!(names.value(row), img.name);
+        // The photo's real width, read independently of the tool.
+        let (w, _) = image_size(&scene.join("images").join(&img.name));
+        assert_eq!(widths.value(row), w);
+        assert!(matches.value(row));
+        assert_eq!(nobs.value(row) as usize, img.num_observations());
+    }
+    assert_eq!(
+        nobs.iter().map(|v| v.unwrap() as usize).sum::<usize>(),
+        rec.num_observations()
+    );
+
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("manifest.json")).unwrap())
+            .unwrap();
+    for t in m["tables"].as_array().unwrap() {
+        let (bytes, sha) =
+            nrw_dataset::manifest::sha256_file(&out.path().join(t["path"].as_str().unwrap()))
+                .unwrap();
+        assert_eq!(t["sha256"], sha.as_str());
+        assert_eq!(t["bytes"], bytes);
+    }
+    assert_eq!(m["inputs"].as_array().unwrap().len(), 3);
+    // No temporary file is left behind.
+    let leftovers: Vec<_> = walk(out.path())
+        .into_iter()
+        .filter(|p| p.to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+/// Width and height from a JPEG's SOF marker, read without the tool's code.
+fn image_size(p: &Path) -> (u32, u32) {
+    let b = std::fs::read(p).unwrap();
+    let mut i = 2;
+    while i + 9 < b.len() {
+        assert_eq!(b[i], 0xFF);
+        let marker = b[i + 1];
+        let len = u16::from_be_bytes([b[i + 2], b[i + 3]]) as usize;
+        if (0xC0..=0xCF).contains(&marker) && ![0xC4, 0xC8, 0xCC].contains(&marker) {
+            let h = u16::from_be_bytes([b[i + 5], b[i + 6]]) as u32;
+            let w = u16::from_be_bytes([b[i + 7], b[i + 8]]) as u32;
+            return (w, h);
+        }
+        i += 2 + len;
+    }
+    panic!("no SOF in {}", p.display());
+}
+
+fn walk(d: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(d).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[test]
+fn corrupted_models_fail_with_file_record_and_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = data().join("sacre_coeur/sparse/0");
+    for f in ["cameras.bin", "images.bin", "points3D.bin"] {
+        std::fs::copy(src.join(f), tmp.path().join(f)).unwrap();
+    }
+    let images = tmp.path().join("images.bin");
+    let full = std::fs::read(&images).unwrap();
+    std::fs::write(&images, &full[..full.len() / 2]).unwrap();
+    let err = fails(&["inspect", tmp.path().to_str().unwrap()]);
+    assert!(
+        err.contains("images.bin")
+            && err.contains("image #")
+            && err.contains("field `")
+            && err.contains("truncated"),
+        "{err}"
+    );
+    std::fs::write(&images, &full).unwrap();
+    let cams = tmp.path().join("cameras.bin");
+    let mut c = std::fs::read(&cams).unwrap();
+    c[12..16].copy_from_slice(&42i32.to_le_bytes());
+    std::fs::write(&cams, &c).unwrap();
+    let err = fails(&["inspect", tmp.path().to_str().unwrap(), "--json"]);
+    assert!(
+        err.contains("cameras.bin")
+            && err.contains("camera #0")
+            && err.contains("model_id")
+            && err.contains("42"),
+        "{err}"
+    );
+}
+
+#[test]
+fn ingest_without_photos_says_where_it_looked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("sparse/0");
+    std::fs::create_dir_all(&model).unwrap();
+    for f in ["cameras.bin", "images.bin", "points3D.bin"] {
+        std::fs::copy(data().join("sacre_coeur/sparse/0").join(f), model.join(f)).unwrap();
+    }
+    let out = tmp.path().join("out");
+    let err = fails(&[
+        "ingest",
+        tmp.path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("no photo folder found") && err.contains("--images"),
+        "{err}"
+    );
+    std::fs::create_dir_all(tmp.path().join("images")).unwrap();
+    let err = fails(&[
+        "ingest",
+        tmp.path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("10 of 10 registered photos are missing"),
+        "{err}"
+    );
+    assert!(
+        !out.join("manifest.json").exists(),
+        "nothing written for a failed ingest"
+    );
+}
+
+#[test]
+fn help_teaches_the_layout_and_examples() {
+    let h = ok(&["--help"]);
+    assert!(
+        h.contains("sparse/0/") && h.contains("Examples:") && h.contains("ingest"),
+        "{h}"
+    );
+    let h = ok(&["ingest", "--help"]);
+    assert!(h.contains("--images") && h.contains("--out"), "{h}");
+}

@@ -283,8 +283,8 @@ pub trait Projection {
 /// Normalised image-plane coordinates, or `None` behind or on the camera plane.
 #[inline(always)]
 fn normalise(p: DVec3) -> Option<(f64, f64)> {
-    // COLMAP rejects w < epsilon; `!(>=)` also rejects NaN.
-    if !(p.z >= f64::EPSILON) {
+    // COLMAP rejects w < epsilon; NaN is rejected too (it compares as unordered).
+    if p.z.partial_cmp(&f64::EPSILON)?.is_lt() {
         return None;
     }
     Some((p.x / p.z, p.y / p.z))

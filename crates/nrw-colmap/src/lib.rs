@@ -17,12 +17,15 @@ mod write;
 
 pub use camera::{Camera, CameraModel, Projection};
 pub use error::{ColmapError, Record, Result};
-pub use load::{detect_format, find_model_dir, read_model, read_scene, MODEL_FILES};
+pub use load::{
+    detect_format, find_model_dir, model_from_bytes, read_model, read_scene, ModelFiles,
+    MODEL_FILES,
+};
 pub use model::{
     Format, Frame, Image, Point2D, Point3D, Reconstruction, Rig, SensorId, TrackElement, Warning,
     NO_POINT3D,
 };
-pub use ply::{read_ply, write_ply, PointCloud};
+pub use ply::{read_ply, read_ply_from, write_ply, PointCloud};
 pub use pose::{LocalRigid3, Rigid3};
 pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};
 pub use write::write_model;

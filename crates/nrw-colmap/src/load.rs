@@ -91,38 +91,6 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| ColmapError::io(path, e))
 }
 
-fn read_text(path: &Path) -> Result<String> {
-    let bytes = read_bytes(path)?;
-    if bytes.last().is_some_and(|&b| b != b'\n') {
-        // COLMAP ends every text file with a newline; without it the last record may be cut.
-        let line = bytes.iter().filter(|&&b| b == b'\n').count() + 1;
-        return Err(ColmapError::invalid(
-            path,
-            Record::Line {
-                kind: "last",
-                line,
-                id: None,
-            },
-            "end of file",
-            "file is truncated: the last line has no newline",
-        ));
-    }
-    String::from_utf8(bytes).map_err(|e| {
-        let at = e.utf8_error().valid_up_to();
-        let line = e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count() + 1;
-        ColmapError::invalid(
-            path,
-            Record::Line {
-                kind: "text",
-                line,
-                id: None,
-            },
-            "bytes",
-            format!("not UTF-8 text (byte offset {at})"),
-        )
-    })
-}
-
 /// Read the scene's model (see [`find_model_dir`]) in the encoding found there.
 pub fn read_scene(scene: &Path) -> Result<Reconstruction> {
     let dir = find_model_dir(scene)?;
@@ -136,49 +104,116 @@ pub fn read_model(dir: &Path, format: Option<Format>) -> Result<Reconstruction> 
         None => detect_format(dir)?,
     };
     let file = |n: &str| dir.join(format!("{n}.{}", format.ext()));
+    let optional = |p: PathBuf| -> Result<Option<(PathBuf, Vec<u8>)>> {
+        if p.is_file() {
+            let bytes = read_bytes(&p)?;
+            Ok(Some((p, bytes)))
+        } else {
+            Ok(None)
+        }
+    };
+    let files = ModelFiles {
+        cameras: (file("cameras"), read_bytes(&file("cameras"))?),
+        images: (file("images"), read_bytes(&file("images"))?),
+        points: (file("points3D"), read_bytes(&file("points3D"))?),
+        rigs: optional(file("rigs"))?,
+        frames: optional(file("frames"))?,
+    };
+    model_from_bytes(format, &files)
+}
+
+/// A model's file contents with the names to report them under (no file system needed).
+#[derive(Debug, Clone, Default)]
+pub struct ModelFiles {
+    pub cameras: (PathBuf, Vec<u8>),
+    pub images: (PathBuf, Vec<u8>),
+    pub points: (PathBuf, Vec<u8>),
+    pub rigs: Option<(PathBuf, Vec<u8>)>,
+    pub frames: Option<(PathBuf, Vec<u8>)>,
+}
+
+/// A text model file's contents: UTF-8, and ending in a newline as COLMAP always writes.
+fn utf8<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str> {
+    if bytes.last().is_some_and(|&b| b != b'\n') {
+        // Without the final newline the last record may have been cut mid-number.
+        let line = bytes.iter().filter(|&&b| b == b'\n').count() + 1;
+        return Err(ColmapError::invalid(
+            path,
+            Record::Line {
+                kind: "last",
+                line,
+                id: None,
+            },
+            "end of file",
+            "file is truncated: the last line has no newline",
+        ));
+    }
+    std::str::from_utf8(bytes).map_err(|e| {
+        let at = e.valid_up_to();
+        let line = bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+        ColmapError::invalid(
+            path,
+            Record::Line {
+                kind: "text",
+                line,
+                id: None,
+            },
+            "bytes",
+            format!("not UTF-8 text (byte offset {at})"),
+        )
+    })
+}
+
+/// Parse and cross-check a model held in memory: what [`read_model`] does after reading files.
+pub fn model_from_bytes(format: Format, files: &ModelFiles) -> Result<Reconstruction> {
     let mut checks = PoseCheck::default();
     let mut rec = Reconstruction {
         format: Some(format),
         ..Default::default()
     };
-    let (cams, imgs, pts) = (file("cameras"), file("images"), file("points3D"));
-    let (rigs, frames) = (file("rigs"), file("frames"));
+    let (cams, imgs, pts) = (&files.cameras, &files.images, &files.points);
     match format {
         Format::Binary => {
-            rec.cameras = crate::bin::read_cameras(&cams, &read_bytes(&cams)?)?;
-            rec.images = crate::bin::read_images(&imgs, &read_bytes(&imgs)?, &mut checks)?;
-            rec.points = crate::bin::read_points(&pts, &read_bytes(&pts)?)?;
-            if rigs.is_file() {
-                rec.rigs = crate::bin::read_rigs(&rigs, &read_bytes(&rigs)?, &mut checks)?;
+            rec.cameras = crate::bin::read_cameras(&cams.0, &cams.1)?;
+            rec.images = crate::bin::read_images(&imgs.0, &imgs.1, &mut checks)?;
+            rec.points = crate::bin::read_points(&pts.0, &pts.1)?;
+            if let Some((p, b)) = &files.rigs {
+                rec.rigs = crate::bin::read_rigs(p, b, &mut checks)?;
             }
-            if frames.is_file() {
-                rec.frames = crate::bin::read_frames(&frames, &read_bytes(&frames)?, &mut checks)?;
+            if let Some((p, b)) = &files.frames {
+                rec.frames = crate::bin::read_frames(p, b, &mut checks)?;
             }
         }
         Format::Text => {
-            rec.cameras = crate::txt::read_cameras(&cams, &read_text(&cams)?)?;
-            rec.images = crate::txt::read_images(&imgs, &read_text(&imgs)?, &mut checks)?;
-            rec.points = crate::txt::read_points(&pts, &read_text(&pts)?)?;
-            if rigs.is_file() {
-                rec.rigs = crate::txt::read_rigs(&rigs, &read_text(&rigs)?, &mut checks)?;
+            rec.cameras = crate::txt::read_cameras(&cams.0, utf8(&cams.0, &cams.1)?)?;
+            rec.images = crate::txt::read_images(&imgs.0, utf8(&imgs.0, &imgs.1)?, &mut checks)?;
+            rec.points = crate::txt::read_points(&pts.0, utf8(&pts.0, &pts.1)?)?;
+            if let Some((p, b)) = &files.rigs {
+                rec.rigs = crate::txt::read_rigs(p, utf8(p, b)?, &mut checks)?;
             }
-            if frames.is_file() {
-                rec.frames = crate::txt::read_frames(&frames, &read_text(&frames)?, &mut checks)?;
+            if let Some((p, b)) = &files.frames {
+                rec.frames = crate::txt::read_frames(p, utf8(p, b)?, &mut checks)?;
             }
         }
     }
     rec.files = [
-        cams,
-        imgs.clone(),
-        pts.clone(),
-        rigs.clone(),
-        frames.clone(),
+        Some(cams),
+        Some(imgs),
+        Some(pts),
+        files.rigs.as_ref(),
+        files.frames.as_ref(),
     ]
     .into_iter()
-    .filter(|p| p.is_file())
+    .flatten()
+    .map(|(p, _)| p.clone())
     .collect();
     rec.warnings = checks.warnings;
-    validate(&mut rec, &imgs, &pts, &frames)?;
+    let frames_path = files
+        .frames
+        .as_ref()
+        .map(|f| f.0.clone())
+        .unwrap_or_default();
+    validate(&mut rec, &imgs.0, &pts.0, &frames_path)?;
     Ok(rec)
 }
 

@@ -231,7 +231,17 @@ impl<'de, R: VertexRow + Deserialize<'de>> serde::de::DeserializeSeed<'de> for C
 pub fn read_ply(path: &Path) -> Result<PointCloud> {
     let file = File::open(path).map_err(|e| ColmapError::io(path, e))?;
     let file_len = file.metadata().map_err(|e| ColmapError::io(path, e))?.len();
-    let mut reader = PlyReader::from_reader(BufReader::with_capacity(1 << 20, file))
+    read_ply_from(BufReader::with_capacity(1 << 20, file), file_len, path)
+}
+
+/// Read a PLY from any reader of `byte_len` bytes, reporting errors under the name `path`.
+pub fn read_ply_from<R: std::io::BufRead>(
+    input: R,
+    byte_len: u64,
+    path: &Path,
+) -> Result<PointCloud> {
+    let file_len = byte_len;
+    let mut reader = PlyReader::from_reader(input)
         .map_err(|e| ColmapError::invalid(path, Record::File, "header", e.to_string()))?;
     let header = reader.header().clone();
     let mut cloud = PointCloud {

@@ -280,7 +280,7 @@ fn wrong_camera_params_and_unknown_models_are_errors() {
             if l.starts_with('#') {
                 l.to_string()
             } else {
-                l.rsplitn(2, ' ').nth(1).unwrap().to_string()
+                l.rsplit_once(' ').unwrap().0.to_string()
             }
         })
         .map(|l| l + "\n")

@@ -92,7 +92,7 @@ fn inspect_summary_is_readable() {
 
 #[test]
 fn ingest_writes_scene_tables_and_a_manifest_that_describes_them() {
-    use arrow_array::{Array, BooleanArray, StringArray, UInt32Array};
+    use arrow_array::{BooleanArray, StringArray, UInt32Array};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
     let out = tempfile::tempdir().unwrap();
@@ -114,36 +114,11 @@ fn ingest_writes_scene_tables_and_a_manifest_that_describes_them() {
         .collect();
     let b = &batches[0];
     assert_eq!(b.num_rows(), rec.images.len());
-    let ids = b
-        .column_by_name("image_id")
-        .unwrap()
-        .as_any()
-        .downcast_ref::<UInt32Array>()
-        .unwrap();
-    let names = b
-        .column_by_name("name")
-        .unwrap()
-        .as_any()
-        .downcast_ref::<StringArray>()
-        .unwrap();
-    let widths = b
-        .column_by_name("photo_width")
-        .unwrap()
-        .as_any()
-        .downcast_ref::<UInt32Array>()
-        .unwrap();
-    let matches = b
-        .column_by_name("photo_matches_camera")
-        .unwrap()
-        .as_any()
-        .downcast_ref::<BooleanArray>()
-        .unwrap();
-    let nobs = b
-        .column_by_name("num_observations")
-        .unwrap()
-        .as_any()
-        .downcast_ref::<UInt32Array>()
-        .unwrap();
+    let ids = column::<UInt32Array>(b, "image_id");
+    let names = column::<StringArray>(b, "name");
+    let widths = column::<UInt32Array>(b, "photo_width");
+    let matches = column::<BooleanArray>(b, "photo_matches_camera");
+    let nobs = column::<UInt32Array>(b, "num_observations");
     for row in 0..b.num_rows() {
         let img = &rec.images[&ids.value(row)];
         assert_eq!(names.value(row), img.name);
@@ -175,6 +150,15 @@ fn ingest_writes_scene_tables_and_a_manifest_that_describes_them() {
         .filter(|p| p.to_string_lossy().ends_with(".tmp"))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+/// A column of a batch by name, as its concrete Arrow type.
+fn column<'a, T: 'static>(b: &'a arrow_array::RecordBatch, name: &str) -> &'a T {
+    b.column_by_name(name)
+        .unwrap_or_else(|| panic!("no column {name}"))
+        .as_any()
+        .downcast_ref::<T>()
+        .unwrap_or_else(|| panic!("column {name} has another type"))
 }
 
 /// Width and height from a JPEG's SOF marker, read without the tool's code.

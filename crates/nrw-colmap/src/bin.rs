@@ -9,7 +9,7 @@ use glam::{DVec2, DVec3};
 use crate::camera::{Camera, CameraModel};
 use crate::error::{ColmapError, Record, Result};
 use crate::model::{Frame, Image, Point2D, Point3D, Rig, SensorId, TrackElement};
-use crate::parse::{check_finite, make_pose, PoseCheck};
+use crate::parse::{check_finite, make_pose, pose_flag, PoseCheck};
 use crate::pose::Rigid3;
 
 /// A bounds-checked little-endian cursor that names the file in its errors.
@@ -341,20 +341,11 @@ pub(crate) fn read_rigs(
             for _ in 1..num_sensors {
                 let s = b.sensor(rec, "sensor")?;
                 let has_pose = b.u8(rec, "sensor.has_pose")?;
-                let pose = match has_pose {
-                    0 => None,
-                    1 => {
-                        let (q, t) = b.pose(rec, "sensor_from_rig.")?;
-                        Some(make_pose(path, rec, "sensor_from_rig.q", q, t, checks)?.0)
-                    }
-                    v => {
-                        return Err(ColmapError::invalid(
-                            path,
-                            rec,
-                            "sensor.has_pose",
-                            format!("must be 0 or 1, found {v}"),
-                        ))
-                    }
+                let pose = if pose_flag(path, rec, "sensor.has_pose", has_pose)? {
+                    let (q, t) = b.pose(rec, "sensor_from_rig.")?;
+                    Some(make_pose(path, rec, "sensor_from_rig.q", q, t, checks)?.0)
+                } else {
+                    None
                 };
                 sensors.push((s, pose));
             }

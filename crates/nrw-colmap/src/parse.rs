@@ -85,3 +85,17 @@ pub(crate) fn check_camera(path: &Path, rec: Record, cam: &Camera) -> Result<()>
     }
     Ok(())
 }
+
+/// COLMAP's has-pose flag of a rig sensor: 0 or 1, nothing else.
+pub(crate) fn pose_flag(path: &Path, rec: Record, field: &str, v: u8) -> Result<bool> {
+    match v {
+        0 => Ok(false),
+        1 => Ok(true),
+        v => Err(ColmapError::invalid(
+            path,
+            rec,
+            field,
+            format!("must be 0 or 1, found {v}"),
+        )),
+    }
+}

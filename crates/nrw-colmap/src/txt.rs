@@ -9,7 +9,7 @@ use glam::{DVec2, DVec3};
 use crate::camera::{Camera, CameraModel};
 use crate::error::{ColmapError, Record, Result};
 use crate::model::{Frame, Image, Point2D, Point3D, Rig, SensorId, TrackElement, NO_POINT3D};
-use crate::parse::{check_camera, check_finite, make_pose, PoseCheck};
+use crate::parse::{check_camera, check_finite, make_pose, pose_flag, PoseCheck};
 
 /// Whitespace-separated tokens of one line, parsed with the file, line and field in errors.
 struct Tokens<'a> {
@@ -332,20 +332,11 @@ pub(crate) fn read_rigs(
             for _ in 1..n {
                 let s = t.sensor("SENSOR")?;
                 let has_pose: u8 = t.num("HAS_POSE")?;
-                let pose = match has_pose {
-                    0 => None,
-                    1 => {
-                        let (q, tr) = t.pose("SENSOR_FROM_RIG.")?;
-                        Some(make_pose(path, rec, "SENSOR_FROM_RIG.q", q, tr, checks)?.0)
-                    }
-                    v => {
-                        return Err(ColmapError::invalid(
-                            path,
-                            rec,
-                            "HAS_POSE",
-                            format!("must be 0 or 1, found {v}"),
-                        ))
-                    }
+                let pose = if pose_flag(path, rec, "HAS_POSE", has_pose)? {
+                    let (q, tr) = t.pose("SENSOR_FROM_RIG.")?;
+                    Some(make_pose(path, rec, "SENSOR_FROM_RIG.q", q, tr, checks)?.0)
+                } else {
+                    None
                 };
                 sensors.push((s, pose));
             }

@@ -271,3 +271,75 @@ fn help_teaches_the_layout_and_examples() {
     let h = ok(&["ingest", "--help"]);
     assert!(h.contains("--images") && h.contains("--out"), "{h}");
 }
+
+#[test]
+fn demo_builds_the_embedded_scene_and_runs_every_stage() {
+    let out = tempfile::tempdir().unwrap();
+    let stdout = ok(&["demo", "--out", out.path().to_str().unwrap()]);
+    let scene = out.path().join("scene");
+    let dataset = out.path().join("dataset");
+    assert!(
+        stdout.contains(&format!("scene:   {}", scene.display())),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(&format!("dataset: {}", dataset.display())),
+        "{stdout}"
+    );
+    // The scene is a COLMAP scene like any other, and the dataset describes all of it.
+    let rec = nrw_colmap::read_scene(&scene).unwrap();
+    let spec = nrw_synth::SceneSpec::demo();
+    assert_eq!(rec.images.len(), spec.cameras.count);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dataset.join("manifest.json")).unwrap())
+            .unwrap();
+    let images = m["tables"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["path"] == "scene/images.parquet")
+        .unwrap();
+    assert_eq!(images["rows"], spec.cameras.count);
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(scene.join("ground_truth/report.json")).unwrap(),
+    )
+    .unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", scene.to_str().unwrap(), "--json"])).unwrap();
+    let (a, b) = (
+        v["mean_reprojection_error_px"].as_f64().unwrap(),
+        report["mean_reprojection_error_px"].as_f64().unwrap(),
+    );
+    assert!((a - b).abs() < 1e-9, "inspect {a} vs generator {b}");
+}
+
+#[test]
+fn synth_reads_a_spec_file_and_reports_bad_ones() {
+    let out = tempfile::tempdir().unwrap();
+    let spec = out.path().join("s.toml");
+    std::fs::write(&spec, "name = 'x'\nseed = 5\n[cameras]\ncount = 2\nmin_size = 64\nmax_size = 96\n[geometry]\npoints = 1000\n").unwrap();
+    ok(&[
+        "synth",
+        spec.to_str().unwrap(),
+        "--out",
+        out.path().join("scene").to_str().unwrap(),
+    ]);
+    assert_eq!(
+        nrw_colmap::read_scene(&out.path().join("scene"))
+            .unwrap()
+            .images
+            .len(),
+        2
+    );
+    std::fs::write(&spec, "name = 'x'\nseed = 5\n[cameras]\nmodel = 'WIDE'\n").unwrap();
+    let err = fails(&[
+        "synth",
+        spec.to_str().unwrap(),
+        "--out",
+        out.path().join("bad").to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("s.toml") && err.contains("cameras.model") && err.contains("WIDE"),
+        "{err}"
+    );
+}

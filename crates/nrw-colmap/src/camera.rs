@@ -131,6 +131,20 @@ impl CameraModel {
         self.param_names()[0] == "f"
     }
 
+    /// Whether the model maps incidence angle (not its tangent) to image radius.
+    pub fn is_fisheye(self) -> bool {
+        matches!(
+            self,
+            CameraModel::OpenCvFisheye
+                | CameraModel::SimpleRadialFisheye
+                | CameraModel::RadialFisheye
+                | CameraModel::ThinPrismFisheye
+                | CameraModel::RadTanThinPrismFisheye
+                | CameraModel::SimpleFisheye
+                | CameraModel::Fisheye
+        )
+    }
+
     /// Whether projecting through this model does more than `f·x/z + c`.
     pub fn has_distortion(self) -> bool {
         !matches!(self, CameraModel::SimplePinhole | CameraModel::Pinhole)
@@ -231,6 +245,132 @@ impl Camera {
         out.reserve(points.len());
         let params = self.params.as_slice();
         dispatch!(self.model, M => out.extend(points.iter().map(|&p| M::project(params, p))))
+    }
+
+    /// Unit ray in the camera frame whose projection is `px`; `None` where no ray projects there.
+    ///
+    /// Pinhole models invert in closed form. Every other model is inverted by Newton's method
+    /// on this crate's own forward projection (numeric Jacobian, bounded steps), so the ray is
+    /// exactly consistent with [`Camera::img_from_cam`]: the result reprojects to within
+    /// 1e-6 px or `None` is returned (e.g. beyond the fold of a strong radial distortion, or
+    /// past a fisheye's 90°).
+    pub fn cam_ray_from_img(&self, px: DVec2) -> Option<DVec3> {
+        let guess = (px - self.principal_point()) / self.focal();
+        if !self.model.has_distortion() {
+            return Some(DVec3::new(guess.x, guess.y, 1.0).normalize());
+        }
+        let fisheye = self.model.is_fisheye();
+        // Unknowns: normalised image-plane coordinates, or angle coordinates for fisheye
+        // models (|q| = incidence angle), which stay finite up to 90°.
+        let dir = |q: DVec2| -> Option<DVec3> {
+            if !fisheye {
+                return Some(DVec3::new(q.x, q.y, 1.0));
+            }
+            let theta = q.length();
+            if theta >= std::f64::consts::FRAC_PI_2 {
+                return None;
+            }
+            if theta < 1e-12 {
+                return Some(DVec3::new(q.x, q.y, 1.0));
+            }
+            let s = theta.sin() / theta;
+            Some(DVec3::new(q.x * s, q.y * s, theta.cos()))
+        };
+        let mut q = if fisheye {
+            let r = guess.length();
+            if r > 1e-12 {
+                guess * (r.atan() / r)
+            } else {
+                guess
+            }
+        } else {
+            guess
+        };
+        for _ in 0..100 {
+            let d = dir(q)?;
+            let p = self.img_from_cam(d)?;
+            let r = p - px;
+            if r.length() < 1e-10 * (1.0 + px.length()) {
+                break;
+            }
+            let h = 1e-7 * (1.0 + q.length());
+            let jx = (self.img_from_cam(dir(q + DVec2::new(h, 0.0))?)? - p) / h;
+            let jy = (self.img_from_cam(dir(q + DVec2::new(0.0, h))?)? - p) / h;
+            let det = jx.x * jy.y - jx.y * jy.x;
+            if det.is_nan() || det.abs() <= 1e-300 {
+                return None;
+            }
+            let mut step = DVec2::new(jy.y * r.x - jy.x * r.y, -jx.y * r.x + jx.x * r.y) / det;
+            // Trust region, as COLMAP's undistortion: at most 10% of |q| or 0.1 per step.
+            let max = (0.1 * q.length()).max(0.1);
+            if step.length() > max {
+                step *= max / step.length();
+            }
+            q -= step;
+        }
+        let d = dir(q)?;
+        let back = self.img_from_cam(d)?;
+        ((back - px).length() < 1e-6).then(|| d.normalize())
+    }
+
+    /// The radius, in normalised coordinates (tan of the incidence angle; for fisheye models
+    /// the angle itself), up to which projection is one-to-one in every direction.
+    ///
+    /// A radial polynomial with a negative k folds back: points far off-axis project onto
+    /// pixels that belong to other, in-view directions. COLMAP's projection returns those
+    /// pixels; a renderer must not splat them. Found by scanning 16 directions (4096 steps up
+    /// to 89.4° off-axis) for the first radius where the image radius stops growing; costs
+    /// about a millisecond, so compute it once per camera.
+    pub fn injective_radius(&self) -> f64 {
+        let fisheye = self.model.is_fisheye();
+        let r_max = if fisheye {
+            std::f64::consts::FRAC_PI_2 * 0.9999
+        } else {
+            100.0
+        };
+        if !self.model.has_distortion() {
+            return r_max;
+        }
+        let pp = self.principal_point();
+        const STEPS: usize = 4096;
+        let mut limit = r_max;
+        for k in 0..16 {
+            let phi = k as f64 * std::f64::consts::TAU / 16.0;
+            let (s, c) = phi.sin_cos();
+            let mut prev = 0.0;
+            for i in 1..=STEPS {
+                let r = r_max * i as f64 / STEPS as f64;
+                if r >= limit {
+                    break;
+                }
+                let p = if fisheye {
+                    DVec3::new(r.sin() * c, r.sin() * s, r.cos())
+                } else {
+                    DVec3::new(r * c, r * s, 1.0)
+                };
+                let rad = match self.img_from_cam(p) {
+                    Some(px) => (px - pp).length(),
+                    None => f64::NAN,
+                };
+                if rad.is_nan() || rad <= prev {
+                    limit = limit.min(r_max * (i - 1) as f64 / STEPS as f64);
+                    break;
+                }
+                prev = rad;
+            }
+        }
+        limit
+    }
+
+    /// Normalised radius of a camera-space point in the units of [`Camera::injective_radius`].
+    #[inline]
+    pub fn normalized_radius(&self, p: DVec3) -> f64 {
+        let r = (p.x * p.x + p.y * p.y).sqrt() / p.z;
+        if self.model.is_fisheye() {
+            r.atan()
+        } else {
+            r
+        }
     }
 
     /// Focal lengths (fx, fy); models with one focal length return it twice.
@@ -619,6 +759,51 @@ mod tests {
         assert!((px.x - (320.0 + 500.0 * a)).abs() < 1e-9);
         let b = 90.1f64.to_radians();
         assert_eq!(c.img_from_cam(DVec3::new(b.sin(), 0.0, b.cos())), None);
+    }
+
+    #[test]
+    fn rays_from_pixels_reproject_for_every_model() {
+        for m in CameraModel::ALL {
+            let mut params = vec![0.0; m.num_params()];
+            let k = if m.single_focal() { 1 } else { 2 };
+            params[..k].fill(if m.is_fisheye() { 420.0 } else { 700.0 });
+            params[k] = 400.0;
+            params[k + 1] = 300.0;
+            for (i, p) in params.iter_mut().enumerate().skip(k + 2) {
+                *p = if m == CameraModel::Fov {
+                    0.8
+                } else {
+                    0.02 / (i as f64)
+                };
+            }
+            let c = cam(m, &params);
+            for y in (0..600).step_by(37) {
+                for x in (0..800).step_by(41) {
+                    let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                    let ray = c.cam_ray_from_img(px).unwrap_or_else(|| panic!("{m} {px}"));
+                    assert!((ray.length() - 1.0).abs() < 1e-12);
+                    let back = c.img_from_cam(ray * 7.0).unwrap();
+                    assert!((back - px).length() < 1e-6, "{m} {px} -> {back}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn injective_radius_finds_the_fold_of_a_negative_radial_term() {
+        // x(1 + k x²) peaks at x = 1/√(−3k): 2.887 for k = −0.04.
+        let c = cam(CameraModel::SimpleRadial, &[500.0, 320.0, 240.0, -0.04]);
+        let r = c.injective_radius();
+        assert!((r - 1.0 / (0.12f64).sqrt()).abs() < 0.03, "{r}");
+        // Positive k never folds; pinhole never does.
+        assert_eq!(
+            cam(CameraModel::SimpleRadial, &[500.0, 320.0, 240.0, 0.04]).injective_radius(),
+            100.0
+        );
+        assert_eq!(
+            cam(CameraModel::Pinhole, &[500.0, 500.0, 320.0, 240.0]).injective_radius(),
+            100.0
+        );
     }
 
     #[test]

@@ -367,15 +367,19 @@ pub fn read_ply_from<R: std::io::BufRead>(
 /// Write a cloud as binary little-endian PLY in COLMAP's fused.ply layout (float x y z,
 /// float nx ny nz, uchar red green blue), leaving out the channels the cloud lacks.
 ///
-/// Positions are stored as f32 like COLMAP's; precision is given up here, so callers with
-/// georeferenced clouds should write them re-centred.
+/// Positions are stored as f32 like COLMAP's, unless a coordinate exceeds 10⁵ in magnitude
+/// (georeferenced clouds), where f32 would round to decimetres: then x y z are doubles.
 pub fn write_ply(cloud: &PointCloud, path: &Path) -> std::io::Result<()> {
     use std::io::Write;
+    let double = cloud.positions.iter().any(|p| p.abs().max_element() > 1e5);
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
         cloud.len()
     );
-    header.push_str("property float x\nproperty float y\nproperty float z\n");
+    let ty = if double { "double" } else { "float" };
+    header.push_str(&format!(
+        "property {ty} x\nproperty {ty} y\nproperty {ty} z\n"
+    ));
     if cloud.normals.is_some() {
         header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
     }
@@ -388,7 +392,12 @@ pub fn write_ply(cloud: &PointCloud, path: &Path) -> std::io::Result<()> {
     w.write_all(header.as_bytes())?;
     for i in 0..cloud.len() {
         for v in cloud.positions[i].to_array() {
-            w.write_all(&(v as f32).to_le_bytes())?;
+            if double {
+                w.write_all(&v.to_le_bytes())?;
+            } else {
+                // Precision given up here: COLMAP's layout stores f32 positions.
+                w.write_all(&(v as f32).to_le_bytes())?;
+            }
         }
         if let Some(n) = &cloud.normals {
             for v in n[i] {

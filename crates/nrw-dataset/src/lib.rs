@@ -3,6 +3,7 @@
 //! they can never disagree about a byte.
 
 pub mod atomic;
+pub mod depth;
 pub mod error;
 pub mod manifest;
 pub mod parquet_io;

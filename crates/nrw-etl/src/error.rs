@@ -15,6 +15,8 @@ pub enum EtlError {
         #[source]
         source: image::ImageError,
     },
+    #[error(transparent)]
+    Synth(#[from] nrw_synth::SynthError),
     #[error("{0}")]
     Usage(String),
 }

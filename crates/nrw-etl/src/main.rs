@@ -16,8 +16,9 @@ use clap::{Parser, Subcommand};
 Neural Rerendering in the Wild (Meshry et al., CVPR 2019).\n\n\
 A scene folder is laid out as COLMAP writes it: sparse/0/{cameras,images,points3D}.{bin,txt} \
 (COLMAP 3 or 4), images/ with the photos, and optionally dense/fused.ply.\n\n\
-Start with `nrw-etl inspect SCENE` to check a model, then `nrw-etl ingest SCENE --out DATASET`.",
-    after_help = "Examples:\n  nrw-etl inspect ../shared/data/sceaux_castle\n  nrw-etl inspect ../shared/data/sacre_coeur --json\n  nrw-etl ingest ../shared/data/sceaux_castle --out /tmp/sceaux"
+Try `nrw-etl demo` first: it builds a synthetic scene and runs every stage on it. \
+On your own data, start with `nrw-etl inspect SCENE` to check a model, then `nrw-etl ingest SCENE --out DATASET`.",
+    after_help = "Examples:\n  nrw-etl demo --out /tmp/nrw-demo\n  nrw-etl synth scenes/demo.toml --out /tmp/scene --seed 3\n  nrw-etl inspect ../shared/data/sceaux_castle\n  nrw-etl inspect ../shared/data/sacre_coeur --json\n  nrw-etl ingest ../shared/data/sceaux_castle --out /tmp/sceaux"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -26,6 +27,10 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Build the embedded synthetic landmark scene and run every stage on it (start here)
+    Demo(cmd::demo::DemoArgs),
+    /// Generate a synthetic COLMAP scene with ground truth from a spec (scenes/*.toml)
+    Synth(cmd::synth::SynthArgs),
     /// Summarise a COLMAP model and check it: counts, camera models, reprojection errors
     Inspect(cmd::inspect::InspectArgs),
     /// Read and validate a scene and write its dataset tables (scene/*.parquet) and manifest.json
@@ -35,6 +40,8 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Demo(a) => cmd::demo::run(a),
+        Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Ingest(a) => cmd::ingest::run(a),
     };

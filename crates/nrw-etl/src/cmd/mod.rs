@@ -1,7 +1,9 @@
 //! One module per subcommand.
 
+pub mod demo;
 pub mod ingest;
 pub mod inspect;
+pub mod synth;
 
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,40 @@
+//! `nrw-etl demo`: the main job end to end on the embedded synthetic scene, so a fresh
+//! machine can run the tool before its user owns a reconstruction.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::ingest::{self, IngestArgs};
+use crate::error::Result;
+
+/// Arguments of `demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Folder for the demo: DIR/scene (the synthetic COLMAP scene) and DIR/dataset
+    #[arg(long, default_value = "nrw-demo")]
+    pub out: PathBuf,
+    /// Scene spec to use instead of the embedded demo scene
+    #[arg(long)]
+    pub spec: Option<PathBuf>,
+    /// Override the scene's seed
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+/// Run `demo`: synthesise the scene, then every pipeline stage that exists.
+pub fn run(args: &DemoArgs) -> Result<()> {
+    let spec = super::synth::load_spec(args.spec.as_deref(), args.seed)?;
+    let scene = args.out.join("scene");
+    super::synth::generate(&spec, &scene)?;
+    let dataset = args.out.join("dataset");
+    ingest::run(&IngestArgs {
+        scene: scene.clone(),
+        out: dataset.clone(),
+        images: None,
+        format: None,
+    })?;
+    println!("scene:   {}", scene.display());
+    println!("dataset: {}", dataset.display());
+    Ok(())
+}

@@ -1,0 +1,406 @@
+//! A synthetic photo collection of a landmark, in the same on-disk form as a real COLMAP
+//! scene (`images/`, `sparse/0/` in both encodings, `dense/fused.ply`) plus ground truth
+//! (`ground_truth/`: true depth, ADE20K labels, each photo's appearance). Photos are ray-cast
+//! from the true surface; the COLMAP model is genuine (keypoints are projections plus
+//! Gaussian noise, so stored reprojection errors are honest). Only effects the spec lists are
+//! simulated. Deterministic: same spec and seed, same bytes, whatever the thread count.
+
+pub mod cameras;
+pub mod error;
+pub mod geometry;
+pub mod look;
+pub mod render;
+pub mod spec;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
+
+use glam::{DVec2, DVec3};
+use nrw_colmap::pose::dot3_plus;
+use nrw_colmap::{
+    Format, Image, Point2D, Point3D, PointCloud, Reconstruction, TrackElement, NO_POINT3D,
+};
+use nrw_dataset::atomic::write_bytes_atomic;
+use nrw_dataset::depth::{write_exr, DepthMap};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::Serialize;
+
+pub use error::{Result, SynthError};
+pub use render::Counters;
+pub use spec::{Appearance, SceneSpec};
+
+use crate::cameras::Shot;
+use crate::geometry::{albedo, hash64, to_srgb8, Landmark, SurfacePoint};
+use crate::look::{gauss, Look};
+use crate::render::{render, Person};
+
+/// What a generated scene holds, and which simulation stages ran how often.
+#[derive(Debug, Clone, Serialize)]
+pub struct SynthReport {
+    /// Where the scene was written (left out of report.json so bytes do not depend on it).
+    #[serde(skip)]
+    pub out: PathBuf,
+    pub photos: usize,
+    pub small_photos: usize,
+    pub away_photos: usize,
+    pub sparse_points: usize,
+    pub observations: usize,
+    pub dense_points: usize,
+    /// Mean over observations of the keypoint noise actually added (px).
+    pub mean_reprojection_error_px: Option<f64>,
+    pub counters: BTreeMap<&'static str, u64>,
+}
+
+/// Ground truth of one photo, as written to ground_truth/appearance.json.
+#[derive(Debug, Clone, Serialize)]
+pub struct PhotoTruth {
+    pub image_id: u32,
+    pub name: String,
+    /// Time of day, or "neutral" when the spec simulates none.
+    pub label: String,
+    pub look: Look,
+    pub people: Vec<Person>,
+    pub small: bool,
+    pub away: bool,
+    pub width: u64,
+    pub height: u64,
+}
+
+struct PhotoResult {
+    truth: PhotoTruth,
+    /// (feature index, keypoint, |noise|)
+    observed: Vec<(usize, DVec2, f64)>,
+    extras: Vec<DVec2>,
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SynthError + '_ {
+    move |e| SynthError::Io {
+        path: path.to_path_buf(),
+        source: e,
+    }
+}
+
+fn seed_for(seed: u64, stream: u64) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(hash64(seed ^ hash64(stream)))
+}
+
+fn encode(
+    path: &Path,
+    w: usize,
+    h: usize,
+    data: &[u8],
+    color: image::ExtendedColorType,
+    jpeg: Option<u8>,
+) -> Result<()> {
+    use image::ImageEncoder;
+    let mut bytes = Vec::new();
+    let err = |e| SynthError::Image {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    match jpeg {
+        Some(q) => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, q)
+            .write_image(data, w as u32, h as u32, color)
+            .map_err(err)?,
+        None => image::codecs::png::PngEncoder::new(&mut bytes)
+            .write_image(data, w as u32, h as u32, color)
+            .map_err(err)?,
+    }
+    write_bytes_atomic(path, &bytes)?;
+    Ok(())
+}
+
+/// Which features a photo sees (unoccluded, in frame) and their noisy keypoints.
+fn observe<R: Rng>(
+    shot: &Shot,
+    depth: &[f32],
+    features: &[SurfacePoint],
+    noise_px: f64,
+    rng: &mut R,
+) -> Vec<(usize, DVec2, f64)> {
+    let (w, h) = (shot.camera.width as f64, shot.camera.height as f64);
+    let mut out = Vec::new();
+    let fold = shot.camera.injective_radius();
+    for (k, f) in features.iter().enumerate() {
+        let cam = shot.pose.transform(f.p);
+        if cam.z <= 0.0 || shot.camera.normalized_radius(cam) > fold {
+            continue; // beyond the lens's fold: its pixel belongs to another direction
+        }
+        let Some(px) = shot.camera.img_from_cam(cam) else {
+            continue;
+        };
+        if !(px.x >= 1.0 && px.y >= 1.0 && px.x < w - 1.0 && px.y < h - 1.0) {
+            continue;
+        }
+        let d = depth[px.y as usize * shot.camera.width as usize + px.x as usize] as f64;
+        // Visible when the true depth at its pixel is the point's own (else occluded).
+        if !(d > 0.0 && (d - cam.z).abs() <= 0.01 * cam.z + 0.02) {
+            continue;
+        }
+        let noise = DVec2::new(gauss(rng), gauss(rng)) * noise_px;
+        out.push((k, px + noise, noise.length()));
+    }
+    out
+}
+
+/// Generate the scene a spec describes into `out`; `progress` is called once per finished photo.
+pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> Result<SynthReport> {
+    spec.validate("scene spec")?;
+    let landmark = Landmark::new(&spec.geometry);
+    let fx = &spec.effects;
+    let ext = if fx.jpeg_quality.is_some() {
+        "jpg"
+    } else {
+        "png"
+    };
+    let shots = cameras::shots(&spec.cameras, &landmark, ext, &mut seed_for(spec.seed, 1));
+    let features = landmark.sample_surface(spec.observations.features, &mut seed_for(spec.seed, 2));
+    for d in [
+        "images",
+        "sparse/0",
+        "dense",
+        "ground_truth/depth",
+        "ground_truth/semantics",
+    ] {
+        let p = out.join(d);
+        std::fs::create_dir_all(&p).map_err(io(&p))?;
+    }
+    let counters = Counters::default();
+    let results: Vec<PhotoResult> = shots
+        .par_iter()
+        .enumerate()
+        .map(|(i, shot)| -> Result<PhotoResult> {
+            let mut rng = seed_for(spec.seed, 0x1000 + i as u64);
+            let look = Look::draw(fx, &mut rng);
+            let people = match fx.transients {
+                Some(mean) => Person::draw(mean, shot, &mut rng),
+                None => Vec::new(),
+            };
+            let buf = render(
+                &landmark,
+                shot,
+                &look,
+                &people,
+                fx.noise,
+                hash64(spec.seed ^ (i as u64 + 1)),
+                &counters,
+            );
+            let observed = observe(
+                shot,
+                &buf.depth,
+                &features,
+                spec.observations.noise_px,
+                &mut rng,
+            );
+            let n_extra =
+                (observed.len() as f64 * spec.observations.extra_keypoints).round() as usize;
+            let extras = (0..n_extra)
+                .map(|_| {
+                    DVec2::new(
+                        rng.random_range(0.0..buf.width as f64),
+                        rng.random_range(0.0..buf.height as f64),
+                    )
+                })
+                .collect();
+            let photo = out.join("images").join(&shot.name);
+            encode(
+                &photo,
+                buf.width,
+                buf.height,
+                &buf.rgb,
+                image::ExtendedColorType::Rgb8,
+                fx.jpeg_quality,
+            )?;
+            let stem = Path::new(&shot.name).with_extension("");
+            let stem = stem.to_string_lossy();
+            write_exr(
+                &out.join("ground_truth/depth").join(format!("{stem}.exr")),
+                &DepthMap {
+                    width: buf.width,
+                    height: buf.height,
+                    data: buf.depth,
+                },
+            )?;
+            encode(
+                &out.join("ground_truth/semantics")
+                    .join(format!("{stem}.png")),
+                buf.width,
+                buf.height,
+                &buf.semantics,
+                image::ExtendedColorType::L8,
+                None,
+            )?;
+            if fx.jpeg_quality.is_some() {
+                counters.jpeg_photos.fetch_add(1, Ordering::Relaxed);
+            } else {
+                counters.png_photos.fetch_add(1, Ordering::Relaxed);
+            }
+            progress();
+            let label = look.appearance.map_or("neutral", |a| a.label()).to_string();
+            Ok(PhotoResult {
+                truth: PhotoTruth {
+                    image_id: shot.image_id,
+                    name: shot.name.clone(),
+                    label,
+                    look,
+                    people,
+                    small: shot.small,
+                    away: shot.away,
+                    width: shot.camera.width,
+                    height: shot.camera.height,
+                },
+                observed,
+                extras,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+
+    // Tracks: a feature seen by two or more photos becomes a 3D point.
+    let mut seen = vec![0usize; features.len()];
+    for r in &results {
+        for (k, _, _) in &r.observed {
+            seen[*k] += 1;
+        }
+    }
+    let mut point_id = vec![NO_POINT3D; features.len()];
+    let mut next = 1u64;
+    for (k, n) in seen.iter().enumerate() {
+        if *n >= 2 {
+            point_id[k] = next;
+            next += 1;
+        }
+    }
+    let origin = DVec3::from_array(spec.geometry.origin);
+    let mut rec = Reconstruction::default();
+    let mut points: BTreeMap<u64, Point3D> = BTreeMap::new();
+    let mut err_sum = 0.0;
+    let mut n_obs = 0usize;
+    for (shot, r) in shots.iter().zip(&results) {
+        rec.cameras
+            .entry(shot.camera_id)
+            .or_insert_with(|| shot.camera.clone());
+        let mut points2d = Vec::with_capacity(r.observed.len() + r.extras.len());
+        for (k, xy, e) in &r.observed {
+            let pid = point_id[*k];
+            if pid != NO_POINT3D {
+                let f = &features[*k];
+                let p = points.entry(pid).or_insert_with(|| {
+                    let a = albedo(f.material, f.p, f.normal);
+                    Point3D {
+                        id: pid,
+                        xyz: f.p + origin,
+                        rgb: [to_srgb8(a.x), to_srgb8(a.y), to_srgb8(a.z)],
+                        error: 0.0,
+                        track: Vec::new(),
+                    }
+                });
+                p.track.push(TrackElement {
+                    image_id: shot.image_id,
+                    point2d_idx: points2d.len() as u32,
+                });
+                p.error += e; // summed here, divided by track length below
+                err_sum += e;
+                n_obs += 1;
+            }
+            points2d.push(Point2D {
+                xy: *xy,
+                point3d_id: pid,
+            });
+        }
+        points2d.extend(r.extras.iter().map(|xy| Point2D {
+            xy: *xy,
+            point3d_id: NO_POINT3D,
+        }));
+        // World→camera for world coordinates shifted by `origin`: t' = t − R·origin, summed
+        // with compensated arithmetic so a georeferenced scene keeps its digits.
+        let rows = shot.pose.matrix().transpose();
+        let t = shot.pose.translation;
+        let mut pose = shot.pose;
+        pose.translation = DVec3::new(
+            dot3_plus(rows.x_axis, -origin, t.x),
+            dot3_plus(rows.y_axis, -origin, t.y),
+            dot3_plus(rows.z_axis, -origin, t.z),
+        );
+        rec.images.insert(
+            shot.image_id,
+            Image {
+                id: shot.image_id,
+                name: shot.name.clone(),
+                camera_id: shot.camera_id,
+                cam_from_world: pose,
+                stored_quat_norm: 1.0,
+                points2d,
+            },
+        );
+    }
+    for p in points.values_mut() {
+        p.error /= p.track.len() as f64;
+    }
+    rec.points = points;
+    let sparse = out.join("sparse/0");
+    for f in [Format::Binary, Format::Text] {
+        nrw_colmap::write_model(&rec, &sparse, f).map_err(io(&sparse))?;
+    }
+
+    let dense = landmark.sample_surface(spec.geometry.points, &mut seed_for(spec.seed, 3));
+    let cloud = PointCloud {
+        path: out.join("dense/fused.ply"),
+        positions: dense.iter().map(|s| s.p + origin).collect(),
+        colors: Some(
+            dense
+                .iter()
+                .map(|s| {
+                    let a = albedo(s.material, s.p, s.normal);
+                    [to_srgb8(a.x), to_srgb8(a.y), to_srgb8(a.z)]
+                })
+                .collect(),
+        ),
+        normals: Some(
+            dense
+                .iter()
+                .map(|s| s.normal.as_vec3().to_array())
+                .collect(),
+        ),
+    };
+    nrw_colmap::write_ply(&cloud, &cloud.path).map_err(io(&cloud.path))?;
+
+    let report = SynthReport {
+        out: out.to_path_buf(),
+        photos: shots.len(),
+        small_photos: shots.iter().filter(|s| s.small).count(),
+        away_photos: shots.iter().filter(|s| s.away).count(),
+        sparse_points: rec.points.len(),
+        observations: n_obs,
+        dense_points: cloud.len(),
+        mean_reprojection_error_px: (n_obs > 0).then(|| err_sum / n_obs as f64),
+        counters: counters.snapshot(),
+    };
+    let truths: Vec<&PhotoTruth> = results.iter().map(|r| &r.truth).collect();
+    let json = |v: &dyn erased::Json, name: &str| -> Result<()> {
+        let p = out.join("ground_truth").join(name);
+        let mut text = v.to_json();
+        text.push('\n');
+        write_bytes_atomic(&p, text.as_bytes())?;
+        Ok(())
+    };
+    json(&truths, "appearance.json")?;
+    json(&report, "report.json")?;
+    let spec_text = toml::to_string(spec).expect("a spec serialises");
+    write_bytes_atomic(&out.join("scene.toml"), spec_text.as_bytes())?;
+    Ok(report)
+}
+
+mod erased {
+    /// Pretty JSON of any serialisable value, behind a trait object.
+    pub trait Json {
+        fn to_json(&self) -> String;
+    }
+    impl<T: serde::Serialize> Json for T {
+        fn to_json(&self) -> String {
+            serde_json::to_string_pretty(self).expect("plain data serialises")
+        }
+    }
+}

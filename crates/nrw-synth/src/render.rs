@@ -1,0 +1,304 @@
+//! Photos ray-cast from the true surface, with true depth and ADE20K labels per pixel, and
+//! each effect applied only when the photo's [`Look`] carries it. [`Counters`] record how
+//! often each effect ran, so tests can prove that an effect not asked for costs nothing.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use glam::{DVec2, DVec3};
+use rand::Rng;
+use serde::Serialize;
+
+use crate::cameras::Shot;
+use crate::geometry::{albedo, hash64, to_srgb8, Landmark, Material, ADE_PERSON, ADE_SKY};
+use crate::look::Look;
+
+/// How many times each simulation stage ran (pixels, rays or photos).
+#[derive(Debug, Default)]
+pub struct Counters {
+    pub primary_rays: AtomicU64,
+    /// Pixels whose ray needed the iterative inverse of a distortion model.
+    pub distortion_inversions: AtomicU64,
+    pub sun_shading: AtomicU64,
+    pub shadow_rays: AtomicU64,
+    pub window_glow: AtomicU64,
+    pub haze: AtomicU64,
+    pub exposure: AtomicU64,
+    pub white_balance: AtomicU64,
+    pub transient_tests: AtomicU64,
+    pub sensor_noise: AtomicU64,
+    pub jpeg_photos: AtomicU64,
+    pub png_photos: AtomicU64,
+}
+
+impl Counters {
+    /// A name → count map for reports and tests.
+    pub fn snapshot(&self) -> BTreeMap<&'static str, u64> {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        BTreeMap::from([
+            ("primary_rays", g(&self.primary_rays)),
+            ("distortion_inversions", g(&self.distortion_inversions)),
+            ("sun_shading", g(&self.sun_shading)),
+            ("shadow_rays", g(&self.shadow_rays)),
+            ("window_glow", g(&self.window_glow)),
+            ("haze", g(&self.haze)),
+            ("exposure", g(&self.exposure)),
+            ("white_balance", g(&self.white_balance)),
+            ("transient_tests", g(&self.transient_tests)),
+            ("sensor_noise", g(&self.sensor_noise)),
+            ("jpeg_photos", g(&self.jpeg_photos)),
+            ("png_photos", g(&self.png_photos)),
+        ])
+    }
+}
+
+/// A person-like transient: a body cylinder and a head sphere standing on the ground.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Person {
+    pub x: f64,
+    pub y: f64,
+    pub height: f64,
+    pub color: [f64; 3],
+}
+
+impl Person {
+    const BODY_R: f64 = 0.24;
+    const HEAD_R: f64 = 0.12;
+
+    fn intersect(&self, o: DVec3, d: DVec3, t_max: f64) -> Option<(f64, DVec3)> {
+        let mut best: Option<(f64, DVec3)> = None;
+        let top = self.height - 2.0 * Self::HEAD_R;
+        // Body: a cylinder from the ground to the shoulders.
+        let (ox, oy) = (o.x - self.x, o.y - self.y);
+        let a = d.x * d.x + d.y * d.y;
+        if a > 1e-18 {
+            let b = ox * d.x + oy * d.y;
+            let c = ox * ox + oy * oy - Self::BODY_R * Self::BODY_R;
+            let disc = b * b - a * c;
+            if disc >= 0.0 && c > 0.0 {
+                let t = (-b - disc.sqrt()) / a;
+                let z = o.z + d.z * t;
+                if t > 1e-6 && t < t_max && (0.0..=top).contains(&z) {
+                    best = Some((t, DVec3::new(ox + d.x * t, oy + d.y * t, 0.0).normalize()));
+                }
+            }
+        }
+        // Head: a sphere on top.
+        let centre = DVec3::new(self.x, self.y, self.height - Self::HEAD_R);
+        let oc = o - centre;
+        let b = oc.dot(d);
+        let c = oc.length_squared() - Self::HEAD_R * Self::HEAD_R;
+        let disc = b * b - c;
+        if disc >= 0.0 && c > 0.0 {
+            let t = -b - disc.sqrt();
+            if t > 1e-6 && t < best.map_or(t_max, |b| b.0) {
+                best = Some((t, (o + d * t - centre).normalize()));
+            }
+        }
+        best
+    }
+
+    /// Draw people standing in view of a shot, on open ground in front of the landmark.
+    pub fn draw<R: Rng>(mean: f64, shot: &Shot, rng: &mut R) -> Vec<Person> {
+        // Poisson count by inversion (small means only).
+        let (mut n, mut p, l) = (0usize, rng.random::<f64>(), (-mean).exp());
+        while p > l && n < 64 {
+            p *= rng.random::<f64>();
+            n += 1;
+        }
+        let r = shot.pose.matrix().transpose();
+        let fwd = r * DVec3::Z;
+        let right = r * DVec3::X;
+        let mut out = Vec::new();
+        for _ in 0..n {
+            let ahead = rng.random_range(4.0..18.0);
+            let side = rng.random_range(-0.35..0.35) * ahead;
+            let flat = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero();
+            let flat_r = DVec3::new(right.x, right.y, 0.0).normalize_or_zero();
+            let pos = shot.centre + flat * ahead + flat_r * side;
+            // Keep clear of the building, steps and columns.
+            if pos.y > -4.2 && pos.x.abs() < 40.0 {
+                continue;
+            }
+            out.push(Person {
+                x: pos.x,
+                y: pos.y,
+                height: rng.random_range(1.55..1.9),
+                color: [
+                    rng.random_range(0.05..0.8),
+                    rng.random_range(0.05..0.8),
+                    rng.random_range(0.05..0.8),
+                ],
+            });
+        }
+        out
+    }
+}
+
+/// A rendered photo with its ground truth.
+pub struct PhotoBuffers {
+    pub width: usize,
+    pub height: usize,
+    /// sRGB, 3 bytes per pixel, row-major.
+    pub rgb: Vec<u8>,
+    /// Camera-space z of the visible surface; 0 where nothing is (sky, outside the lens).
+    pub depth: Vec<f32>,
+    /// ADE20K class per pixel; 0 where the lens sees nothing.
+    pub semantics: Vec<u8>,
+}
+
+/// Standard normal from a 64-bit hash (Box–Muller on its two halves).
+fn hashed_gauss(h: u64) -> f64 {
+    let u1 = ((h >> 32) as f64 + 1.0) / 4_294_967_297.0;
+    let u2 = (h & 0xffff_ffff) as f64 / 4_294_967_296.0;
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// Whether a window cell is lit at night.
+fn lit(cell: (i32, i32)) -> bool {
+    hash64(((cell.0 as i64 as u64) << 32) ^ cell.1 as i64 as u64 ^ 0x5eed) % 10 < 6
+}
+
+/// Render one photo. `noise_seed` makes sensor noise a pure function of (photo, pixel).
+pub fn render(
+    landmark: &Landmark,
+    shot: &Shot,
+    look: &Look,
+    people: &[Person],
+    sensor_noise: Option<f64>,
+    noise_seed: u64,
+    counters: &Counters,
+) -> PhotoBuffers {
+    let (w, h) = (shot.camera.width as usize, shot.camera.height as usize);
+    let mut out = PhotoBuffers {
+        width: w,
+        height: h,
+        rgb: vec![0; w * h * 3],
+        depth: vec![0.0; w * h],
+        semantics: vec![0; w * h],
+    };
+    let cam_to_world = shot.pose.matrix().transpose();
+    let o = shot.centre;
+    let distorted = shot.camera.model.has_distortion();
+    let sun = look.sun_direction.map(DVec3::from_array);
+    let ambient = DVec3::from_array(look.ambient);
+    let sun_rad = DVec3::from_array(look.sun);
+    let gain = look.exposure_ev.map(|ev| 2f64.powf(ev));
+    let wb = look.white_balance.map(DVec3::from_array);
+    let glow = look.window_glow.map(DVec3::from_array);
+    let horizon = DVec3::from_array(look.sky_horizon);
+    let (
+        mut n_inv,
+        mut n_sun,
+        mut n_shadow,
+        mut n_glow,
+        mut n_haze,
+        mut n_exp,
+        mut n_wb,
+        mut n_tr,
+        mut n_noise,
+    ) = (0u64, 0u64, 0u64, 0u64, 0u64, 0u64, 0u64, 0u64, 0u64);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+            // Pinhole models invert in closed form; only distortion models iterate.
+            n_inv += distorted as u64;
+            let Some(ray) = shot.camera.cam_ray_from_img(px) else {
+                continue;
+            };
+            let d = cam_to_world * ray;
+            let mut hit = landmark.intersect(o, d, 1e-6, 1e5).map(|h| {
+                (
+                    h.t,
+                    h.normal,
+                    Some(h.material),
+                    h.class,
+                    h.cell,
+                    DVec3::ZERO,
+                )
+            });
+            if !people.is_empty() {
+                n_tr += 1;
+                for p in people {
+                    let t_max = hit.map_or(1e5, |h| h.0);
+                    if let Some((t, n)) = p.intersect(o, d, t_max) {
+                        hit = Some((t, n, None, ADE_PERSON, (0, 0), DVec3::from_array(p.color)));
+                    }
+                }
+            }
+            let mut c = match hit {
+                None => {
+                    out.semantics[i] = ADE_SKY;
+                    look.sky(d)
+                }
+                Some((t, n, material, class, cell, person_color)) => {
+                    let p = o + d * t;
+                    out.depth[i] = (t * ray.z) as f32;
+                    out.semantics[i] = class;
+                    let alb = match material {
+                        Some(m) => albedo(m, p, n),
+                        None => person_color,
+                    };
+                    let mut c = alb * ambient;
+                    if let Some(l) = sun {
+                        n_sun += 1;
+                        let ndl = n.dot(l);
+                        if ndl > 0.0 {
+                            n_shadow += 1;
+                            if !landmark.occluded(p + n * 1e-4, l, 1e4) {
+                                c += alb * sun_rad * ndl;
+                            }
+                        }
+                    }
+                    if let (Some(g), Some(Material::Glass)) = (glow, material) {
+                        n_glow += 1;
+                        if lit(cell) {
+                            c += g;
+                        }
+                    }
+                    if let Some(beta) = look.haze_density {
+                        n_haze += 1;
+                        let f = (-beta * t).exp();
+                        c = c * f + horizon * (1.0 - f);
+                    }
+                    c
+                }
+            };
+            if let Some(g) = gain {
+                n_exp += 1;
+                c *= g;
+            }
+            if let Some(g) = wb {
+                n_wb += 1;
+                c *= g;
+            }
+            for k in 0..3 {
+                let mut v = to_srgb8(c[k]) as f64;
+                if let Some(s) = sensor_noise {
+                    n_noise += 1;
+                    v += 255.0
+                        * s
+                        * hashed_gauss(hash64(
+                            noise_seed ^ ((i as u64) * 3 + k as u64).wrapping_mul(0x9e37_79b9),
+                        ));
+                }
+                out.rgb[i * 3 + k] = v.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    let add = |a: &AtomicU64, v: u64| {
+        a.fetch_add(v, Ordering::Relaxed);
+    };
+    add(&counters.primary_rays, (w * h) as u64);
+    add(&counters.distortion_inversions, n_inv);
+    add(&counters.sun_shading, n_sun);
+    add(&counters.shadow_rays, n_shadow);
+    add(&counters.window_glow, n_glow);
+    add(&counters.haze, n_haze);
+    add(&counters.exposure, n_exp);
+    add(&counters.white_balance, n_wb);
+    add(&counters.transient_tests, n_tr);
+    add(&counters.sensor_noise, n_noise);
+    out
+}

@@ -1,0 +1,267 @@
+//! The scene spec: a small TOML file. Every effect is opt-in; an effect the spec does not
+//! name is never computed (see [`crate::Counters`], which tests use to prove it).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, SynthError};
+
+/// A whole synthetic scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    pub name: String,
+    /// Same seed, same bytes.
+    pub seed: u64,
+    #[serde(default)]
+    pub geometry: GeometrySpec,
+    #[serde(default)]
+    pub cameras: CameraSpec,
+    #[serde(default)]
+    pub observations: ObservationSpec,
+    /// Absent table or absent keys: no effect simulated.
+    #[serde(default)]
+    pub effects: EffectsSpec,
+}
+
+/// The landmark and its dense cloud.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GeometrySpec {
+    /// Points in dense/fused.ply (10⁴ … 10⁷).
+    pub points: usize,
+    /// Façade width and height in metres.
+    pub facade_width: f64,
+    pub facade_height: f64,
+    /// Window columns and rows.
+    pub bays: usize,
+    pub floors: usize,
+    /// A portico of columns in front of the façade.
+    pub columns: bool,
+    /// Offset added to every world coordinate written (e.g. UTM-like [5e6, 5e6, 0]).
+    pub origin: [f64; 3],
+}
+
+impl Default for GeometrySpec {
+    fn default() -> Self {
+        GeometrySpec {
+            points: 200_000,
+            facade_width: 24.0,
+            facade_height: 14.0,
+            bays: 6,
+            floors: 3,
+            columns: true,
+            origin: [0.0; 3],
+        }
+    }
+}
+
+/// The photographers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraSpec {
+    pub count: usize,
+    /// Any COLMAP model name this project projects (SIMPLE_PINHOLE … FISHEYE).
+    pub model: String,
+    /// Scales the model's default distortion coefficients (0 = none).
+    pub distortion: f64,
+    /// Photo widths are drawn between these (the longer side for portrait photos).
+    pub min_size: u32,
+    pub max_size: u32,
+    /// Fraction of photos under 450 px on both sides.
+    pub small_fraction: f64,
+    /// Fraction of photos that look mostly away from the landmark.
+    pub away_fraction: f64,
+    /// One camera shared by all photos (then all photos have one size).
+    pub shared: bool,
+    /// Distance range from the façade, metres.
+    pub min_distance: f64,
+    pub max_distance: f64,
+}
+
+impl Default for CameraSpec {
+    fn default() -> Self {
+        CameraSpec {
+            count: 24,
+            model: "SIMPLE_RADIAL".into(),
+            distortion: 1.0,
+            min_size: 480,
+            max_size: 800,
+            small_fraction: 0.15,
+            away_fraction: 0.15,
+            shared: false,
+            min_distance: 12.0,
+            max_distance: 40.0,
+        }
+    }
+}
+
+/// The sparse model's keypoints and tracks.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObservationSpec {
+    /// Surface points tried as SfM features; those seen by two photos become 3D points.
+    pub features: usize,
+    /// Gaussian keypoint noise (pixels, per axis): the honest reprojection error.
+    pub noise_px: f64,
+    /// Unmatched keypoints per matched one (COLMAP keeps many).
+    pub extra_keypoints: f64,
+}
+
+impl Default for ObservationSpec {
+    fn default() -> Self {
+        ObservationSpec {
+            features: 3000,
+            noise_px: 0.5,
+            extra_keypoints: 0.3,
+        }
+    }
+}
+
+/// Photo effects; each is simulated only when present.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EffectsSpec {
+    /// Times of day to draw from: day, overcast, sunset, night. Absent: flat neutral light.
+    pub appearance: Option<Vec<Appearance>>,
+    /// Standard deviation of exposure offsets, in stops.
+    pub exposure_ev: Option<f64>,
+    /// Standard deviation of red/blue white-balance gains.
+    pub white_balance: Option<f64>,
+    /// Haze density per metre (0.01 ≈ 37% veiled at 100 m).
+    pub haze: Option<f64>,
+    /// Mean number of people per photo (with ADE20K label maps, person = 13).
+    pub transients: Option<f64>,
+    /// Sensor noise standard deviation on [0, 1] intensities.
+    pub noise: Option<f64>,
+    /// Write photos as JPEG at this quality (else lossless PNG).
+    pub jpeg_quality: Option<u8>,
+}
+
+/// A time of day.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Appearance {
+    Day,
+    Overcast,
+    Sunset,
+    Night,
+}
+
+impl Appearance {
+    /// Lower-case label used in ground truth and reports.
+    pub fn label(self) -> &'static str {
+        match self {
+            Appearance::Day => "day",
+            Appearance::Overcast => "overcast",
+            Appearance::Sunset => "sunset",
+            Appearance::Night => "night",
+        }
+    }
+}
+
+impl SceneSpec {
+    /// The embedded default demo scene.
+    pub fn demo() -> SceneSpec {
+        toml::from_str(DEMO_TOML).expect("embedded demo spec parses")
+    }
+
+    /// Parse a spec file's text; `origin` names the file in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<SceneSpec> {
+        let spec: SceneSpec = toml::from_str(text).map_err(|e| SynthError::Spec {
+            file: origin.into(),
+            problem: e.to_string(),
+        })?;
+        spec.validate(origin)?;
+        Ok(spec)
+    }
+
+    /// Reject specs that cannot make a scene, naming the key.
+    pub fn validate(&self, origin: &str) -> Result<()> {
+        let bad = |key: &str, problem: String| {
+            Err(SynthError::Spec {
+                file: origin.into(),
+                problem: format!("{key}: {problem}"),
+            })
+        };
+        let g = &self.geometry;
+        if !(g.facade_width > 1.0 && g.facade_height > 1.0) {
+            return bad("geometry.facade_width/height", "must exceed 1 m".into());
+        }
+        if g.bays == 0 || g.floors == 0 || g.bays > 64 || g.floors > 64 {
+            return bad("geometry.bays/floors", "must be 1 to 64".into());
+        }
+        if g.points > 50_000_000 {
+            return bad(
+                "geometry.points",
+                format!("{} is more than 5·10⁷", g.points),
+            );
+        }
+        if !g.origin.iter().all(|v| v.is_finite()) {
+            return bad("geometry.origin", "must be finite".into());
+        }
+        let c = &self.cameras;
+        if nrw_colmap::CameraModel::from_name(&c.model).is_none() {
+            return bad(
+                "cameras.model",
+                format!("unknown camera model {:?}", c.model),
+            );
+        }
+        if c.count == 0 || c.count > 100_000 {
+            return bad("cameras.count", "must be 1 to 100000".into());
+        }
+        if !(16 <= c.min_size && c.min_size <= c.max_size && c.max_size <= 8192) {
+            return bad(
+                "cameras.min_size/max_size",
+                "need 16 ≤ min ≤ max ≤ 8192".into(),
+            );
+        }
+        for (k, v) in [
+            ("small_fraction", c.small_fraction),
+            ("away_fraction", c.away_fraction),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return bad(&format!("cameras.{k}"), format!("{v} is not in [0, 1]"));
+            }
+        }
+        if !(c.min_distance > 1.0 && c.min_distance <= c.max_distance) {
+            return bad(
+                "cameras.min_distance/max_distance",
+                "need 1 < min ≤ max".into(),
+            );
+        }
+        if !(self.observations.noise_px >= 0.0 && self.observations.extra_keypoints >= 0.0) {
+            return bad(
+                "observations",
+                "noise_px and extra_keypoints must be ≥ 0".into(),
+            );
+        }
+        let e = &self.effects;
+        if e.appearance.as_ref().is_some_and(|a| a.is_empty()) {
+            return bad(
+                "effects.appearance",
+                "list at least one time of day, or leave it out".into(),
+            );
+        }
+        for (k, v) in [
+            ("exposure_ev", e.exposure_ev),
+            ("white_balance", e.white_balance),
+            ("haze", e.haze),
+            ("transients", e.transients),
+            ("noise", e.noise),
+        ] {
+            if v.is_some_and(|v| !(v >= 0.0 && v.is_finite())) {
+                return bad(
+                    &format!("effects.{k}"),
+                    "must be a finite number ≥ 0".into(),
+                );
+            }
+        }
+        if e.jpeg_quality.is_some_and(|q| !(1..=100).contains(&q)) {
+            return bad("effects.jpeg_quality", "must be 1 to 100".into());
+        }
+        Ok(())
+    }
+}
+
+/// The default demo scene, embedded so `nrw-etl demo` needs no file.
+pub const DEMO_TOML: &str = include_str!("../../../scenes/demo.toml");

@@ -239,6 +239,12 @@ impl Camera {
         dispatch!(self.model, M => M::project(&self.params, p))
     }
 
+    /// Run `v` with this camera's projection as a type parameter, so a caller's hot loop is
+    /// monomorphised per model (a pinhole loop then contains no distortion code at all).
+    pub fn visit_projection<V: ProjectionVisitor>(&self, v: V) -> V::Output {
+        dispatch!(self.model, M => v.visit::<M>(&self.params))
+    }
+
     /// Project many points, matching on the model once for the whole batch.
     pub fn project_many(&self, points: &[DVec3], out: &mut Vec<Option<DVec2>>) {
         out.clear();
@@ -412,6 +418,13 @@ impl Camera {
             params,
         }
     }
+}
+
+/// A computation generic over the projection model; see [`Camera::visit_projection`].
+pub trait ProjectionVisitor {
+    type Output;
+    /// Called once with the camera's model as `P` and its parameters.
+    fn visit<P: Projection>(self, params: &[f64]) -> Self::Output;
 }
 
 /// One camera model's projection, implemented by a zero-sized type so loops monomorphise.

@@ -15,7 +15,7 @@ pub mod stats;
 mod txt;
 mod write;
 
-pub use camera::{Camera, CameraModel, Projection};
+pub use camera::{Camera, CameraModel, Projection, ProjectionVisitor};
 pub use error::{ColmapError, Record, Result};
 pub use load::{
     detect_format, find_model_dir, model_from_bytes, read_model, read_scene, ModelFiles,

@@ -1,0 +1,14 @@
+//! Renders a reconstructed point cloud from each photo's exact camera into a deep buffer
+//! (depth, and colour and normals where the cloud has them) that aligns with the photo pixel
+//! for pixel, and applies the paper's filters. Cost follows the scene: chunks outside a
+//! view are skipped, and lenses without distortion run no distortion code.
+
+pub mod cloud;
+pub mod splat;
+pub mod verdict;
+pub mod view;
+
+pub use cloud::{Chunk, RenderCloud, CHUNK_POINTS};
+pub use splat::{render, DeepBuffer};
+pub use verdict::{Filters, Verdict};
+pub use view::{render_size, View};

@@ -1,0 +1,75 @@
+//! The paper's filters, each drop recorded with its reason and the value measured.
+
+use serde::{Deserialize, Serialize};
+
+/// Filter thresholds; defaults are the paper's.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Filters {
+    /// Drop a view whose render has more than this fraction of empty pixels (paper: 0.85).
+    pub max_empty_ratio: f64,
+    /// Drop a photo whose shorter side is under this many pixels (paper: 450). The shorter
+    /// side, because training crops are square: a photo narrower than the crop's scaled
+    /// size cannot give one, whichever way it is oriented.
+    pub min_photo_side: u32,
+}
+
+impl Default for Filters {
+    fn default() -> Self {
+        Filters {
+            max_empty_ratio: 0.85,
+            min_photo_side: 450,
+        }
+    }
+}
+
+/// What happened to a photo, with the measured value behind a drop.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "verdict", rename_all = "snake_case")]
+pub enum Verdict {
+    Kept { empty_ratio: f64 },
+    TooSmall { shorter_side_px: u32 },
+    TooSparse { empty_ratio: f64 },
+}
+
+impl Verdict {
+    /// `kept`, `too_small`, `too_sparse`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Verdict::Kept { .. } => "kept",
+            Verdict::TooSmall { .. } => "too_small",
+            Verdict::TooSparse { .. } => "too_sparse",
+        }
+    }
+
+    /// The number the verdict rests on (empty ratio, or shorter side in pixels).
+    pub fn value(&self) -> f64 {
+        match *self {
+            Verdict::Kept { empty_ratio } | Verdict::TooSparse { empty_ratio } => empty_ratio,
+            Verdict::TooSmall { shorter_side_px } => shorter_side_px as f64,
+        }
+    }
+
+    /// Whether the photo stays in the dataset.
+    pub fn is_kept(&self) -> bool {
+        matches!(self, Verdict::Kept { .. })
+    }
+}
+
+impl Filters {
+    /// The size check, done before rendering (a too-small photo costs no render).
+    pub fn check_size(&self, width: u64, height: u64) -> Option<Verdict> {
+        let side = width.min(height);
+        (side < self.min_photo_side as u64).then_some(Verdict::TooSmall {
+            shorter_side_px: side as u32,
+        })
+    }
+
+    /// The sparsity check on a render.
+    pub fn check_render(&self, empty_ratio: f64) -> Verdict {
+        if empty_ratio > self.max_empty_ratio {
+            Verdict::TooSparse { empty_ratio }
+        } else {
+            Verdict::Kept { empty_ratio }
+        }
+    }
+}

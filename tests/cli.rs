@@ -96,12 +96,14 @@ fn ingest_writes_scene_tables_and_a_manifest_that_describes_them() {
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
     let out = tempfile::tempdir().unwrap();
-    let scene = data().join("sacre_coeur");
+    let scene = data().join("sceaux_castle");
     ok(&[
         "ingest",
         scene.to_str().unwrap(),
         "--out",
         out.path().to_str().unwrap(),
+        "--min-dim",
+        "200",
     ]);
     let rec = nrw_colmap::read_scene(&scene).unwrap();
 
@@ -143,7 +145,8 @@ fn ingest_writes_scene_tables_and_a_manifest_that_describes_them() {
         assert_eq!(t["sha256"], sha.as_str());
         assert_eq!(t["bytes"], bytes);
     }
-    assert_eq!(m["inputs"].as_array().unwrap().len(), 3);
+    // Model files and the dense cloud.
+    assert_eq!(m["inputs"].as_array().unwrap().len(), 4);
     // No temporary file is left behind.
     let leftovers: Vec<_> = walk(out.path())
         .into_iter()
@@ -342,4 +345,207 @@ fn synth_reads_a_spec_file_and_reports_bad_ones() {
         err.contains("s.toml") && err.contains("cameras.model") && err.contains("WIDE"),
         "{err}"
     );
+}
+
+fn files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    walk(dir)
+        .into_iter()
+        .map(|p| {
+            (
+                p.strip_prefix(dir).unwrap().to_path_buf(),
+                std::fs::read(&p).unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// A small synthetic scene whose photos pass a lowered size filter.
+fn small_scene(dir: &Path, photos: usize) {
+    let mut spec = nrw_synth::SceneSpec::demo();
+    spec.cameras.count = photos;
+    spec.cameras.min_size = 120;
+    spec.cameras.max_size = 160;
+    spec.cameras.small_fraction = 0.0;
+    spec.geometry.points = 60_000;
+    spec.observations.features = 300;
+    nrw_synth::generate(&spec, dir, &|| {}).unwrap();
+}
+
+#[test]
+fn interrupted_ingest_resumes_to_the_same_bytes_on_any_thread_count() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 9);
+    let args = |out: &Path, threads: &str| -> Vec<String> {
+        [
+            "ingest",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--min-dim",
+            "96",
+            "--min-photo-side",
+            "100",
+            "--rows-per-shard",
+            "2",
+            "--quiet",
+            "--threads",
+            threads,
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let whole = tmp.path().join("whole");
+    let a: Vec<String> = args(&whole, "1");
+    let o = nrw(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let resumed = tmp.path().join("resumed");
+    let mut b = args(&resumed, "2");
+    b.extend(["--stop-after-shards".to_string(), "2".to_string()]);
+    let o = nrw(&b.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(
+        o.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(String::from_utf8_lossy(&o.stderr).contains("run the same command again to resume"));
+    assert!(
+        !resumed.join("manifest.json").exists(),
+        "no manifest for an unfinished dataset"
+    );
+    let b = args(&resumed, "2");
+    let o = nrw(&b
+        .iter()
+        .map(String::as_str)
+        .chain(["--json"])
+        .collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        summary["resumed_groups"], 2,
+        "the two finished groups were not redone"
+    );
+
+    let (fa, fb) = (files(&whole), files(&resumed));
+    assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
+    for (k, v) in &fa {
+        assert!(
+            v == &fb[k],
+            "{} differs between the whole run (1 thread) and the resumed one (2 threads)",
+            k.display()
+        );
+    }
+    assert!(fa.keys().filter(|k| k.starts_with("shards")).count() >= 3);
+}
+
+#[test]
+fn a_scene_where_every_view_is_dropped_exits_3_with_every_verdict_recorded() {
+    use arrow_array::{Float64Array, StringArray};
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let out = tempfile::tempdir().unwrap();
+    let o = nrw(&[
+        "ingest",
+        data().join("sacre_coeur").to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("no view survived the filters") && err.contains("10 too sparse"),
+        "{err}"
+    );
+    let f = std::fs::File::open(out.path().join("scene/images.parquet")).unwrap();
+    let b = ParquetRecordBatchReaderBuilder::try_new(f)
+        .unwrap()
+        .build()
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap();
+    let verdicts = column::<StringArray>(&b, "verdict");
+    let values = column::<Float64Array>(&b, "verdict_value");
+    for i in 0..b.num_rows() {
+        assert_eq!(verdicts.value(i), "too_sparse");
+        // The data README: sparse points leave 97–99% of pixels empty.
+        assert!(
+            (0.97..1.0).contains(&values.value(i)),
+            "{}",
+            values.value(i)
+        );
+    }
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("manifest.json")).unwrap())
+            .unwrap();
+    assert!(m["tables"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|t| !t["path"].as_str().unwrap().starts_with("shards/")));
+}
+
+#[test]
+fn shard_payloads_decode_and_align() {
+    use arrow_array::{BinaryArray, UInt32Array};
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let out = tempfile::tempdir().unwrap();
+    ok(&[
+        "ingest",
+        data().join("sceaux_castle").to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--min-dim",
+        "150",
+        "--min-photo-side",
+        "100",
+        "--quiet",
+    ]);
+    let f = std::fs::File::open(out.path().join("shards/views-00000.parquet")).unwrap();
+    let builder = ParquetRecordBatchReaderBuilder::try_new(f).unwrap();
+    assert!(
+        builder.metadata().num_row_groups() >= 2,
+        "small row groups for random access"
+    );
+    let mut rows = 0;
+    for b in builder.build().unwrap() {
+        let b = b.unwrap();
+        let (w, h) = (
+            column::<UInt32Array>(&b, "width"),
+            column::<UInt32Array>(&b, "height"),
+        );
+        for i in 0..b.num_rows() {
+            let (w, h) = (w.value(i), h.value(i));
+            assert_eq!(w.min(h), 150);
+            let name = Path::new("row");
+            let (pw, ph, pc, _) = nrw_dataset::codec::decode_png(
+                column::<BinaryArray>(&b, "photo_png").value(i),
+                name,
+            )
+            .unwrap();
+            assert_eq!((pw, ph, pc), (w, h, 3));
+            let (cw, ch, cc, rgba) = nrw_dataset::codec::decode_png(
+                column::<BinaryArray>(&b, "color_png").value(i),
+                name,
+            )
+            .unwrap();
+            assert_eq!((cw, ch, cc), (w, h, 4));
+            let depth = nrw_dataset::depth::decode_exr(
+                column::<BinaryArray>(&b, "depth_exr").value(i),
+                name,
+            )
+            .unwrap();
+            assert_eq!((depth.width as u32, depth.height as u32), (w, h));
+            for (k, d) in depth.data.iter().enumerate() {
+                assert_eq!(*d > 0.0, rgba[k * 4 + 3] == 255, "alpha is coverage");
+            }
+            // fused.ply has normals, so the normal channel is there.
+            let normals = column::<BinaryArray>(&b, "normal_png");
+            assert!(!arrow_array::Array::is_null(normals, i));
+            rows += 1;
+        }
+    }
+    assert_eq!(rows, 11);
 }

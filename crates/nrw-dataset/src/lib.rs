@@ -3,14 +3,19 @@
 //! they can never disagree about a byte.
 
 pub mod atomic;
+pub mod codec;
 pub mod depth;
 pub mod error;
 pub mod manifest;
 pub mod parquet_io;
 pub mod scene;
 pub mod schema;
+pub mod views;
 
 pub use error::{DatasetError, Result};
 pub use manifest::{FileEntry, Manifest, SceneSource, Tool, SCHEMA_VERSION};
-pub use scene::{cameras_schema, images_schema, write_scene_tables, CAMERAS_TABLE, IMAGES_TABLE};
+pub use scene::{
+    cameras_schema, images_schema, write_scene_tables, ImageOutcome, CAMERAS_TABLE, IMAGES_TABLE,
+};
 pub use schema::TableDoc;
+pub use views::{views_schema, write_shard, ViewRow};

@@ -56,7 +56,26 @@ pub fn images_schema() -> SchemaRef {
         Field::new("photo_matches_camera", DataType::Boolean, true),
         Field::new("num_points2d", DataType::UInt32, false),
         Field::new("num_observations", DataType::UInt32, false),
+        Field::new("verdict", DataType::Utf8, false),
+        Field::new("verdict_value", DataType::Float64, false),
+        Field::new("empty_ratio", DataType::Float64, true),
+        Field::new("render_width", DataType::UInt32, true),
+        Field::new("render_height", DataType::UInt32, true),
+        Field::new("shard", DataType::Utf8, true),
     ]))
+}
+
+/// What ingest decided about one image (the render stage's output for the images table).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ImageOutcome {
+    /// `kept`, `too_small` or `too_sparse`.
+    pub verdict: String,
+    /// The measured value the verdict rests on (empty ratio, or shorter side in pixels).
+    pub verdict_value: f64,
+    pub empty_ratio: Option<f64>,
+    pub render_size: Option<(u32, u32)>,
+    /// Shard holding the view's row, when kept.
+    pub shard: Option<String>,
 }
 
 fn to_u32(v: u64, table: &str, record: String, field: &str) -> Result<u32> {
@@ -129,7 +148,17 @@ pub fn cameras_batch(rec: &Reconstruction) -> Result<RecordBatch> {
 pub fn images_batch(
     rec: &Reconstruction,
     photos: &BTreeMap<u32, Option<(u32, u32)>>,
+    outcomes: &BTreeMap<u32, ImageOutcome>,
 ) -> Result<RecordBatch> {
+    let outcome = |i: &nrw_colmap::Image| {
+        outcomes.get(&i.id).ok_or_else(|| DatasetError::Value {
+            path: IMAGES_TABLE.into(),
+            record: format!("image {}", i.id),
+            field: "verdict".into(),
+            problem: "no outcome recorded for this image".into(),
+        })
+    };
+    let outs: Vec<&ImageOutcome> = rec.images.values().map(outcome).collect::<Result<_>>()?;
     let imgs: Vec<_> = rec.images.values().collect();
     let col = |f: &dyn Fn(&nrw_colmap::Image) -> f64| -> ArrayRef {
         Arc::new(Float64Array::from_iter_values(imgs.iter().map(|i| f(i))))
@@ -185,6 +214,22 @@ pub fn images_batch(
             Arc::new(BooleanArray::from_iter(imgs.iter().map(|i| matches(i)))),
             Arc::new(UInt32Array::from(np)),
             Arc::new(UInt32Array::from(no)),
+            Arc::new(StringArray::from_iter_values(
+                outs.iter().map(|o| o.verdict.as_str()),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                outs.iter().map(|o| o.verdict_value),
+            )),
+            Arc::new(Float64Array::from_iter(outs.iter().map(|o| o.empty_ratio))),
+            Arc::new(UInt32Array::from_iter(
+                outs.iter().map(|o| o.render_size.map(|s| s.0)),
+            )),
+            Arc::new(UInt32Array::from_iter(
+                outs.iter().map(|o| o.render_size.map(|s| s.1)),
+            )),
+            Arc::new(StringArray::from_iter(
+                outs.iter().map(|o| o.shard.as_deref()),
+            )),
         ],
     )
 }
@@ -194,9 +239,10 @@ pub fn write_scene_tables(
     dir: &Path,
     rec: &Reconstruction,
     photos: &BTreeMap<u32, Option<(u32, u32)>>,
+    outcomes: &BTreeMap<u32, ImageOutcome>,
 ) -> Result<Vec<crate::manifest::FileEntry>> {
     Ok(vec![
         crate::parquet_io::write_table(dir, CAMERAS_TABLE, &cameras_batch(rec)?)?,
-        crate::parquet_io::write_table(dir, IMAGES_TABLE, &images_batch(rec, photos)?)?,
+        crate::parquet_io::write_table(dir, IMAGES_TABLE, &images_batch(rec, photos, outcomes)?)?,
     ])
 }

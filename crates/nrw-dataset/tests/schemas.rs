@@ -14,6 +14,11 @@ fn written_tables() -> Vec<(&'static str, &'static str, SchemaRef)> {
     vec![
         ("scene_cameras.toml", CAMERAS_TABLE, cameras_schema()),
         ("scene_images.toml", IMAGES_TABLE, images_schema()),
+        (
+            "views.toml",
+            "shards/views-NNNNN.parquet",
+            nrw_dataset::views_schema(),
+        ),
     ]
 }
 

@@ -19,6 +19,8 @@ pub enum EtlError {
     Synth(#[from] nrw_synth::SynthError),
     #[error("{0}")]
     Usage(String),
+    #[error("interrupted: {0}")]
+    Interrupted(String),
 }
 
 /// Result alias for the CLI.

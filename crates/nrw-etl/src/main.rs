@@ -33,20 +33,43 @@ enum Command {
     Synth(cmd::synth::SynthArgs),
     /// Summarise a COLMAP model and check it: counts, camera models, reprojection errors
     Inspect(cmd::inspect::InspectArgs),
-    /// Read and validate a scene and write its dataset tables (scene/*.parquet) and manifest.json
+    /// Render every registered photo's view, apply the filters, write shards, scene tables and manifest.json.
+    ///
+    /// Exit codes: 0 done; 1 error (message names file, record and field); 3 done, but every
+    /// view was dropped by the filters (the dataset records each verdict); 130 interrupted
+    /// (run again to resume).
     Ingest(cmd::ingest::IngestArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    if let Command::Ingest(a) = &cli.command {
+        if let Some(n) = a.threads {
+            if let Err(e) = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build_global()
+            {
+                eprintln!("error: --threads {n}: {e}");
+                return std::process::ExitCode::FAILURE;
+            }
+        }
+    }
     let result = match &cli.command {
         Command::Demo(a) => cmd::demo::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
-        Command::Ingest(a) => cmd::ingest::run(a),
+        Command::Ingest(a) => cmd::ingest::run(a).map(|s| {
+            if s.kept == 0 {
+                std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);
+            }
+        }),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e @ error::EtlError::Interrupted(_)) => {
+            eprintln!("{e}");
+            std::process::ExitCode::from(130)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             let mut src = std::error::Error::source(&e);

@@ -75,8 +75,9 @@ fn intrinsics<R: Rng>(
 }
 
 fn size<R: Rng>(spec: &CameraSpec, small: bool, rng: &mut R) -> (u32, u32) {
-    let long = if small {
-        rng.random_range(240..=440)
+    // The shorter side is drawn; the longer follows from the aspect ratio.
+    let short = if small {
+        rng.random_range(200..=330)
     } else {
         rng.random_range(spec.min_size..=spec.max_size)
     };
@@ -86,9 +87,9 @@ fn size<R: Rng>(spec: &CameraSpec, small: bool, rng: &mut R) -> (u32, u32) {
         _ => (3, 2),
     };
     if a >= b {
-        (long, (long * b / a).max(1))
+        (short * a / b, short)
     } else {
-        ((long * a / b).max(1), long)
+        (short, short * b / a)
     }
 }
 

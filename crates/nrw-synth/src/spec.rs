@@ -64,10 +64,10 @@ pub struct CameraSpec {
     pub model: String,
     /// Scales the model's default distortion coefficients (0 = none).
     pub distortion: f64,
-    /// Photo widths are drawn between these (the longer side for portrait photos).
+    /// Shorter sides of photos are drawn between these (the longer follows from 4:3, 3:4 or 3:2).
     pub min_size: u32,
     pub max_size: u32,
-    /// Fraction of photos under 450 px on both sides.
+    /// Fraction of small photos (shorter side 200–330 px, longer under 450 px).
     pub small_fraction: f64,
     /// Fraction of photos that look mostly away from the landmark.
     pub away_fraction: f64,

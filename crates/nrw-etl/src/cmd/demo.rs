@@ -28,12 +28,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let scene = args.out.join("scene");
     super::synth::generate(&spec, &scene)?;
     let dataset = args.out.join("dataset");
-    ingest::run(&IngestArgs {
-        scene: scene.clone(),
-        out: dataset.clone(),
-        images: None,
-        format: None,
-    })?;
+    let summary = ingest::run(&IngestArgs::new(scene.clone(), dataset.clone()))?;
+    if summary.kept == 0 {
+        return Err(crate::error::EtlError::Usage(
+            "the demo scene kept no view: this is a bug".into(),
+        ));
+    }
     println!("scene:   {}", scene.display());
     println!("dataset: {}", dataset.display());
     Ok(())

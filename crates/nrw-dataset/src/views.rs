@@ -1,0 +1,181 @@
+//! View shards (`shards/views-NNNNN.parquet`): one row per kept photo with the resized
+//! photo, the colour render with coverage as alpha, the depth as EXR, optional normals,
+//! and everything needed to use them (ids, scaled intrinsics, pose, empty ratio).
+//! Shards are small (default 64 rows) with row groups of 8 rows, so a reader streams them
+//! and random access costs one small row group.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use arrow_array::builder::{BinaryBuilder, Float64Builder, ListBuilder};
+use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array};
+use arrow_schema::{DataType, Field, Schema, SchemaRef};
+use parquet::arrow::ArrowWriter;
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::file::properties::WriterProperties;
+use parquet::schema::types::ColumnPath;
+
+use crate::atomic::write_atomic;
+use crate::error::{DatasetError, Result};
+use crate::manifest::FileEntry;
+
+/// Rows per row group inside a shard: the unit of random access.
+pub const ROW_GROUP_ROWS: usize = 8;
+
+/// One kept view.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewRow {
+    pub image_id: u32,
+    pub name: String,
+    pub camera_id: u32,
+    pub model: String,
+    /// Render (and resized photo) size.
+    pub width: u32,
+    pub height: u32,
+    /// Render size / photo size per axis.
+    pub scale_x: f64,
+    pub scale_y: f64,
+    /// The camera's parameters scaled to the render size (COLMAP order).
+    pub params: Vec<f64>,
+    /// World→camera pose in the model's world frame.
+    pub qvec: [f64; 4],
+    pub tvec: [f64; 3],
+    pub empty_ratio: f64,
+    pub photo_png: Vec<u8>,
+    pub color_png: Vec<u8>,
+    pub depth_exr: Vec<u8>,
+    pub normal_png: Option<Vec<u8>>,
+}
+
+/// Arrow schema of a view shard (documented in schemas/views.toml).
+pub fn views_schema() -> SchemaRef {
+    let f = |n: &str, t: DataType| Field::new(n, t, false);
+    Arc::new(Schema::new(vec![
+        f("image_id", DataType::UInt32),
+        f("name", DataType::Utf8),
+        f("camera_id", DataType::UInt32),
+        f("model", DataType::Utf8),
+        f("width", DataType::UInt32),
+        f("height", DataType::UInt32),
+        f("scale_x", DataType::Float64),
+        f("scale_y", DataType::Float64),
+        f(
+            "params",
+            DataType::List(Arc::new(Field::new("item", DataType::Float64, false))),
+        ),
+        f("qw", DataType::Float64),
+        f("qx", DataType::Float64),
+        f("qy", DataType::Float64),
+        f("qz", DataType::Float64),
+        f("tx", DataType::Float64),
+        f("ty", DataType::Float64),
+        f("tz", DataType::Float64),
+        f("empty_ratio", DataType::Float64),
+        f("photo_png", DataType::Binary),
+        f("color_png", DataType::Binary),
+        f("depth_exr", DataType::Binary),
+        Field::new("normal_png", DataType::Binary, true),
+    ]))
+}
+
+fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
+    let schema = views_schema();
+    let u32s = |f: &dyn Fn(&ViewRow) -> u32| -> ArrayRef {
+        Arc::new(UInt32Array::from_iter_values(rows.iter().map(f)))
+    };
+    let f64s = |f: &dyn Fn(&ViewRow) -> f64| -> ArrayRef {
+        Arc::new(Float64Array::from_iter_values(rows.iter().map(f)))
+    };
+    let bins = |f: &dyn Fn(&ViewRow) -> Option<&[u8]>| -> ArrayRef {
+        let mut b = BinaryBuilder::new();
+        for r in rows {
+            b.append_option(f(r));
+        }
+        Arc::new(b.finish())
+    };
+    let item = match schema.field(8).data_type() {
+        DataType::List(f) => f.clone(),
+        _ => unreachable!("params is a list"),
+    };
+    let mut params = ListBuilder::new(Float64Builder::new()).with_field(item);
+    for r in rows {
+        params.values().append_slice(&r.params);
+        params.append(true);
+    }
+    RecordBatch::try_new(
+        schema,
+        vec![
+            u32s(&|r| r.image_id),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.name.as_str()),
+            )),
+            u32s(&|r| r.camera_id),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.model.as_str()),
+            )),
+            u32s(&|r| r.width),
+            u32s(&|r| r.height),
+            f64s(&|r| r.scale_x),
+            f64s(&|r| r.scale_y),
+            Arc::new(params.finish()),
+            f64s(&|r| r.qvec[0]),
+            f64s(&|r| r.qvec[1]),
+            f64s(&|r| r.qvec[2]),
+            f64s(&|r| r.qvec[3]),
+            f64s(&|r| r.tvec[0]),
+            f64s(&|r| r.tvec[1]),
+            f64s(&|r| r.tvec[2]),
+            f64s(&|r| r.empty_ratio),
+            bins(&|r| Some(&r.photo_png)),
+            bins(&|r| Some(&r.color_png)),
+            bins(&|r| Some(&r.depth_exr)),
+            bins(&|r| r.normal_png.as_deref()),
+        ],
+    )
+    .map_err(|e| DatasetError::Arrow {
+        table: "views".into(),
+        source: e,
+    })
+}
+
+/// Write a shard atomically at `dir/rel`; payload columns are stored uncompressed (PNG and
+/// EXR are compressed already), metadata columns with zstd.
+pub fn write_shard(dir: &Path, rel: &str, rows: &[ViewRow]) -> Result<FileEntry> {
+    let path = dir.join(rel);
+    let b = batch(rows)?;
+    let mut props = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(
+            ZstdLevel::try_new(3).expect("valid level"),
+        ))
+        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+        .set_created_by(format!("nrw-etl {}", env!("CARGO_PKG_VERSION")));
+    for c in ["photo_png", "color_png", "depth_exr", "normal_png"] {
+        props = props
+            .set_column_compression(ColumnPath::from(c), Compression::UNCOMPRESSED)
+            .set_column_statistics_enabled(
+                ColumnPath::from(c),
+                parquet::file::properties::EnabledStatistics::None,
+            );
+    }
+    let props = props.build();
+    write_atomic(&path, |f| {
+        let mut w = ArrowWriter::try_new(f, b.schema(), Some(props)).map_err(|e| {
+            DatasetError::Parquet {
+                path: path.clone(),
+                source: e,
+            }
+        })?;
+        w.write(&b).map_err(|e| DatasetError::Parquet {
+            path: path.clone(),
+            source: e,
+        })?;
+        w.close().map_err(|e| DatasetError::Parquet {
+            path: path.clone(),
+            source: e,
+        })?;
+        Ok(())
+    })?;
+    let mut e = FileEntry::of(dir, rel)?;
+    e.rows = Some(rows.len() as u64);
+    Ok(e)
+}

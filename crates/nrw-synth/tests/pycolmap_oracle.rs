@@ -1,6 +1,6 @@
 //! pycolmap, an independent reader, must read the generated model and measure the same
 //! reprojection error the generator wrote. CI installs pycolmap and sets
-//! NRW_REQUIRE_PYCOLMAP=1, so there a missing pycolmap fails instead of skipping.
+//! NRW_REQUIRE_PY_ORACLES=1, so there a missing pycolmap fails instead of skipping.
 
 use std::path::Path;
 use std::process::Command;
@@ -24,8 +24,8 @@ fn pycolmap_available() -> bool {
         .args(["-c", "import pycolmap, numpy"])
         .status()
         .is_ok_and(|s| s.success());
-    if !ok && std::env::var("NRW_REQUIRE_PYCOLMAP").is_ok_and(|v| v == "1") {
-        panic!("NRW_REQUIRE_PYCOLMAP=1 but `python3 -c 'import pycolmap'` fails");
+    if !ok && std::env::var("NRW_REQUIRE_PY_ORACLES").is_ok_and(|v| v == "1") {
+        panic!("NRW_REQUIRE_PY_ORACLES=1 but `python3 -c 'import pycolmap'` fails");
     }
     ok
 }

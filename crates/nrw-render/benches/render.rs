@@ -1,0 +1,421 @@
+//! `cargo bench -p nrw-render --bench render [-- accuracy|speed] [--quick]`
+//!
+//! accuracy: on a synthetic scene with true depth, for splat radius 0–3 and three render
+//!   scales: surface coverage, depth error on the landmark, empty ratio and time per view.
+//!   Writes docs/accuracy-vs-time.md and docs/accuracy-vs-time.svg.
+//! speed: the same cloud and PINHOLE cameras rendered by us (colour + depth) and by Open3D's
+//!   `project_to_depth_image` (depth only) in the same run, at 10⁵, 10⁶ and 10⁷ points;
+//!   ratio, points/s, views/s. Writes docs/bench/render_speed.md. Needs `pip install open3d`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use glam::DVec3;
+use nrw_colmap::{read_model, read_ply, Format};
+use nrw_dataset::depth::read_exr;
+use nrw_render::{render, render_size, RenderCloud, View};
+use nrw_synth::geometry::Landmark;
+use nrw_synth::SceneSpec;
+use rand::SeedableRng;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+struct Row {
+    min_dim: u32,
+    radius: f32,
+    ms: f64,
+    coverage: f64,
+    empty: f64,
+    median_err: f64,
+    within: f64,
+}
+
+fn accuracy(quick: bool) {
+    let mut spec = SceneSpec::demo();
+    spec.effects = Default::default();
+    spec.cameras.count = if quick { 3 } else { 8 };
+    spec.cameras.min_size = 600;
+    spec.cameras.max_size = 600;
+    spec.cameras.small_fraction = 0.0;
+    spec.cameras.away_fraction = 0.0;
+    let dir = tempfile::tempdir().unwrap();
+    nrw_synth::generate(&spec, dir.path(), &|| {}).unwrap();
+    let rec = read_model(&dir.path().join("sparse/0"), Some(Format::Binary)).unwrap();
+    let cloud = read_ply(&dir.path().join("dense/fused.ply")).unwrap();
+    let origin = rec.scene_origin();
+    let rc = RenderCloud::from_ply(origin, &cloud);
+    let truth: Vec<_> = rec
+        .images
+        .values()
+        .map(|img| {
+            let stem = Path::new(&img.name).with_extension("");
+            let d = read_exr(
+                &dir.path()
+                    .join("ground_truth/depth")
+                    .join(format!("{}.exr", stem.display())),
+            )
+            .unwrap();
+            let l = image::open(
+                dir.path()
+                    .join("ground_truth/semantics")
+                    .join(format!("{}.png", stem.display())),
+            )
+            .unwrap()
+            .to_luma8();
+            (img, d, l)
+        })
+        .collect();
+    let mut rows = Vec::new();
+    for min_dim in [300u32, 600, 900] {
+        for radius in [0.0f32, 0.5, 1.0, 1.5, 2.0, 3.0] {
+            let (mut times, mut errs) = (Vec::new(), Vec::new());
+            let (mut surface, mut covered_surface, mut empty_sum) = (0usize, 0usize, 0.0);
+            for (img, gt, labels) in &truth {
+                let cam = &rec.cameras[&img.camera_id];
+                let (w, h) = render_size(cam.width, cam.height, min_dim);
+                let view = View::new(img, cam, origin, w, h, radius);
+                let mut buf = None;
+                for _ in 0..3 {
+                    let t = Instant::now();
+                    buf = Some(render(&view, &rc, radius));
+                    times.push(t.elapsed().as_secs_f64());
+                }
+                let buf = buf.unwrap();
+                empty_sum += buf.empty_ratio();
+                for y in 0..h as usize {
+                    let py = (((y as f64 + 0.5) / view.scale.y) as usize).min(gt.height - 1);
+                    for x in 0..w as usize {
+                        let px = (((x as f64 + 0.5) / view.scale.x) as usize).min(gt.width - 1);
+                        let t = gt.data[py * gt.width + px];
+                        if t <= 0.0 {
+                            continue;
+                        }
+                        surface += 1;
+                        let d = buf.depth[y * w as usize + x];
+                        if d > 0.0 {
+                            covered_surface += 1;
+                            let l = labels.get_pixel(px as u32, py as u32)[0];
+                            if [2u8, 9, 43].contains(&l) {
+                                errs.push(((d - t) / t).abs() as f64);
+                            }
+                        }
+                    }
+                }
+            }
+            let within =
+                errs.iter().filter(|e| **e <= 0.01).count() as f64 / errs.len().max(1) as f64;
+            let row = Row {
+                min_dim,
+                radius,
+                ms: median(times) * 1e3,
+                coverage: covered_surface as f64 / surface as f64,
+                empty: empty_sum / truth.len() as f64,
+                median_err: if errs.is_empty() {
+                    f64::NAN
+                } else {
+                    median(errs)
+                },
+                within,
+            };
+            eprintln!(
+                "min_dim {min_dim} r {radius}: {:.2} ms, coverage {:.3}, median err {:.4}",
+                row.ms, row.coverage, row.median_err
+            );
+            rows.push(row);
+        }
+    }
+    let mut md = String::from("# Accuracy versus time: splat radius and render resolution\n\n");
+    let _ = writeln!(
+        md,
+        "Regenerate: `cargo bench -p nrw-render --bench render -- accuracy`. Scene: the demo landmark \
+         ({} dense points, {} photos with shorter side 600 px, no photo effects), true depth from the \
+         generator. *Surface coverage*: rendered pixels among pixels whose true depth has a surface \
+         (sky excluded). *Depth error*: |rendered − true| / true on landmark pixels (building, windows, \
+         columns), with true depth looked up at the photo pixel under each render pixel. *Empty*: the \
+         fraction the 85% filter sees. Time: median per view on this machine (2 cores, one view per core \
+         in ingest); compare rows, not machines.\n",
+        cloud.len(),
+        truth.len()
+    );
+    md.push_str("| min dim (px) | radius (px) | ms / view | surface coverage | empty ratio | median depth error | within 1% |\n|---|---|---|---|---|---|---|\n");
+    for r in &rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.2} | {:.1}% | {:.1}% | {:.2}% | {:.1}% |",
+            r.min_dim,
+            r.radius,
+            r.ms,
+            r.coverage * 100.0,
+            r.empty * 100.0,
+            r.median_err * 100.0,
+            r.within * 100.0
+        );
+    }
+    md.push_str(
+        "\nReading it: coverage grows with the radius and falls with resolution (the same points \
+         spread over more pixels); depth error grows with the radius (a splat gives its depth to \
+         pixels up to r away) and is worst at r = 0 for low coverage (farther points show through \
+         holes). The paper's setting, 600 px and r = 1, sits at the knee. ![plot](accuracy-vs-time.svg)\n",
+    );
+    std::fs::write(root().join("docs/accuracy-vs-time.md"), md).unwrap();
+    std::fs::write(root().join("docs/accuracy-vs-time.svg"), svg(&rows)).unwrap();
+    eprintln!("wrote docs/accuracy-vs-time.md and .svg");
+}
+
+/// Two panels (coverage and within-1% versus ms/view), one line per render size.
+fn svg(rows: &[Row]) -> String {
+    let (w, h, m) = (900.0, 380.0, 50.0);
+    let pw = (w - 3.0 * m) / 2.0;
+    let ph = h - 2.0 * m;
+    let max_ms = rows.iter().map(|r| r.ms).fold(0.0, f64::max) * 1.05;
+    let colors = ["#1f77b4", "#d62728", "#2ca02c"];
+    let mut s = format!("<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n");
+    for (panel, (title, get)) in [
+        (
+            "surface coverage",
+            (|r: &Row| r.coverage) as fn(&Row) -> f64,
+        ),
+        ("depth within 1%", |r: &Row| r.within),
+    ]
+    .iter()
+    .enumerate()
+    {
+        let x0 = m + panel as f64 * (pw + m);
+        let _ = writeln!(
+            s,
+            "<rect x='{x0}' y='{m}' width='{pw}' height='{ph}' fill='none' stroke='#999'/>"
+        );
+        let _ = writeln!(s, "<text x='{}' y='{}' text-anchor='middle' font-weight='bold'>{title} vs ms per view</text>", x0 + pw / 2.0, m - 12.0);
+        let _ = writeln!(
+            s,
+            "<text x='{}' y='{}' text-anchor='middle'>ms / view</text>",
+            x0 + pw / 2.0,
+            h - 12.0
+        );
+        for k in 0..=4 {
+            let v = k as f64 / 4.0;
+            let y = m + ph - v * ph;
+            let _ = writeln!(s, "<text x='{}' y='{}' text-anchor='end'>{:.0}%</text><line x1='{x0}' x2='{}' y1='{y}' y2='{y}' stroke='#eee'/>", x0 - 4.0, y + 4.0, v * 100.0, x0 + pw);
+            let t = max_ms * v;
+            let _ = writeln!(
+                s,
+                "<text x='{}' y='{}' text-anchor='middle'>{t:.1}</text>",
+                x0 + v * pw,
+                m + ph + 16.0
+            );
+        }
+        for (ci, dim) in [300u32, 600, 900].iter().enumerate() {
+            let pts: Vec<(f64, f64, f32)> = rows
+                .iter()
+                .filter(|r| r.min_dim == *dim)
+                .map(|r| (x0 + r.ms / max_ms * pw, m + ph - get(r) * ph, r.radius))
+                .collect();
+            let path: Vec<String> = pts
+                .iter()
+                .map(|(x, y, _)| format!("{x:.1},{y:.1}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "<polyline points='{}' fill='none' stroke='{}' stroke-width='2'/>",
+                path.join(" "),
+                colors[ci]
+            );
+            for (x, y, r) in &pts {
+                let _ = writeln!(s, "<circle cx='{x:.1}' cy='{y:.1}' r='3' fill='{}'/><text x='{:.1}' y='{:.1}' font-size='10'>r={r}</text>", colors[ci], x + 4.0, y - 4.0);
+            }
+            let _ = writeln!(
+                s,
+                "<text x='{}' y='{}' fill='{}'>{dim} px</text>",
+                x0 + 8.0,
+                m + 16.0 + 14.0 * ci as f64,
+                colors[ci]
+            );
+        }
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+fn write_npy(path: &Path, data: &[f32], cols: usize) {
+    let rows = data.len() / cols;
+    let mut header =
+        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for v in data {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+const OPEN3D: &str = r#"
+import json, sys, time, statistics, numpy as np
+import open3d as o3d, open3d.core as o3c
+pts = np.load(sys.argv[1]); views = json.load(open(sys.argv[2])); runs = int(sys.argv[3])
+pcd = o3d.t.geometry.PointCloud(o3c.Tensor(pts))
+ts = []
+for v in views:
+    K = o3c.Tensor(np.array(v["K"], dtype=np.float64)); E = o3c.Tensor(np.array(v["E"], dtype=np.float64))
+    for _ in range(runs):
+        t = time.perf_counter()
+        d = pcd.project_to_depth_image(v["w"], v["h"], K, E, depth_scale=1.0, depth_max=1e4)
+        ts.append(time.perf_counter() - t)
+print(statistics.median(ts))
+"#;
+
+fn speed(quick: bool) {
+    let spec = SceneSpec::demo();
+    let landmark = Landmark::new(&spec.geometry);
+    let mut cam_spec = spec.cameras.clone();
+    cam_spec.model = "PINHOLE".into();
+    cam_spec.count = 8;
+    cam_spec.min_size = 600;
+    cam_spec.max_size = 600;
+    cam_spec.small_fraction = 0.0;
+    cam_spec.away_fraction = 0.0;
+    let shots = nrw_synth::cameras::shots(
+        &cam_spec,
+        &landmark,
+        "png",
+        &mut rand_chacha::ChaCha8Rng::seed_from_u64(5),
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let views_json: Vec<serde_json::Value> = shots
+        .iter()
+        .map(|s| {
+            let p = &s.camera.params;
+            let r = s.pose.matrix();
+            let t = s.pose.translation;
+            serde_json::json!({
+                "w": s.camera.width, "h": s.camera.height,
+                "K": [[p[0], 0.0, p[2]], [0.0, p[1], p[3]], [0.0, 0.0, 1.0]],
+                "E": [[r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x], [r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y], [r.x_axis.z, r.y_axis.z, r.z_axis.z, t.z], [0.0, 0.0, 0.0, 1.0]],
+            })
+        })
+        .collect();
+    std::fs::write(
+        tmp.path().join("views.json"),
+        serde_json::to_string(&views_json).unwrap(),
+    )
+    .unwrap();
+    let sizes: &[usize] = if quick {
+        &[100_000, 1_000_000]
+    } else {
+        &[100_000, 1_000_000, 10_000_000]
+    };
+    let mut md = String::from("# Render speed against Open3D\n\n");
+    let _ = writeln!(
+        md,
+        "Regenerate: `cargo bench -p nrw-render --bench render -- speed` (needs `pip install open3d`). \
+         The demo landmark's surface sampled at N points, {} PINHOLE views of 800×600, medians over views \
+         and runs, one thread for both. Open3D: `t.geometry.PointCloud.project_to_depth_image` (depth only, \
+         one pixel per point). Ours: `nrw_render::render` producing colour and depth, radius 0 (same \
+         footprint) and 1 (the paper's). Cloud preparation (re-centring, Morton sort, chunks) is timed \
+         separately: it is paid once per scene, not per view.\n",
+        shots.len()
+    );
+    md.push_str("| points | cloud prep | ours r=0 ms/view | ours r=1 ms/view | Open3D ms/view | Open3D / ours (r=0) | Open3D / ours (r=1) | ours points/s (r=1) | ours views/s (r=1) |\n|---|---|---|---|---|---|---|---|---|\n");
+    for &n in sizes {
+        let pts = landmark.sample_surface(n, &mut rand_chacha::ChaCha8Rng::seed_from_u64(n as u64));
+        let world: Vec<DVec3> = pts.iter().map(|p| p.p).collect();
+        let colors: Vec<[u8; 3]> = pts.iter().map(|_| [128, 128, 128]).collect();
+        let t = Instant::now();
+        let rc = RenderCloud::new(DVec3::ZERO, &world, Some(&colors), None);
+        let prep = t.elapsed().as_secs_f64();
+        let mut ours = [Vec::new(), Vec::new()];
+        let runs = if n >= 10_000_000 { 2 } else { 5 };
+        for s in &shots {
+            let img = nrw_colmap::Image {
+                id: s.image_id,
+                name: s.name.clone(),
+                camera_id: s.camera_id,
+                cam_from_world: s.pose,
+                stored_quat_norm: 1.0,
+                points2d: vec![],
+            };
+            for (k, r) in [0.0f32, 1.0].iter().enumerate() {
+                let v = View::new(
+                    &img,
+                    &s.camera,
+                    DVec3::ZERO,
+                    s.camera.width as u32,
+                    s.camera.height as u32,
+                    *r,
+                );
+                for _ in 0..runs {
+                    let t = Instant::now();
+                    std::hint::black_box(render(&v, &rc, *r));
+                    ours[k].push(t.elapsed().as_secs_f64());
+                }
+            }
+        }
+        let (o0, o1) = (median(ours[0].clone()), median(ours[1].clone()));
+        let flat: Vec<f32> = world
+            .iter()
+            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect();
+        write_npy(&tmp.path().join("pts.npy"), &flat, 3);
+        let out = Command::new("python3")
+            .env("OMP_NUM_THREADS", "1")
+            .args(["-c", OPEN3D])
+            .arg(tmp.path().join("pts.npy"))
+            .arg(tmp.path().join("views.json"))
+            .arg(runs.to_string())
+            .output();
+        let o3d = match out {
+            Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout)
+                .trim()
+                .parse::<f64>()
+                .ok(),
+            Ok(o) => {
+                eprintln!("open3d failed: {}", String::from_utf8_lossy(&o.stderr));
+                None
+            }
+            Err(e) => {
+                eprintln!("python3: {e}");
+                None
+            }
+        };
+        let row = match o3d {
+            Some(t3) => format!(
+                "| {n} | {:.0} ms | {:.2} | {:.2} | {:.2} | **{:.1}×** | **{:.1}×** | {:.2e} | {:.0} |\n",
+                prep * 1e3, o0 * 1e3, o1 * 1e3, t3 * 1e3, t3 / o0, t3 / o1, n as f64 / o1, 1.0 / o1
+            ),
+            None => format!("| {n} | {:.0} ms | {:.2} | {:.2} | not measured | — | — | {:.2e} | {:.0} |\n", prep * 1e3, o0 * 1e3, o1 * 1e3, n as f64 / o1, 1.0 / o1),
+        };
+        eprint!("{row}");
+        md.push_str(&row);
+    }
+    md.push_str("\nTime per view grows less than linearly with points where views see part of the scene: chunks outside a view's frustum are skipped (see `chunks_visited` in `DeepBuffer`).\n");
+    std::fs::create_dir_all(root().join("docs/bench")).unwrap();
+    std::fs::write(root().join("docs/bench/render_speed.md"), md).unwrap();
+    eprintln!("wrote docs/bench/render_speed.md");
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let quick = args.iter().any(|a| a == "--quick");
+    let want = |k: &str| {
+        !args.iter().any(|a| a == "accuracy" || a == "speed") || args.iter().any(|a| a == k)
+    };
+    if want("accuracy") {
+        accuracy(quick);
+    }
+    if want("speed") {
+        speed(quick);
+    }
+}

@@ -95,14 +95,17 @@ impl ProjectionVisitor for Splat<'_> {
                     (px.y - 0.5 - r).ceil() as i64,
                     (px.y - 0.5 + r).floor() as i64,
                 );
+                let (x0, x1) = (x0.max(0), x1.min(w - 1));
                 for y in y0.max(0)..=y1.min(h - 1) {
                     let dy = y as f64 + 0.5 - px.y;
-                    for x in x0.max(0)..=x1.min(w - 1) {
+                    let dy2 = dy * dy;
+                    let row = &mut self.zbuf[(y * w) as usize..((y + 1) * w) as usize];
+                    for x in x0..=x1 {
                         let dx = x as f64 + 0.5 - px.x;
-                        if dx * dx + dy * dy <= r2 {
-                            let slot = &mut self.zbuf[(y * w + x) as usize];
-                            *slot = (*slot).min(key);
-                        }
+                        // Branch-free: a pixel outside the disc takes u64::MAX, which never wins.
+                        let k = if dx * dx + dy2 <= r2 { key } else { u64::MAX };
+                        let slot = &mut row[x as usize];
+                        *slot = (*slot).min(k);
                     }
                 }
             }

@@ -589,3 +589,129 @@ fn shards_read_back_with_pyarrow_duckdb_and_openexr() {
     assert_eq!(v["shard_rows"], 11);
     assert_eq!(v["views_checked"], 11);
 }
+
+#[test]
+fn the_sparse_views_scene_is_dropped_whole_with_exit_3() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/sparse_views.toml"),
+    )
+    .unwrap();
+    let mut spec = nrw_synth::SceneSpec::from_toml(&text, "sparse_views").unwrap();
+    spec.cameras.count = 3;
+    spec.cameras.min_size = 120;
+    spec.cameras.max_size = 150;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let out = tmp.path().join("ds");
+    let o = nrw(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--min-photo-side",
+        "100",
+        "--json",
+        "--quiet",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        (s["kept"].as_u64(), s["too_sparse"].as_u64()),
+        (Some(0), Some(3))
+    );
+}
+
+#[test]
+fn semantics_are_stored_colour_coded_with_a_transient_mask() {
+    use arrow_array::{BinaryArray, StringArray, UInt32Array};
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    let mut spec = nrw_synth::SceneSpec::demo();
+    spec.cameras.count = 4;
+    spec.cameras.min_size = 120;
+    spec.cameras.max_size = 150;
+    spec.cameras.small_fraction = 0.0;
+    spec.cameras.away_fraction = 0.0;
+    spec.effects.transients = Some(6.0);
+    spec.geometry.points = 60_000;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let out = tmp.path().join("ds");
+    let labels = scene.join("ground_truth/semantics");
+    let o = nrw(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--semantics",
+        labels.to_str().unwrap(),
+        "--min-photo-side",
+        "100",
+        "--min-dim",
+        "96",
+        "--max-empty",
+        "1.0",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let f = std::fs::File::open(out.join("shards/views-00000.parquet")).unwrap();
+    let (mut people, mut rows) = (0usize, 0usize);
+    for b in ParquetRecordBatchReaderBuilder::try_new(f)
+        .unwrap()
+        .build()
+        .unwrap()
+    {
+        let b = b.unwrap();
+        for i in 0..b.num_rows() {
+            rows += 1;
+            let name = column::<StringArray>(&b, "name").value(i);
+            let (w, h) = (
+                column::<UInt32Array>(&b, "width").value(i),
+                column::<UInt32Array>(&b, "height").value(i),
+            );
+            let (sw, sh, sc, rgb) = nrw_dataset::codec::decode_png(
+                column::<BinaryArray>(&b, "semantics_png").value(i),
+                Path::new(name),
+            )
+            .unwrap();
+            let (_, _, mc, mask) = nrw_dataset::codec::decode_png(
+                column::<BinaryArray>(&b, "transient_png").value(i),
+                Path::new(name),
+            )
+            .unwrap();
+            assert_eq!((sw, sh, sc, mc), (w, h, 3, 1));
+            // Independently: nearest-resize the ground-truth ids and compare pixel by pixel.
+            let gt = image::open(labels.join(Path::new(name).with_extension("png")))
+                .unwrap()
+                .to_luma8();
+            for y in 0..h {
+                for x in 0..w {
+                    let sx = ((x as f64 + 0.5) * gt.width() as f64 / w as f64) as u32;
+                    let sy = ((y as f64 + 0.5) * gt.height() as f64 / h as f64) as u32;
+                    let id = gt.get_pixel(sx.min(gt.width() - 1), sy.min(gt.height() - 1))[0];
+                    let k = (y * w + x) as usize;
+                    let person = id == 13;
+                    assert_eq!(mask[k] == 255, person, "{name} ({x},{y}) id {id}");
+                    if person {
+                        assert_eq!(&rgb[k * 3..k * 3 + 3], &[150, 5, 61]);
+                        people += 1;
+                    }
+                    if id == 3 {
+                        assert_eq!(&rgb[k * 3..k * 3 + 3], &[6, 230, 230], "sky");
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(rows, 4);
+    assert!(
+        people > 0,
+        "the scene asked for people; some must be labelled"
+    );
+}

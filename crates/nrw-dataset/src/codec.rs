@@ -53,6 +53,16 @@ pub fn resize_photo(img: &RgbImage, width: u32, height: u32) -> RgbImage {
     image::imageops::resize(img, width, height, image::imageops::FilterType::Lanczos3)
 }
 
+/// PNG of raw RGB8 bytes.
+pub fn encode_rgb_bytes(name: &str, w: u32, h: u32, rgb: &[u8]) -> Result<Vec<u8>> {
+    png(name, w, h, rgb, image::ExtendedColorType::Rgb8)
+}
+
+/// PNG of raw single-channel bytes.
+pub fn encode_gray(name: &str, w: u32, h: u32, gray: &[u8]) -> Result<Vec<u8>> {
+    png(name, w, h, gray, image::ExtendedColorType::L8)
+}
+
 /// PNG of an RGB8 image.
 pub fn encode_rgb(name: &str, img: &RgbImage) -> Result<Vec<u8>> {
     png(

@@ -10,6 +10,7 @@ pub mod manifest;
 pub mod parquet_io;
 pub mod scene;
 pub mod schema;
+pub mod semantics;
 pub mod views;
 
 pub use error::{DatasetError, Result};

@@ -45,6 +45,10 @@ pub struct ViewRow {
     pub color_png: Vec<u8>,
     pub depth_exr: Vec<u8>,
     pub normal_png: Option<Vec<u8>>,
+    /// ADE20K colour-coded labels, PNG RGB8, when --semantics was given.
+    pub semantics_png: Option<Vec<u8>>,
+    /// Transient mask, PNG L8 (255 = transient class), when --semantics was given.
+    pub transient_png: Option<Vec<u8>>,
 }
 
 /// Arrow schema of a view shard (documented in schemas/views.toml).
@@ -75,6 +79,8 @@ pub fn views_schema() -> SchemaRef {
         f("color_png", DataType::Binary),
         f("depth_exr", DataType::Binary),
         Field::new("normal_png", DataType::Binary, true),
+        Field::new("semantics_png", DataType::Binary, true),
+        Field::new("transient_png", DataType::Binary, true),
     ]))
 }
 
@@ -130,6 +136,8 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
             bins(&|r| Some(&r.color_png)),
             bins(&|r| Some(&r.depth_exr)),
             bins(&|r| r.normal_png.as_deref()),
+            bins(&|r| r.semantics_png.as_deref()),
+            bins(&|r| r.transient_png.as_deref()),
         ],
     )
     .map_err(|e| DatasetError::Arrow {
@@ -149,7 +157,14 @@ pub fn write_shard(dir: &Path, rel: &str, rows: &[ViewRow]) -> Result<FileEntry>
         ))
         .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
         .set_created_by(format!("nrw-etl {}", env!("CARGO_PKG_VERSION")));
-    for c in ["photo_png", "color_png", "depth_exr", "normal_png"] {
+    for c in [
+        "photo_png",
+        "color_png",
+        "depth_exr",
+        "normal_png",
+        "semantics_png",
+        "transient_png",
+    ] {
         props = props
             .set_column_compression(ColumnPath::from(c), Compression::UNCOMPRESSED)
             .set_column_statistics_enabled(

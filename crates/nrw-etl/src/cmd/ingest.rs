@@ -45,6 +45,10 @@ pub struct IngestArgs {
     /// Point cloud to render [default: <scene>/dense/fused.ply if present, else the sparse points]
     #[arg(long)]
     pub points: Option<PathBuf>,
+    /// Folder of per-photo ADE20K label maps (8-bit PNG of class ids, named like the photo
+    /// with .png); stored colour-coded with a transient mask
+    #[arg(long)]
+    pub semantics: Option<PathBuf>,
     /// Render so the shorter side has this many pixels (the paper: 600)
     #[arg(long, default_value_t = 600)]
     pub min_dim: u32,
@@ -83,6 +87,7 @@ impl IngestArgs {
             images: None,
             format: None,
             points: None,
+            semantics: None,
             min_dim: 600,
             radius: 1.0,
             max_empty: 0.85,
@@ -305,6 +310,20 @@ fn process(
     let photo_path = photos_dir.join(&img.name);
     let photo = resize_photo(&load_photo(&photo_path)?, w, h);
     let name = format!("image {}", img.id);
+    let (semantics_png, transient_png) = match &args.semantics {
+        None => (None, None),
+        Some(dir) => {
+            let path = dir.join(Path::new(&img.name).with_extension("png"));
+            let labels = nrw_dataset::semantics::load_labels(&path, photo_size.0, photo_size.1)?;
+            let (rgb, mask) = nrw_dataset::semantics::colorize(
+                &nrw_dataset::semantics::resize_labels(&labels, w, h),
+            );
+            (
+                Some(nrw_dataset::codec::encode_rgb_bytes(&name, w, h, &rgb)?),
+                Some(nrw_dataset::codec::encode_gray(&name, w, h, &mask)?),
+            )
+        }
+    };
     let row = ViewRow {
         image_id: img.id,
         name: img.name.clone(),
@@ -329,6 +348,8 @@ fn process(
             Some(n) => Some(encode_normals(&name, w, h, n, &buf.depth)?),
             None => None,
         },
+        semantics_png,
+        transient_png,
     };
     Ok((outcome, Some(row)))
 }
@@ -392,6 +413,15 @@ pub fn run(args: &IngestArgs) -> Result<IngestSummary> {
     parameters.insert("max_empty".into(), args.max_empty.into());
     parameters.insert("min_photo_side".into(), args.min_photo_side.into());
     parameters.insert("rows_per_shard".into(), args.rows_per_shard.into());
+    if let Some(d) = &args.semantics {
+        if !d.is_dir() {
+            return Err(EtlError::Usage(format!(
+                "{}: --semantics is not a folder",
+                d.display()
+            )));
+        }
+        parameters.insert("semantics".into(), d.display().to_string().into());
+    }
     let fingerprint = {
         let mut h = Sha256::new();
         h.update(serde_json::to_string(&inputs).expect("json").as_bytes());

@@ -47,10 +47,9 @@ struct Splat<'a> {
     tested: usize,
 }
 
-impl ProjectionVisitor for Splat<'_> {
-    type Output = (usize, usize);
-
-    fn visit<P: Projection>(self, params: &[f64]) -> (usize, usize) {
+impl Splat<'_> {
+    /// The splat loop over visible chunks, generic over how a camera-space point projects.
+    fn run<F: Fn(Vec3) -> Option<(f64, f64)>>(self, project: F) -> (usize, usize) {
         let v = self.view;
         let (w, h) = (v.width as i64, v.height as i64);
         let near = self.cloud.near;
@@ -70,38 +69,26 @@ impl ProjectionVisitor for Splat<'_> {
                 if c.z <= near {
                     continue;
                 }
-                let cd = DVec3::new(c.x as f64, c.y as f64, c.z as f64);
-                if v.check_fold && v.camera.normalized_radius(cd) > v.fold {
-                    continue;
-                }
-                let Some(px) = P::project(params, cd) else {
-                    continue;
-                };
+                let Some((px, py)) = project(c) else { continue };
                 // Positive f32 bits order like the values: one u64 min = nearest, then lowest index.
                 let key = (c.z.to_bits() as u64) << 32 | (chunk.start as u64 + k as u64);
                 if r == 0.0 {
-                    let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);
+                    let (x, y) = (px.floor() as i64, py.floor() as i64);
                     if x >= 0 && y >= 0 && x < w && y < h {
                         let slot = &mut self.zbuf[(y * w + x) as usize];
                         *slot = (*slot).min(key);
                     }
                     continue;
                 }
-                let (x0, x1) = (
-                    (px.x - 0.5 - r).ceil() as i64,
-                    (px.x - 0.5 + r).floor() as i64,
-                );
-                let (y0, y1) = (
-                    (px.y - 0.5 - r).ceil() as i64,
-                    (px.y - 0.5 + r).floor() as i64,
-                );
+                let (x0, x1) = ((px - 0.5 - r).ceil() as i64, (px - 0.5 + r).floor() as i64);
+                let (y0, y1) = ((py - 0.5 - r).ceil() as i64, (py - 0.5 + r).floor() as i64);
                 let (x0, x1) = (x0.max(0), x1.min(w - 1));
                 for y in y0.max(0)..=y1.min(h - 1) {
-                    let dy = y as f64 + 0.5 - px.y;
+                    let dy = y as f64 + 0.5 - py;
                     let dy2 = dy * dy;
                     let row = &mut self.zbuf[(y * w) as usize..((y + 1) * w) as usize];
                     for x in x0..=x1 {
-                        let dx = x as f64 + 0.5 - px.x;
+                        let dx = x as f64 + 0.5 - px;
                         // Branch-free: a pixel outside the disc takes u64::MAX, which never wins.
                         let k = if dx * dx + dy2 <= r2 { key } else { u64::MAX };
                         let slot = &mut row[x as usize];
@@ -111,6 +98,23 @@ impl ProjectionVisitor for Splat<'_> {
             }
         }
         (chunks, tested)
+    }
+}
+
+impl ProjectionVisitor for Splat<'_> {
+    type Output = (usize, usize);
+
+    fn visit<P: Projection>(self, params: &[f64]) -> (usize, usize) {
+        let v = self.view;
+        let camera = &v.camera;
+        let (check_fold, fold) = (v.check_fold, v.fold);
+        self.run(|c: Vec3| {
+            let cd = DVec3::new(c.x as f64, c.y as f64, c.z as f64);
+            if check_fold && camera.normalized_radius(cd) > fold {
+                return None;
+            }
+            P::project(params, cd).map(|p| (p.x, p.y))
+        })
     }
 }
 

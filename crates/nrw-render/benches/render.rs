@@ -280,127 +280,168 @@ print(statistics.median(ts))
 fn speed(quick: bool) {
     let spec = SceneSpec::demo();
     let landmark = Landmark::new(&spec.geometry);
-    let mut cam_spec = spec.cameras.clone();
-    cam_spec.model = "PINHOLE".into();
-    cam_spec.count = 8;
-    cam_spec.min_size = 600;
-    cam_spec.max_size = 600;
-    cam_spec.small_fraction = 0.0;
-    cam_spec.away_fraction = 0.0;
-    let shots = nrw_synth::cameras::shots(
-        &cam_spec,
-        &landmark,
-        "png",
-        &mut rand_chacha::ChaCha8Rng::seed_from_u64(5),
-    );
-    let tmp = tempfile::tempdir().unwrap();
-    let views_json: Vec<serde_json::Value> = shots
-        .iter()
-        .map(|s| {
-            let p = &s.camera.params;
-            let r = s.pose.matrix();
-            let t = s.pose.translation;
-            serde_json::json!({
-                "w": s.camera.width, "h": s.camera.height,
-                "K": [[p[0], 0.0, p[2]], [0.0, p[1], p[3]], [0.0, 0.0, 1.0]],
-                "E": [[r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x], [r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y], [r.x_axis.z, r.y_axis.z, r.z_axis.z, t.z], [0.0, 0.0, 0.0, 1.0]],
-            })
-        })
-        .collect();
-    std::fs::write(
-        tmp.path().join("views.json"),
-        serde_json::to_string(&views_json).unwrap(),
-    )
-    .unwrap();
     let sizes: &[usize] = if quick {
         &[100_000, 1_000_000]
     } else {
         &[100_000, 1_000_000, 10_000_000]
     };
+    let tmp = tempfile::tempdir().unwrap();
     let mut md = String::from("# Render speed against Open3D\n\n");
     let _ = writeln!(
         md,
         "Regenerate: `cargo bench -p nrw-render --bench render -- speed` (needs `pip install open3d`). \
-         The demo landmark's surface sampled at N points, {} PINHOLE views of 800×600, medians over views \
-         and runs, one thread for both. Open3D: `t.geometry.PointCloud.project_to_depth_image` (depth only, \
-         one pixel per point). Ours: `nrw_render::render` producing colour and depth, radius 0 (same \
-         footprint) and 1 (the paper's). Cloud preparation (re-centring, Morton sort, chunks) is timed \
-         separately: it is paid once per scene, not per view.\n",
-        shots.len()
+         The demo landmark's surface sampled at N points; 8 PINHOLE views of 800×600; medians over views \
+         and runs; one thread for both (`OMP_NUM_THREADS=1`). Open3D: `t.geometry.PointCloud.project_to_depth_image` \
+         (depth only, one pixel per point). Ours: `nrw_render::render` producing colour and depth, radius 0 \
+         (the same footprint) and 1 (the paper's). Cloud preparation (re-centring, Morton sort, chunks) is \
+         timed separately: it is paid once per scene, not per view. Two camera sets: *whole* (12–40 m away, \
+         the landmark fills the view) and *close-up* (5–8 m away, a view sees part of the scene, where \
+         chunk culling pays).\n"
     );
-    md.push_str("| points | cloud prep | ours r=0 ms/view | ours r=1 ms/view | Open3D ms/view | Open3D / ours (r=0) | Open3D / ours (r=1) | ours points/s (r=1) | ours views/s (r=1) |\n|---|---|---|---|---|---|---|---|---|\n");
-    for &n in sizes {
-        let pts = landmark.sample_surface(n, &mut rand_chacha::ChaCha8Rng::seed_from_u64(n as u64));
-        let world: Vec<DVec3> = pts.iter().map(|p| p.p).collect();
-        let colors: Vec<[u8; 3]> = pts.iter().map(|_| [128, 128, 128]).collect();
-        let t = Instant::now();
-        let rc = RenderCloud::new(DVec3::ZERO, &world, Some(&colors), None);
-        let prep = t.elapsed().as_secs_f64();
-        let mut ours = [Vec::new(), Vec::new()];
-        let runs = if n >= 10_000_000 { 2 } else { 5 };
-        for s in &shots {
-            let img = nrw_colmap::Image {
-                id: s.image_id,
-                name: s.name.clone(),
-                camera_id: s.camera_id,
-                cam_from_world: s.pose,
-                stored_quat_norm: 1.0,
-                points2d: vec![],
-            };
-            for (k, r) in [0.0f32, 1.0].iter().enumerate() {
-                let v = View::new(
-                    &img,
-                    &s.camera,
-                    DVec3::ZERO,
-                    s.camera.width as u32,
-                    s.camera.height as u32,
-                    *r,
-                );
-                for _ in 0..runs {
-                    let t = Instant::now();
-                    std::hint::black_box(render(&v, &rc, *r));
-                    ours[k].push(t.elapsed().as_secs_f64());
+    md.push_str("| views | points | cloud prep | chunks visited | ours r=0 ms/view | ours r=1 ms/view | Open3D ms/view | Open3D / ours (r=0) | Open3D / ours (r=1) | ours points/s (r=1) | ours views/s (r=1) |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let clouds: Vec<(usize, Vec<DVec3>)> = sizes
+        .iter()
+        .map(|&n| {
+            (
+                n,
+                landmark
+                    .sample_surface(n, &mut rand_chacha::ChaCha8Rng::seed_from_u64(n as u64))
+                    .iter()
+                    .map(|p| p.p)
+                    .collect(),
+            )
+        })
+        .collect();
+    for (label, d0, d1) in [("whole", 12.0, 40.0), ("close-up", 5.0, 8.0)] {
+        let mut cam_spec = spec.cameras.clone();
+        cam_spec.model = "PINHOLE".into();
+        cam_spec.count = 8;
+        cam_spec.min_size = 600;
+        cam_spec.max_size = 600;
+        cam_spec.small_fraction = 0.0;
+        cam_spec.away_fraction = 0.0;
+        cam_spec.min_distance = d0;
+        cam_spec.max_distance = d1;
+        let shots = nrw_synth::cameras::shots(
+            &cam_spec,
+            &landmark,
+            "png",
+            &mut rand_chacha::ChaCha8Rng::seed_from_u64(5),
+        );
+        let views_json: Vec<serde_json::Value> = shots
+            .iter()
+            .map(|s| {
+                let p = &s.camera.params;
+                let r = s.pose.matrix();
+                let t = s.pose.translation;
+                serde_json::json!({
+                    "w": s.camera.width, "h": s.camera.height,
+                    "K": [[p[0], 0.0, p[2]], [0.0, p[1], p[3]], [0.0, 0.0, 1.0]],
+                    "E": [[r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x], [r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y], [r.x_axis.z, r.y_axis.z, r.z_axis.z, t.z], [0.0, 0.0, 0.0, 1.0]],
+                })
+            })
+            .collect();
+        std::fs::write(
+            tmp.path().join("views.json"),
+            serde_json::to_string(&views_json).unwrap(),
+        )
+        .unwrap();
+        for (n, world) in &clouds {
+            let n = *n;
+            let colors: Vec<[u8; 3]> = vec![[128, 128, 128]; world.len()];
+            let t = Instant::now();
+            let rc = RenderCloud::new(DVec3::ZERO, world, Some(&colors), None);
+            let prep = t.elapsed().as_secs_f64();
+            let mut ours = [Vec::new(), Vec::new()];
+            let mut visited = 0usize;
+            let runs = if n >= 10_000_000 { 2 } else { 5 };
+            for s in &shots {
+                let img = nrw_colmap::Image {
+                    id: s.image_id,
+                    name: s.name.clone(),
+                    camera_id: s.camera_id,
+                    cam_from_world: s.pose,
+                    stored_quat_norm: 1.0,
+                    points2d: vec![],
+                };
+                for (k, r) in [0.0f32, 1.0].iter().enumerate() {
+                    let v = View::new(
+                        &img,
+                        &s.camera,
+                        DVec3::ZERO,
+                        s.camera.width as u32,
+                        s.camera.height as u32,
+                        *r,
+                    );
+                    for _ in 0..runs {
+                        let t = Instant::now();
+                        let b = std::hint::black_box(render(&v, &rc, *r));
+                        ours[k].push(t.elapsed().as_secs_f64());
+                        visited += b.chunks_visited;
+                    }
                 }
             }
+            let visited_frac = visited as f64 / (rc.chunks.len() * shots.len() * 2 * runs) as f64;
+            let (o0, o1) = (median(ours[0].clone()), median(ours[1].clone()));
+            let flat: Vec<f32> = world
+                .iter()
+                .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect();
+            write_npy(&tmp.path().join("pts.npy"), &flat, 3);
+            let out = Command::new("python3")
+                .env("OMP_NUM_THREADS", "1")
+                .args(["-c", OPEN3D])
+                .arg(tmp.path().join("pts.npy"))
+                .arg(tmp.path().join("views.json"))
+                .arg(runs.to_string())
+                .output();
+            let o3d = match out {
+                Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout)
+                    .trim()
+                    .parse::<f64>()
+                    .ok(),
+                Ok(o) => {
+                    eprintln!("open3d failed: {}", String::from_utf8_lossy(&o.stderr));
+                    None
+                }
+                Err(e) => {
+                    eprintln!("python3: {e}");
+                    None
+                }
+            };
+            let head = format!(
+                "| {label} | {n} | {:.0} ms | {:.0}% | {:.2} | {:.2} |",
+                prep * 1e3,
+                visited_frac * 100.0,
+                o0 * 1e3,
+                o1 * 1e3
+            );
+            let row = match o3d {
+                Some(t3) => format!(
+                    "{head} {:.2} | **{:.1}×** | **{:.1}×** | {:.2e} | {:.0} |\n",
+                    t3 * 1e3,
+                    t3 / o0,
+                    t3 / o1,
+                    n as f64 / o1,
+                    1.0 / o1
+                ),
+                None => format!(
+                    "{head} not measured | — | — | {:.2e} | {:.0} |\n",
+                    n as f64 / o1,
+                    1.0 / o1
+                ),
+            };
+            eprint!("{row}");
+            md.push_str(&row);
         }
-        let (o0, o1) = (median(ours[0].clone()), median(ours[1].clone()));
-        let flat: Vec<f32> = world
-            .iter()
-            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-            .collect();
-        write_npy(&tmp.path().join("pts.npy"), &flat, 3);
-        let out = Command::new("python3")
-            .env("OMP_NUM_THREADS", "1")
-            .args(["-c", OPEN3D])
-            .arg(tmp.path().join("pts.npy"))
-            .arg(tmp.path().join("views.json"))
-            .arg(runs.to_string())
-            .output();
-        let o3d = match out {
-            Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout)
-                .trim()
-                .parse::<f64>()
-                .ok(),
-            Ok(o) => {
-                eprintln!("open3d failed: {}", String::from_utf8_lossy(&o.stderr));
-                None
-            }
-            Err(e) => {
-                eprintln!("python3: {e}");
-                None
-            }
-        };
-        let row = match o3d {
-            Some(t3) => format!(
-                "| {n} | {:.0} ms | {:.2} | {:.2} | {:.2} | **{:.1}×** | **{:.1}×** | {:.2e} | {:.0} |\n",
-                prep * 1e3, o0 * 1e3, o1 * 1e3, t3 * 1e3, t3 / o0, t3 / o1, n as f64 / o1, 1.0 / o1
-            ),
-            None => format!("| {n} | {:.0} ms | {:.2} | {:.2} | not measured | — | — | {:.2e} | {:.0} |\n", prep * 1e3, o0 * 1e3, o1 * 1e3, n as f64 / o1, 1.0 / o1),
-        };
-        eprint!("{row}");
-        md.push_str(&row);
     }
-    md.push_str("\nThese views see most of the landmark, so time per view grows nearly linearly with points; chunks outside a view's frustum are skipped (`DeepBuffer::chunks_visited`), which is what keeps views of part of a large scene cheap. Target of issue 4: ≥ 10× Open3D for colour + depth; not reached here (see the ratios).\n");
+    md.push_str(
+        "\nReading it: at the same footprint (r = 0) we are several times faster than Open3D's depth-only \
+         projection while also producing colour; the paper's r = 1 costs about twice r = 0. Close-up views \
+         visit a fraction of the chunks, so their cost grows sub-linearly with the cloud while Open3D's \
+         grows linearly. Issue 4's target (≥ 10× Open3D for colour + depth) is judged by the last ratio \
+         columns; in the run recorded here it is not reached.\n",
+    );
     std::fs::create_dir_all(root().join("docs/bench")).unwrap();
     std::fs::write(root().join("docs/bench/render_speed.md"), md).unwrap();
     eprintln!("wrote docs/bench/render_speed.md");

@@ -11,6 +11,7 @@ pub mod parquet_io;
 pub mod scene;
 pub mod schema;
 pub mod semantics;
+pub mod split;
 pub mod views;
 
 pub use error::{DatasetError, Result};

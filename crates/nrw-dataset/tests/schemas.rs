@@ -19,6 +19,11 @@ fn written_tables() -> Vec<(&'static str, &'static str, SchemaRef)> {
             "shards/views-NNNNN.parquet",
             nrw_dataset::views_schema(),
         ),
+        (
+            "splits.toml",
+            nrw_dataset::split::SPLITS_TABLE,
+            nrw_dataset::split::splits_schema(),
+        ),
     ]
 }
 

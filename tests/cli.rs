@@ -715,3 +715,273 @@ fn semantics_are_stored_colour_coded_with_a_transient_mask() {
         "the scene asked for people; some must be labelled"
     );
 }
+
+/// A dataset of a small synthetic scene (photos pass lowered filters), with `n` photos.
+fn small_dataset(tmp: &Path, n: usize, semantics: bool) -> PathBuf {
+    let scene = tmp.join(format!("scene{n}"));
+    let mut spec = nrw_synth::SceneSpec::demo();
+    spec.cameras.count = n;
+    spec.cameras.min_size = 120;
+    spec.cameras.max_size = 150;
+    spec.cameras.small_fraction = 0.0;
+    spec.cameras.away_fraction = 0.0;
+    spec.geometry.points = 60_000;
+    spec.observations.features = 300;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let out = tmp.join(format!("ds{n}"));
+    let labels = scene.join("ground_truth/semantics");
+    let mut args = vec![
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--min-photo-side",
+        "100",
+        "--min-dim",
+        "96",
+        "--max-empty",
+        "1.0",
+        "--quiet",
+    ];
+    if semantics {
+        args.extend(["--semantics", labels.to_str().unwrap()]);
+    }
+    ok(&args);
+    out
+}
+
+fn split_of(ds: &Path) -> std::collections::BTreeMap<String, String> {
+    nrw_dataset::split::read_splits(ds)
+        .unwrap()
+        .into_iter()
+        .map(|a| (a.name, a.split))
+        .collect()
+}
+
+#[test]
+fn split_is_reproducible_exact_and_incremental() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = small_dataset(tmp.path(), 9, false);
+    let copy = tmp.path().join("copy");
+    std::fs::create_dir_all(&copy).unwrap();
+    for f in walk(&ds) {
+        let rel = f.strip_prefix(&ds).unwrap();
+        std::fs::create_dir_all(copy.join(rel).parent().unwrap()).unwrap();
+        std::fs::copy(&f, copy.join(rel)).unwrap();
+    }
+    ok(&["split", ds.to_str().unwrap(), "--val", "3", "--seed", "11"]);
+    ok(&[
+        "split",
+        copy.to_str().unwrap(),
+        "--val",
+        "3",
+        "--seed",
+        "11",
+    ]);
+    assert_eq!(
+        std::fs::read(ds.join("splits.parquet")).unwrap(),
+        std::fs::read(copy.join("splits.parquet")).unwrap()
+    );
+    let first = split_of(&ds);
+    assert_eq!(first.len(), 9);
+    assert_eq!(first.values().filter(|s| *s == "val").count(), 3);
+    let v: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", ds.to_str().unwrap(), "--json"])).unwrap();
+    assert_eq!(
+        (v["splits"]["train"].as_u64(), v["splits"]["val"].as_u64()),
+        (Some(6), Some(3))
+    );
+
+    // The same scene with three more photos (the generator draws photos in order, so the
+    // first nine are identical), ingested into the same dataset, then split again.
+    let bigger = small_dataset(tmp.path(), 12, false);
+    for f in ["splits.parquet"] {
+        std::fs::copy(ds.join(f), bigger.join(f)).unwrap();
+    }
+    ok(&[
+        "split",
+        bigger.to_str().unwrap(),
+        "--val",
+        "4",
+        "--seed",
+        "99",
+    ]);
+    let second = split_of(&bigger);
+    assert_eq!(second.len(), 12);
+    for (name, s) in &first {
+        assert_eq!(&second[name], s, "{name} moved from {s}");
+    }
+    assert_eq!(second.values().filter(|s| *s == "val").count(), 4);
+    let err = fails(&["split", bigger.to_str().unwrap(), "--val", "40"]);
+    assert!(
+        err.contains("--val 40") && err.contains("only 0 unassigned") && err.contains("12 kept"),
+        "{err}"
+    );
+    let err = fails(&["split", bigger.to_str().unwrap(), "--val", "2"]);
+    assert!(
+        err.contains("4 validation photos already assigned"),
+        "{err}"
+    );
+}
+
+#[test]
+fn reader_streams_a_split_and_crops_every_channel_at_one_place() {
+    use nrw_dataset::reader::Dataset;
+    let tmp = tempfile::tempdir().unwrap();
+    let ds_dir = small_dataset(tmp.path(), 9, true);
+    ok(&[
+        "split",
+        ds_dir.to_str().unwrap(),
+        "--val",
+        "2",
+        "--seed",
+        "5",
+    ]);
+    let ds = Dataset::open(&ds_dir).unwrap();
+    let want: Vec<u32> = ds.ids("val").unwrap().to_vec();
+    let got: Vec<u32> = ds
+        .iter_split("val")
+        .unwrap()
+        .map(|v| v.unwrap().image_id)
+        .collect();
+    assert_eq!(got, want);
+    let train: Vec<u32> = ds
+        .iter_split("train")
+        .unwrap()
+        .map(|v| v.unwrap().image_id)
+        .collect();
+    assert_eq!(train.len(), 7);
+    assert!(
+        train.iter().all(|id| !want.contains(id)),
+        "splits are disjoint"
+    );
+    let v = ds.get(train[3]).unwrap();
+    assert_eq!(v.image_id, train[3]);
+    let (photo, color, depth) = (v.photo().unwrap(), v.color().unwrap(), v.depth().unwrap());
+    let c = v.crop_at(7, 5, 64).unwrap();
+    for y in 0..64u32 {
+        for x in 0..64u32 {
+            assert_eq!(c.photo.get_pixel(x, y), photo.get_pixel(x + 7, y + 5));
+            assert_eq!(c.color.get_pixel(x, y), color.get_pixel(x + 7, y + 5));
+            let d = c.depth[(y * 64 + x) as usize];
+            assert_eq!(d, depth.data[((y + 5) * v.width + x + 7) as usize]);
+            assert_eq!(
+                d > 0.0,
+                c.color.get_pixel(x, y)[3] == 255,
+                "alpha is coverage inside the crop"
+            );
+        }
+    }
+    assert!(c.semantics.is_some() && c.transient.is_some());
+    let too_big = v.crop_at(0, 0, 4096).unwrap_err().to_string();
+    assert!(too_big.contains("does not fit"), "{too_big}");
+    assert!(ds
+        .get(999_999)
+        .unwrap_err()
+        .to_string()
+        .contains("not a kept view"));
+    // Another schema version is refused with a clear message.
+    let m = ds_dir.join("manifest.json");
+    let text = std::fs::read_to_string(&m)
+        .unwrap()
+        .replace("\"schema_version\": 1", "\"schema_version\": 7");
+    std::fs::write(&m, text).unwrap();
+    let e = Dataset::open(&ds_dir).unwrap_err().to_string();
+    assert!(
+        e.contains("schema version 7") && e.contains("re-run ingest"),
+        "{e}"
+    );
+}
+
+#[test]
+fn official_export_has_the_papers_files_and_round_trips_losslessly() {
+    use nrw_dataset::reader::Dataset;
+    let tmp = tempfile::tempdir().unwrap();
+    let ds_dir = small_dataset(tmp.path(), 6, true);
+    let out = tmp.path().join("official");
+    let err = fails(&[
+        "export",
+        ds_dir.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(err.contains("nrw-etl split"), "{err}");
+    ok(&["split", ds_dir.to_str().unwrap(), "--val", "2"]);
+    ok(&[
+        "export",
+        ds_dir.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let ds = Dataset::open(&ds_dir).unwrap();
+    let scale: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("depth_scale.json")).unwrap())
+            .unwrap();
+    let depth_max = scale["depth_max"].as_f64().unwrap();
+    for (split, n) in [("train", 4), ("val", 2)] {
+        let files: Vec<String> = std::fs::read_dir(out.join(split))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        assert_eq!(files.len(), n * 4 + 1, "{split}: {files:?}");
+        for (k, v) in ds.iter_split(split).unwrap().enumerate() {
+            let v = v.unwrap();
+            let open = |suffix: &str| {
+                image::open(out.join(split).join(format!("{k:04}_{suffix}.png"))).unwrap()
+            };
+            let reference = open("reference");
+            assert_eq!(reference.color(), image::ColorType::Rgb8);
+            assert_eq!(reference.to_rgb8(), v.photo().unwrap(), "photo round trip");
+            let color = open("color");
+            assert_eq!(color.color(), image::ColorType::Rgba8);
+            assert_eq!(
+                color.to_rgba8(),
+                v.color().unwrap(),
+                "colour and alpha round trip"
+            );
+            let depth = open("depth");
+            assert_eq!(depth.color(), image::ColorType::L16);
+            let d16 = depth.to_luma16();
+            let truth = v.depth().unwrap();
+            for (i, p) in d16.pixels().enumerate() {
+                let back = p[0] as f64 / 65535.0 * depth_max;
+                let t = truth.data[i] as f64;
+                assert_eq!(p[0] == 0, t == 0.0);
+                assert!(
+                    (back - t).abs() <= depth_max / 65535.0,
+                    "depth within one quantum: {back} vs {t}, value {} max {depth_max}",
+                    p[0]
+                );
+            }
+            assert_eq!(open("seg_rgb").color(), image::ColorType::Rgb8);
+        }
+    }
+    let files = tmp.path().join("files");
+    ok(&[
+        "export",
+        ds_dir.to_str().unwrap(),
+        "--layout",
+        "files",
+        "--out",
+        files.to_str().unwrap(),
+    ]);
+    let v = ds.iter_split("val").unwrap().next().unwrap().unwrap();
+    let d = files
+        .join("val")
+        .join(Path::new(&v.name).with_extension(""));
+    for f in [
+        "photo.png",
+        "color.png",
+        "depth.exr",
+        "normal.png",
+        "semantics.png",
+        "transient.png",
+        "meta.json",
+    ] {
+        assert!(d.join(f).is_file(), "{f}");
+    }
+    assert_eq!(
+        nrw_dataset::depth::read_exr(&d.join("depth.exr")).unwrap(),
+        v.depth().unwrap()
+    );
+}

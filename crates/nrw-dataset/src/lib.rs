@@ -8,6 +8,7 @@ pub mod depth;
 pub mod error;
 pub mod manifest;
 pub mod parquet_io;
+pub mod reader;
 pub mod scene;
 pub mod schema;
 pub mod semantics;

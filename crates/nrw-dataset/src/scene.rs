@@ -246,3 +246,53 @@ pub fn write_scene_tables(
         crate::parquet_io::write_table(dir, IMAGES_TABLE, &images_batch(rec, photos, outcomes)?)?,
     ])
 }
+
+/// (image id, name, verdict) of every registered image, from `scene/images.parquet`.
+pub fn read_verdicts(dir: &Path) -> Result<Vec<(u32, String, String)>> {
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let path = dir.join(IMAGES_TABLE);
+    let f = std::fs::File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
+    let reader = ParquetRecordBatchReaderBuilder::try_new(f)
+        .and_then(|b| {
+            let mask = parquet::arrow::ProjectionMask::columns(
+                b.parquet_schema(),
+                ["image_id", "name", "verdict"],
+            );
+            b.with_projection(mask).build()
+        })
+        .map_err(|e| DatasetError::Parquet {
+            path: path.clone(),
+            source: e,
+        })?;
+    let mut out = Vec::new();
+    for b in reader {
+        let b = b.map_err(|e| DatasetError::Arrow {
+            table: IMAGES_TABLE.into(),
+            source: e,
+        })?;
+        let bad = || DatasetError::Schema {
+            path: path.clone(),
+            problem: "image_id/name/verdict columns missing or of another type".into(),
+        };
+        let ids = b
+            .column_by_name("image_id")
+            .and_then(|c| c.as_any().downcast_ref::<UInt32Array>())
+            .ok_or_else(bad)?;
+        let names = b
+            .column_by_name("name")
+            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+            .ok_or_else(bad)?;
+        let verdicts = b
+            .column_by_name("verdict")
+            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+            .ok_or_else(bad)?;
+        for i in 0..b.num_rows() {
+            out.push((
+                ids.value(i),
+                names.value(i).to_string(),
+                verdicts.value(i).to_string(),
+            ));
+        }
+    }
+    Ok(out)
+}

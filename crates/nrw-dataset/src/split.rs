@@ -65,7 +65,8 @@ pub fn assign(
     val: usize,
     seed: u64,
 ) -> std::result::Result<(Vec<Assignment>, SplitChange), String> {
-    let by_name: BTreeMap<&str, &Assignment> = previous.iter().map(|a| (a.name.as_str(), a)).collect();
+    let by_name: BTreeMap<&str, &Assignment> =
+        previous.iter().map(|a| (a.name.as_str(), a)).collect();
     let mut out = Vec::with_capacity(eligible.len());
     let mut change = SplitChange::default();
     let mut fresh: Vec<(u64, &str, u32)> = Vec::new();
@@ -77,13 +78,21 @@ pub fn assign(
                 } else {
                     change.kept_train += 1;
                 }
-                out.push(Assignment { image_id: *id, ..(*a).clone() });
+                out.push(Assignment {
+                    image_id: *id,
+                    ..(*a).clone()
+                });
             }
             None => fresh.push((rank(seed, name), name.as_str(), *id)),
         }
     }
-    let still: std::collections::BTreeSet<&str> = eligible.iter().map(|(_, n)| n.as_str()).collect();
-    change.gone = previous.iter().filter(|a| !still.contains(a.name.as_str())).map(|a| a.name.clone()).collect();
+    let still: std::collections::BTreeSet<&str> =
+        eligible.iter().map(|(_, n)| n.as_str()).collect();
+    change.gone = previous
+        .iter()
+        .filter(|a| !still.contains(a.name.as_str()))
+        .map(|a| a.name.clone())
+        .collect();
     if val < change.kept_val {
         return Err(format!(
             "--val {val} is below the {} validation photos already assigned; assignments are never undone (remove {SPLITS_TABLE} to start over)",
@@ -106,7 +115,12 @@ pub fn assign(
         } else {
             change.new_train += 1;
         }
-        out.push(Assignment { image_id: *id, name: name.to_string(), split: split.into(), seed });
+        out.push(Assignment {
+            image_id: *id,
+            name: name.to_string(),
+            split: split.into(),
+            seed,
+        });
     }
     out.sort_by_key(|a| a.image_id);
     Ok((out, change))
@@ -117,13 +131,22 @@ pub fn write_splits(dir: &Path, rows: &[Assignment]) -> Result<crate::manifest::
     let batch = RecordBatch::try_new(
         splits_schema(),
         vec![
-            Arc::new(UInt32Array::from_iter_values(rows.iter().map(|a| a.image_id))),
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|a| a.name.as_str()))),
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|a| a.split.as_str()))),
+            Arc::new(UInt32Array::from_iter_values(
+                rows.iter().map(|a| a.image_id),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|a| a.name.as_str()),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|a| a.split.as_str()),
+            )),
             Arc::new(UInt64Array::from_iter_values(rows.iter().map(|a| a.seed))),
         ],
     )
-    .map_err(|e| DatasetError::Arrow { table: SPLITS_TABLE.into(), source: e })?;
+    .map_err(|e| DatasetError::Arrow {
+        table: SPLITS_TABLE.into(),
+        source: e,
+    })?;
     crate::parquet_io::write_table(dir, SPLITS_TABLE, &batch)
 }
 
@@ -136,20 +159,46 @@ pub fn read_splits(dir: &Path) -> Result<Vec<Assignment>> {
     let f = std::fs::File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
     let reader = ParquetRecordBatchReaderBuilder::try_new(f)
         .and_then(|b| b.build())
-        .map_err(|e| DatasetError::Parquet { path: path.clone(), source: e })?;
+        .map_err(|e| DatasetError::Parquet {
+            path: path.clone(),
+            source: e,
+        })?;
     let mut out = Vec::new();
     for b in reader {
-        let b = b.map_err(|e| DatasetError::Arrow { table: SPLITS_TABLE.into(), source: e })?;
-        let col = |n: &str| b.column_by_name(n).ok_or_else(|| DatasetError::Schema { path: path.clone(), problem: format!("no column {n}") });
-        let ids = col("image_id")?.as_any().downcast_ref::<UInt32Array>().cloned();
+        let b = b.map_err(|e| DatasetError::Arrow {
+            table: SPLITS_TABLE.into(),
+            source: e,
+        })?;
+        let col = |n: &str| {
+            b.column_by_name(n).ok_or_else(|| DatasetError::Schema {
+                path: path.clone(),
+                problem: format!("no column {n}"),
+            })
+        };
+        let ids = col("image_id")?
+            .as_any()
+            .downcast_ref::<UInt32Array>()
+            .cloned();
         let names = col("name")?.as_any().downcast_ref::<StringArray>().cloned();
-        let splits = col("split")?.as_any().downcast_ref::<StringArray>().cloned();
+        let splits = col("split")?
+            .as_any()
+            .downcast_ref::<StringArray>()
+            .cloned();
         let seeds = col("seed")?.as_any().downcast_ref::<UInt64Array>().cloned();
-        let (Some(ids), Some(names), Some(splits), Some(seeds)) = (ids, names, splits, seeds) else {
-            return Err(DatasetError::Schema { path, problem: "columns have unexpected types".into() });
+        let (Some(ids), Some(names), Some(splits), Some(seeds)) = (ids, names, splits, seeds)
+        else {
+            return Err(DatasetError::Schema {
+                path,
+                problem: "columns have unexpected types".into(),
+            });
         };
         for i in 0..ids.len() {
-            out.push(Assignment { image_id: ids.value(i), name: names.value(i).into(), split: splits.value(i).into(), seed: seeds.value(i) });
+            out.push(Assignment {
+                image_id: ids.value(i),
+                name: names.value(i).into(),
+                split: splits.value(i).into(),
+                seed: seeds.value(i),
+            });
         }
     }
     Ok(out)
@@ -160,7 +209,9 @@ mod tests {
     use super::*;
 
     fn photos(n: usize) -> Vec<(u32, String)> {
-        (0..n).map(|i| (i as u32 + 1, format!("p{i:05}.jpg"))).collect()
+        (0..n)
+            .map(|i| (i as u32 + 1, format!("p{i:05}.jpg")))
+            .collect()
     }
 
     #[test]
@@ -170,9 +221,21 @@ mod tests {
         assert_eq!((c.new_val, c.new_train), (100, 900));
         let mut names: Vec<&str> = a.iter().map(|x| x.name.as_str()).collect();
         names.dedup();
-        assert_eq!(names.len(), 1000, "each photo once: train and val are disjoint");
-        assert_eq!(assign(&photos(1000), &[], 100, 7).unwrap().0, a, "same seed, same split");
-        assert_ne!(assign(&photos(1000), &[], 100, 8).unwrap().0, a, "another seed, another split");
+        assert_eq!(
+            names.len(),
+            1000,
+            "each photo once: train and val are disjoint"
+        );
+        assert_eq!(
+            assign(&photos(1000), &[], 100, 7).unwrap().0,
+            a,
+            "same seed, same split"
+        );
+        assert_ne!(
+            assign(&photos(1000), &[], 100, 8).unwrap().0,
+            a,
+            "another seed, another split"
+        );
         // Order of the input does not matter.
         let mut rev = photos(1000);
         rev.reverse();
@@ -196,7 +259,10 @@ mod tests {
         assert!(e.contains("--val 100") && e.contains("only 19"), "{e}");
         let (first, _) = assign(&photos(50), &[], 10, 1).unwrap();
         let e = assign(&photos(50), &first, 5, 1).unwrap_err();
-        assert!(e.contains("--val 5") && e.contains("10 validation photos already"), "{e}");
+        assert!(
+            e.contains("--val 5") && e.contains("10 validation photos already"),
+            "{e}"
+        );
         let (none, c) = assign(&photos(5), &[], 0, 1).unwrap();
         assert_eq!((none.len(), c.new_val), (5, 0));
         let (tiny, _) = assign(&photos(1), &[], 1, 1).unwrap();

@@ -31,8 +31,12 @@ enum Command {
     Demo(cmd::demo::DemoArgs),
     /// Generate a synthetic COLMAP scene with ground truth from a spec (scenes/*.toml)
     Synth(cmd::synth::SynthArgs),
-    /// Summarise a COLMAP model and check it: counts, camera models, reprojection errors
+    /// Summarise a COLMAP model (counts, camera models, reprojection errors) or a dataset (verdicts, split)
     Inspect(cmd::inspect::InspectArgs),
+    /// Assign kept photos to train and val (seeded, incremental: earlier assignments never change)
+    Split(cmd::split::SplitArgs),
+    /// Write a dataset as files: the paper's official train/ val/ layout, or one folder per photo
+    Export(cmd::export::ExportArgs),
     /// Render every registered photo's view, apply the filters, write shards, scene tables and manifest.json.
     ///
     /// Exit codes: 0 done; 1 error (message names file, record and field); 3 done, but every
@@ -58,6 +62,8 @@ fn main() -> std::process::ExitCode {
         Command::Demo(a) => cmd::demo::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Split(a) => cmd::split::run(a),
+        Command::Export(a) => cmd::export::run(a),
         Command::Ingest(a) => cmd::ingest::run(a).map(|s| {
             if s.kept == 0 {
                 std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);

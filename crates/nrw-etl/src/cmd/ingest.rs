@@ -529,6 +529,10 @@ pub fn run(args: &IngestArgs) -> Result<IngestSummary> {
     }
     let mut tables = nrw_dataset::write_scene_tables(&args.out, &rec, &photos, &outcomes)?;
     tables.extend(shards.iter().cloned());
+    // A split from an earlier run stays (split assigns only new photos when run again).
+    if args.out.join(nrw_dataset::split::SPLITS_TABLE).is_file() {
+        tables.push(FileEntry::of(&args.out, nrw_dataset::split::SPLITS_TABLE)?);
+    }
     let count = |v: &str| outcomes.values().filter(|o| o.verdict == v).count();
     let (kept, too_small, too_sparse) = (count("kept"), count("too_small"), count("too_sparse"));
     let manifest = Manifest {

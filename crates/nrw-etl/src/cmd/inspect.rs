@@ -11,7 +11,7 @@ use crate::error::Result;
 /// Arguments of `inspect`.
 #[derive(Debug, Args)]
 pub struct InspectArgs {
-    /// Scene folder holding sparse/0/ (or sparse/), or a model folder itself
+    /// Scene folder holding sparse/0/ (or sparse/), a model folder itself, or a dataset folder
     pub scene: PathBuf,
     /// Print one JSON object instead of a readable summary
     #[arg(long)]
@@ -21,8 +21,60 @@ pub struct InspectArgs {
     pub format: Option<Encoding>,
 }
 
+/// A dataset's summary: verdict counts and split sizes.
+fn inspect_dataset(args: &InspectArgs) -> Result<()> {
+    let ds = nrw_dataset::reader::Dataset::open(&args.scene)?;
+    let verdicts = nrw_dataset::scene::read_verdicts(&args.scene)?;
+    let mut counts = std::collections::BTreeMap::new();
+    for (_, _, v) in &verdicts {
+        *counts.entry(v.clone()).or_insert(0usize) += 1;
+    }
+    let splits: std::collections::BTreeMap<String, usize> = ds.splits().into_iter().collect();
+    if args.json {
+        let v = json!({
+            "dataset": args.scene.display().to_string(),
+            "schema_version": ds.manifest.schema_version,
+            "registered": verdicts.len(),
+            "verdicts": counts,
+            "views": ds.len(),
+            "splits": splits,
+            "parameters": ds.manifest.parameters,
+        });
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&v).expect("JSON of plain values")
+        );
+        return Ok(());
+    }
+    println!(
+        "dataset      {} (schema {})",
+        args.scene.display(),
+        ds.manifest.schema_version
+    );
+    println!("registered   {}", verdicts.len());
+    for (k, n) in &counts {
+        println!("  {k:<10} {n}");
+    }
+    println!(
+        "views        {} in {} shards",
+        ds.len(),
+        ds.manifest
+            .tables
+            .iter()
+            .filter(|t| t.path.starts_with("shards/"))
+            .count()
+    );
+    for (k, n) in &splits {
+        println!("split {k:<6} {n}");
+    }
+    Ok(())
+}
+
 /// Run `inspect`.
 pub fn run(args: &InspectArgs) -> Result<()> {
+    if args.scene.join(nrw_dataset::Manifest::FILE).is_file() {
+        return inspect_dataset(args);
+    }
     let (dir, rec) = load_model(&args.scene, args.format)?;
     let stats = nrw_colmap::reprojection_stats(&rec);
     let (enc, layout) = describe(&rec);

@@ -1,8 +1,10 @@
 //! One module per subcommand.
 
 pub mod demo;
+pub mod export;
 pub mod ingest;
 pub mod inspect;
+pub mod split;
 pub mod synth;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,424 @@
+//! The one entry point for consumers (the trainer, export, QA): open a dataset, list splits,
+//! stream one split's views without decoding the other's payloads, fetch a view by image id,
+//! decode its payloads into typed buffers, and take aligned random crops.
+//!
+//! Memory stays bounded by a few row groups (8 rows each) whatever the dataset size: shards
+//! are read row group by row group with a row selection, so rows of other splits are skipped
+//! before any PNG or EXR is decoded.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use arrow_array::{
+    Array, BinaryArray, Float64Array, ListArray, RecordBatch, StringArray, UInt32Array,
+};
+use image::{GrayImage, RgbImage, RgbaImage};
+use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection, RowSelector};
+use parquet::arrow::ProjectionMask;
+
+use crate::depth::{decode_exr, DepthMap};
+use crate::error::{DatasetError, Result};
+use crate::manifest::Manifest;
+use crate::views::ROW_GROUP_ROWS;
+
+/// A kept view with its metadata and (still encoded) payloads.
+#[derive(Debug, Clone, PartialEq)]
+pub struct View {
+    pub image_id: u32,
+    pub name: String,
+    pub camera_id: u32,
+    pub model: String,
+    pub width: u32,
+    pub height: u32,
+    pub params: Vec<f64>,
+    pub qvec: [f64; 4],
+    pub tvec: [f64; 3],
+    pub empty_ratio: f64,
+    pub photo_png: Vec<u8>,
+    pub color_png: Vec<u8>,
+    pub depth_exr: Vec<u8>,
+    pub normal_png: Option<Vec<u8>>,
+    pub semantics_png: Option<Vec<u8>>,
+    pub transient_png: Option<Vec<u8>>,
+}
+
+/// The channels of a view decoded at one place: what a training step consumes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Crop {
+    pub x: u32,
+    pub y: u32,
+    pub photo: RgbImage,
+    /// Colour render; alpha is coverage (255 where a point was drawn).
+    pub color: RgbaImage,
+    /// Camera-space depth, 0 where empty, row-major size × size.
+    pub depth: Vec<f32>,
+    pub semantics: Option<RgbImage>,
+    pub transient: Option<GrayImage>,
+}
+
+fn decode_image(bytes: &[u8], what: &str, name: &str) -> Result<image::DynamicImage> {
+    image::load_from_memory_with_format(bytes, image::ImageFormat::Png).map_err(|e| {
+        DatasetError::Schema {
+            path: PathBuf::from(name),
+            problem: format!("{what}: {e}"),
+        }
+    })
+}
+
+impl View {
+    /// The resized photo.
+    pub fn photo(&self) -> Result<RgbImage> {
+        Ok(decode_image(&self.photo_png, "photo_png", &self.name)?.into_rgb8())
+    }
+    /// The colour render with coverage as alpha.
+    pub fn color(&self) -> Result<RgbaImage> {
+        Ok(decode_image(&self.color_png, "color_png", &self.name)?.into_rgba8())
+    }
+    /// The depth render (camera-space z, 0 = empty).
+    pub fn depth(&self) -> Result<DepthMap> {
+        decode_exr(&self.depth_exr, Path::new(&self.name))
+    }
+    /// ADE20K colour-coded labels, when the dataset has semantics.
+    pub fn semantics(&self) -> Result<Option<RgbImage>> {
+        self.semantics_png
+            .as_ref()
+            .map(|b| Ok(decode_image(b, "semantics_png", &self.name)?.into_rgb8()))
+            .transpose()
+    }
+    /// Transient mask (255 = transient), when the dataset has semantics.
+    pub fn transient(&self) -> Result<Option<GrayImage>> {
+        self.transient_png
+            .as_ref()
+            .map(|b| Ok(decode_image(b, "transient_png", &self.name)?.into_luma8()))
+            .transpose()
+    }
+
+    /// A `size`×`size` crop at (x, y) of every channel (the paper trains on 256×256).
+    pub fn crop_at(&self, x: u32, y: u32, size: u32) -> Result<Crop> {
+        if x + size > self.width || y + size > self.height {
+            return Err(DatasetError::Value {
+                path: PathBuf::from(&self.name),
+                record: format!("image {}", self.image_id),
+                field: "crop".into(),
+                problem: format!(
+                    "a {size}×{size} crop at ({x}, {y}) does not fit in {}×{}",
+                    self.width, self.height
+                ),
+            });
+        }
+        let sub = |img: &RgbImage| image::imageops::crop_imm(img, x, y, size, size).to_image();
+        let depth = self.depth()?;
+        let mut d = Vec::with_capacity((size * size) as usize);
+        for row in y..y + size {
+            let start = row as usize * depth.width + x as usize;
+            d.extend_from_slice(&depth.data[start..start + size as usize]);
+        }
+        Ok(Crop {
+            x,
+            y,
+            photo: sub(&self.photo()?),
+            color: image::imageops::crop_imm(&self.color()?, x, y, size, size).to_image(),
+            depth: d,
+            semantics: self.semantics()?.map(|s| sub(&s)),
+            transient: self
+                .transient()?
+                .map(|t| image::imageops::crop_imm(&t, x, y, size, size).to_image()),
+        })
+    }
+
+    /// A crop at a place drawn uniformly by `pick(max_x, max_y)` (inclusive bounds).
+    pub fn random_crop(
+        &self,
+        size: u32,
+        pick: &mut dyn FnMut(u32, u32) -> (u32, u32),
+    ) -> Result<Crop> {
+        if size > self.width || size > self.height {
+            return self.crop_at(0, 0, size); // names the size problem
+        }
+        let (x, y) = pick(self.width - size, self.height - size);
+        self.crop_at(x, y, size)
+    }
+}
+
+/// Where a view lives: shard file and row inside it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Location {
+    shard: usize,
+    row: usize,
+}
+
+/// An opened dataset.
+#[derive(Debug)]
+pub struct Dataset {
+    pub dir: PathBuf,
+    pub manifest: Manifest,
+    shards: Vec<String>,
+    index: HashMap<u32, Location>,
+    /// split name → image ids (sorted).
+    splits: BTreeMap<String, Vec<u32>>,
+}
+
+fn parquet_err(path: &Path) -> impl Fn(parquet::errors::ParquetError) -> DatasetError + '_ {
+    move |e| DatasetError::Parquet {
+        path: path.to_path_buf(),
+        source: e,
+    }
+}
+
+fn column<'a, T: 'static>(b: &'a RecordBatch, name: &str, path: &Path) -> Result<&'a T> {
+    b.column_by_name(name)
+        .and_then(|c| c.as_any().downcast_ref::<T>())
+        .ok_or_else(|| DatasetError::Schema {
+            path: path.to_path_buf(),
+            problem: format!("column `{name}` is missing or of another type"),
+        })
+}
+
+impl Dataset {
+    /// Open a dataset folder: manifest (schema version checked), shard index, splits.
+    pub fn open(dir: &Path) -> Result<Dataset> {
+        let manifest = Manifest::read(dir)?;
+        let shards: Vec<String> = manifest
+            .tables
+            .iter()
+            .filter(|t| t.path.starts_with("shards/"))
+            .map(|t| t.path.clone())
+            .collect();
+        let mut index = HashMap::new();
+        for (s, rel) in shards.iter().enumerate() {
+            let path = dir.join(rel);
+            let f = File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
+            let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
+            let mask = ProjectionMask::columns(b.parquet_schema(), ["image_id"]);
+            let mut row = 0;
+            for batch in b
+                .with_projection(mask)
+                .build()
+                .map_err(parquet_err(&path))?
+            {
+                let batch = batch.map_err(|e| DatasetError::Arrow {
+                    table: rel.clone(),
+                    source: e,
+                })?;
+                let ids = column::<UInt32Array>(&batch, "image_id", &path)?;
+                for i in 0..ids.len() {
+                    index.insert(ids.value(i), Location { shard: s, row });
+                    row += 1;
+                }
+            }
+        }
+        let mut splits: BTreeMap<String, Vec<u32>> = BTreeMap::new();
+        let assigned = crate::split::read_splits(dir)?;
+        if assigned.is_empty() {
+            let mut all: Vec<u32> = index.keys().copied().collect();
+            all.sort_unstable();
+            splits.insert("all".into(), all);
+        } else {
+            for a in assigned {
+                if index.contains_key(&a.image_id) {
+                    splits.entry(a.split).or_default().push(a.image_id);
+                }
+            }
+        }
+        for v in splits.values_mut() {
+            v.sort_unstable();
+        }
+        Ok(Dataset {
+            dir: dir.to_path_buf(),
+            manifest,
+            shards,
+            index,
+            splits,
+        })
+    }
+
+    /// Split names with their sizes (`all` when the dataset has not been split yet).
+    pub fn splits(&self) -> Vec<(String, usize)> {
+        self.splits
+            .iter()
+            .map(|(k, v)| (k.clone(), v.len()))
+            .collect()
+    }
+
+    /// Image ids of a split, sorted.
+    pub fn ids(&self, split: &str) -> Result<&[u32]> {
+        self.splits
+            .get(split)
+            .map(Vec::as_slice)
+            .ok_or_else(|| DatasetError::Schema {
+                path: self.dir.clone(),
+                problem: format!(
+                    "no split {split:?}; the dataset has {:?}",
+                    self.splits.keys().collect::<Vec<_>>()
+                ),
+            })
+    }
+
+    /// Number of kept views.
+    pub fn len(&self) -> usize {
+        self.index.len()
+    }
+
+    /// Whether the dataset holds no view.
+    pub fn is_empty(&self) -> bool {
+        self.index.is_empty()
+    }
+
+    /// Read the given rows of one shard (rows in increasing order).
+    fn read_rows(&self, shard: usize, rows: &[usize]) -> Result<Vec<View>> {
+        let rel = &self.shards[shard];
+        let path = self.dir.join(rel);
+        let f = File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
+        let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
+        let total = b.metadata().file_metadata().num_rows() as usize;
+        // Read only the row groups that hold wanted rows, and within them only those rows.
+        let groups: Vec<usize> = {
+            let mut g: Vec<usize> = rows.iter().map(|r| r / ROW_GROUP_ROWS).collect();
+            g.dedup();
+            g
+        };
+        let mut selectors = Vec::new();
+        for &g in &groups {
+            let (start, end) = (g * ROW_GROUP_ROWS, ((g + 1) * ROW_GROUP_ROWS).min(total));
+            let mut at = start;
+            for &r in rows.iter().filter(|r| (start..end).contains(*r)) {
+                if r > at {
+                    selectors.push(RowSelector::skip(r - at));
+                }
+                selectors.push(RowSelector::select(1));
+                at = r + 1;
+            }
+            if end > at {
+                selectors.push(RowSelector::skip(end - at));
+            }
+        }
+        let reader = b
+            .with_row_groups(groups)
+            .with_row_selection(RowSelection::from(selectors))
+            .with_batch_size(ROW_GROUP_ROWS)
+            .build()
+            .map_err(parquet_err(&path))?;
+        let mut out = Vec::with_capacity(rows.len());
+        for batch in reader {
+            let b = batch.map_err(|e| DatasetError::Arrow {
+                table: rel.clone(),
+                source: e,
+            })?;
+            out.extend(views_of(&b, &path)?);
+        }
+        Ok(out)
+    }
+
+    /// One view by image id (reads one row of one row group).
+    pub fn get(&self, image_id: u32) -> Result<View> {
+        let loc = self
+            .index
+            .get(&image_id)
+            .ok_or_else(|| DatasetError::Schema {
+                path: self.dir.clone(),
+                problem: format!("image {image_id} is not a kept view of this dataset"),
+            })?;
+        self.read_rows(loc.shard, &[loc.row])?
+            .pop()
+            .ok_or_else(|| DatasetError::Schema {
+                path: self.dir.join(&self.shards[loc.shard]),
+                problem: format!("row {} for image {image_id} is missing", loc.row),
+            })
+    }
+
+    /// Stream a split's views in image-id order within each shard, a row group at a time.
+    pub fn iter_split<'a>(
+        &'a self,
+        split: &str,
+    ) -> Result<impl Iterator<Item = Result<View>> + 'a> {
+        let ids = self.ids(split)?;
+        let mut per_shard: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        for id in ids {
+            let loc = self.index[id];
+            per_shard.entry(loc.shard).or_default().push(loc.row);
+        }
+        let mut plan: Vec<(usize, Vec<usize>)> = Vec::new();
+        for (shard, mut rows) in per_shard {
+            rows.sort_unstable();
+            // One read per row group keeps memory at one row group's payloads.
+            let mut group: Vec<usize> = Vec::new();
+            for r in rows {
+                if group
+                    .last()
+                    .is_some_and(|g| g / ROW_GROUP_ROWS != r / ROW_GROUP_ROWS)
+                {
+                    plan.push((shard, std::mem::take(&mut group)));
+                }
+                group.push(r);
+            }
+            if !group.is_empty() {
+                plan.push((shard, group));
+            }
+        }
+        Ok(plan
+            .into_iter()
+            .flat_map(move |(shard, rows)| match self.read_rows(shard, &rows) {
+                Ok(v) => v.into_iter().map(Ok).collect::<Vec<_>>(),
+                Err(e) => vec![Err(e)],
+            }))
+    }
+}
+
+fn views_of(b: &RecordBatch, path: &Path) -> Result<Vec<View>> {
+    let u = |n: &str| column::<UInt32Array>(b, n, path);
+    let f = |n: &str| column::<Float64Array>(b, n, path);
+    let s = |n: &str| column::<StringArray>(b, n, path);
+    let bin = |n: &str| column::<BinaryArray>(b, n, path);
+    let (ids, names, cams, models, ws, hs) = (
+        u("image_id")?,
+        s("name")?,
+        u("camera_id")?,
+        s("model")?,
+        u("width")?,
+        u("height")?,
+    );
+    let params = column::<ListArray>(b, "params", path)?;
+    let q = [f("qw")?, f("qx")?, f("qy")?, f("qz")?];
+    let t = [f("tx")?, f("ty")?, f("tz")?];
+    let empty = f("empty_ratio")?;
+    let (photo, color, depth, normal, sem, tr) = (
+        bin("photo_png")?,
+        bin("color_png")?,
+        bin("depth_exr")?,
+        bin("normal_png")?,
+        bin("semantics_png")?,
+        bin("transient_png")?,
+    );
+    let opt = |a: &BinaryArray, i: usize| (!a.is_null(i)).then(|| a.value(i).to_vec());
+    let mut out = Vec::with_capacity(b.num_rows());
+    for i in 0..b.num_rows() {
+        let p = params.value(i);
+        let p = p
+            .as_any()
+            .downcast_ref::<Float64Array>()
+            .ok_or_else(|| DatasetError::Schema {
+                path: path.to_path_buf(),
+                problem: "params are not float64".into(),
+            })?;
+        out.push(View {
+            image_id: ids.value(i),
+            name: names.value(i).into(),
+            camera_id: cams.value(i),
+            model: models.value(i).into(),
+            width: ws.value(i),
+            height: hs.value(i),
+            params: p.values().to_vec(),
+            qvec: q.map(|c| c.value(i)),
+            tvec: t.map(|c| c.value(i)),
+            empty_ratio: empty.value(i),
+            photo_png: photo.value(i).to_vec(),
+            color_png: color.value(i).to_vec(),
+            depth_exr: depth.value(i).to_vec(),
+            normal_png: opt(normal, i),
+            semantics_png: opt(sem, i),
+            transient_png: opt(tr, i),
+        });
+    }
+    Ok(out)
+}

@@ -303,6 +303,21 @@ fn demo_builds_the_embedded_scene_and_runs_every_stage() {
         .find(|t| t["path"] == "scene/images.parquet")
         .unwrap();
     assert_eq!(images["rows"], spec.cameras.count);
+    // Split and export ran too: the official layout holds every kept view.
+    let split = nrw_dataset::split::read_splits(&dataset).unwrap();
+    let kept = nrw_dataset::scene::read_verdicts(&dataset)
+        .unwrap()
+        .iter()
+        .filter(|v| v.2 == "kept")
+        .count();
+    assert!(kept > 0);
+    assert_eq!(split.len(), kept);
+    let exported = walk(&out.path().join("export"))
+        .iter()
+        .filter(|p| p.to_string_lossy().ends_with("_reference.png"))
+        .count();
+    assert_eq!(exported, kept);
+    assert!(stdout.contains("export:  "), "{stdout}");
     let report: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(scene.join("ground_truth/report.json")).unwrap(),
     )

@@ -22,7 +22,7 @@ pub struct DemoArgs {
     pub seed: Option<u64>,
 }
 
-/// Run `demo`: synthesise the scene, then every pipeline stage that exists.
+/// Run `demo`: synthesise the scene, then every pipeline stage that exists (ingest, split, export).
 pub fn run(args: &DemoArgs) -> Result<()> {
     let spec = super::synth::load_spec(args.spec.as_deref(), args.seed)?;
     let scene = args.out.join("scene");
@@ -34,7 +34,21 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             "the demo scene kept no view: this is a bug".into(),
         ));
     }
+    // The paper holds out 100 photos of thousands; the demo holds out a fifth of its few.
+    let val = (summary.kept / 5).max(1);
+    super::split::run(&super::split::SplitArgs {
+        dataset: dataset.clone(),
+        val,
+        seed: 0,
+    })?;
+    let export = args.out.join("export");
+    super::export::run(&super::export::ExportArgs {
+        dataset: dataset.clone(),
+        layout: super::export::Layout::Official,
+        out: export.clone(),
+    })?;
     println!("scene:   {}", scene.display());
     println!("dataset: {}", dataset.display());
+    println!("export:  {}", export.display());
     Ok(())
 }

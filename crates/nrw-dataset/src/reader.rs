@@ -22,26 +22,8 @@ use crate::error::{DatasetError, Result};
 use crate::manifest::Manifest;
 use crate::views::ROW_GROUP_ROWS;
 
-/// A kept view with its metadata and (still encoded) payloads.
-#[derive(Debug, Clone, PartialEq)]
-pub struct View {
-    pub image_id: u32,
-    pub name: String,
-    pub camera_id: u32,
-    pub model: String,
-    pub width: u32,
-    pub height: u32,
-    pub params: Vec<f64>,
-    pub qvec: [f64; 4],
-    pub tvec: [f64; 3],
-    pub empty_ratio: f64,
-    pub photo_png: Vec<u8>,
-    pub color_png: Vec<u8>,
-    pub depth_exr: Vec<u8>,
-    pub normal_png: Option<Vec<u8>>,
-    pub semantics_png: Option<Vec<u8>>,
-    pub transient_png: Option<Vec<u8>>,
-}
+/// A kept view with its metadata and (still encoded) payloads: a shard row.
+pub use crate::views::ViewRow as View;
 
 /// The channels of a view decoded at one place: what a training step consumes.
 #[derive(Debug, Clone, PartialEq)]
@@ -166,14 +148,7 @@ fn parquet_err(path: &Path) -> impl Fn(parquet::errors::ParquetError) -> Dataset
     }
 }
 
-fn column<'a, T: 'static>(b: &'a RecordBatch, name: &str, path: &Path) -> Result<&'a T> {
-    b.column_by_name(name)
-        .and_then(|c| c.as_any().downcast_ref::<T>())
-        .ok_or_else(|| DatasetError::Schema {
-            path: path.to_path_buf(),
-            problem: format!("column `{name}` is missing or of another type"),
-        })
-}
+use crate::parquet_io::column;
 
 impl Dataset {
     /// Open a dataset folder: manifest (schema version checked), shard index, splits.
@@ -408,6 +383,8 @@ fn views_of(b: &RecordBatch, path: &Path) -> Result<Vec<View>> {
             model: models.value(i).into(),
             width: ws.value(i),
             height: hs.value(i),
+            scale_x: f("scale_x")?.value(i),
+            scale_y: f("scale_y")?.value(i),
             params: p.values().to_vec(),
             qvec: q.map(|c| c.value(i)),
             tvec: t.map(|c| c.value(i)),

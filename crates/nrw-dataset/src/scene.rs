@@ -249,43 +249,13 @@ pub fn write_scene_tables(
 
 /// (image id, name, verdict) of every registered image, from `scene/images.parquet`.
 pub fn read_verdicts(dir: &Path) -> Result<Vec<(u32, String, String)>> {
-    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    use crate::parquet_io::column;
     let path = dir.join(IMAGES_TABLE);
-    let f = std::fs::File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
-    let reader = ParquetRecordBatchReaderBuilder::try_new(f)
-        .and_then(|b| {
-            let mask = parquet::arrow::ProjectionMask::columns(
-                b.parquet_schema(),
-                ["image_id", "name", "verdict"],
-            );
-            b.with_projection(mask).build()
-        })
-        .map_err(|e| DatasetError::Parquet {
-            path: path.clone(),
-            source: e,
-        })?;
     let mut out = Vec::new();
-    for b in reader {
-        let b = b.map_err(|e| DatasetError::Arrow {
-            table: IMAGES_TABLE.into(),
-            source: e,
-        })?;
-        let bad = || DatasetError::Schema {
-            path: path.clone(),
-            problem: "image_id/name/verdict columns missing or of another type".into(),
-        };
-        let ids = b
-            .column_by_name("image_id")
-            .and_then(|c| c.as_any().downcast_ref::<UInt32Array>())
-            .ok_or_else(bad)?;
-        let names = b
-            .column_by_name("name")
-            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
-            .ok_or_else(bad)?;
-        let verdicts = b
-            .column_by_name("verdict")
-            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
-            .ok_or_else(bad)?;
+    for b in crate::parquet_io::read_batches(&path, Some(&["image_id", "name", "verdict"]))? {
+        let ids = column::<UInt32Array>(&b, "image_id", &path)?;
+        let names = column::<StringArray>(&b, "name", &path)?;
+        let verdicts = column::<StringArray>(&b, "verdict", &path)?;
         for i in 0..b.num_rows() {
             out.push((
                 ids.value(i),

@@ -7,9 +7,8 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
-use arrow_array::{Array, RecordBatch, StringArray, UInt32Array, UInt64Array};
+use arrow_array::{RecordBatch, StringArray, UInt32Array, UInt64Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use sha2::{Digest, Sha256};
 
 use crate::error::{DatasetError, Result};
@@ -156,42 +155,13 @@ pub fn read_splits(dir: &Path) -> Result<Vec<Assignment>> {
     if !path.is_file() {
         return Ok(Vec::new());
     }
-    let f = std::fs::File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
-    let reader = ParquetRecordBatchReaderBuilder::try_new(f)
-        .and_then(|b| b.build())
-        .map_err(|e| DatasetError::Parquet {
-            path: path.clone(),
-            source: e,
-        })?;
+    use crate::parquet_io::column;
     let mut out = Vec::new();
-    for b in reader {
-        let b = b.map_err(|e| DatasetError::Arrow {
-            table: SPLITS_TABLE.into(),
-            source: e,
-        })?;
-        let col = |n: &str| {
-            b.column_by_name(n).ok_or_else(|| DatasetError::Schema {
-                path: path.clone(),
-                problem: format!("no column {n}"),
-            })
-        };
-        let ids = col("image_id")?
-            .as_any()
-            .downcast_ref::<UInt32Array>()
-            .cloned();
-        let names = col("name")?.as_any().downcast_ref::<StringArray>().cloned();
-        let splits = col("split")?
-            .as_any()
-            .downcast_ref::<StringArray>()
-            .cloned();
-        let seeds = col("seed")?.as_any().downcast_ref::<UInt64Array>().cloned();
-        let (Some(ids), Some(names), Some(splits), Some(seeds)) = (ids, names, splits, seeds)
-        else {
-            return Err(DatasetError::Schema {
-                path,
-                problem: "columns have unexpected types".into(),
-            });
-        };
+    for b in crate::parquet_io::read_batches(&path, None)? {
+        let ids = column::<UInt32Array>(&b, "image_id", &path)?;
+        let names = column::<StringArray>(&b, "name", &path)?;
+        let splits = column::<StringArray>(&b, "split", &path)?;
+        let seeds = column::<UInt64Array>(&b, "seed", &path)?;
         for i in 0..ids.len() {
             out.push(Assignment {
                 image_id: ids.value(i),

@@ -10,12 +10,10 @@ use std::sync::Arc;
 use arrow_array::builder::{BinaryBuilder, Float64Builder, ListBuilder};
 use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
-use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::properties::WriterProperties;
 use parquet::schema::types::ColumnPath;
 
-use crate::atomic::write_atomic;
 use crate::error::{DatasetError, Result};
 use crate::manifest::FileEntry;
 
@@ -149,7 +147,6 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
 /// Write a shard atomically at `dir/rel`; payload columns are stored uncompressed (PNG and
 /// EXR are compressed already), metadata columns with zstd.
 pub fn write_shard(dir: &Path, rel: &str, rows: &[ViewRow]) -> Result<FileEntry> {
-    let path = dir.join(rel);
     let b = batch(rows)?;
     let mut props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(
@@ -172,25 +169,5 @@ pub fn write_shard(dir: &Path, rel: &str, rows: &[ViewRow]) -> Result<FileEntry>
                 parquet::file::properties::EnabledStatistics::None,
             );
     }
-    let props = props.build();
-    write_atomic(&path, |f| {
-        let mut w = ArrowWriter::try_new(f, b.schema(), Some(props)).map_err(|e| {
-            DatasetError::Parquet {
-                path: path.clone(),
-                source: e,
-            }
-        })?;
-        w.write(&b).map_err(|e| DatasetError::Parquet {
-            path: path.clone(),
-            source: e,
-        })?;
-        w.close().map_err(|e| DatasetError::Parquet {
-            path: path.clone(),
-            source: e,
-        })?;
-        Ok(())
-    })?;
-    let mut e = FileEntry::of(dir, rel)?;
-    e.rows = Some(rows.len() as u64);
-    Ok(e)
+    crate::parquet_io::write_batch(dir, rel, &b, props.build())
 }

@@ -1,0 +1,272 @@
+//! VGG16's convolutional trunk up to relu5_2, on the CPU: 3×3 convolutions as banded
+//! im2col + GEMM (the `gemm` crate), ReLU, 2×2 max pooling. Weights come from a user's
+//! safetensors file with torchvision names (`features.N.weight` OIHW f32, `features.N.bias`);
+//! nothing is downloaded.
+
+use std::path::{Path, PathBuf};
+
+use gemm::Parallelism;
+
+use crate::error::{Result, StyleError};
+
+/// torchvision `features` indices of VGG16's 13 convolutions, and channels out.
+pub const VGG16_CONVS: [(usize, usize); 13] = [
+    (0, 64),
+    (2, 64),
+    (5, 128),
+    (7, 128),
+    (10, 256),
+    (12, 256),
+    (14, 256),
+    (17, 512),
+    (19, 512),
+    (21, 512),
+    (24, 512),
+    (26, 512),
+    (28, 512),
+];
+
+/// The ReLU outputs the paper's published code used for the style loss.
+pub const STYLE_LAYERS: [&str; 5] = ["relu1_2", "relu2_2", "relu3_2", "relu4_2", "relu5_2"];
+
+/// One convolution: weights as an O × (I·9) matrix and a bias per output channel.
+#[derive(Debug, Clone)]
+pub struct Conv {
+    pub out_ch: usize,
+    pub in_ch: usize,
+    pub weight: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+/// VGG16 convolutions up to conv5_2 (the last one relu5_2 needs).
+#[derive(Debug, Clone)]
+pub struct Vgg16 {
+    pub convs: Vec<Conv>,
+    pub path: PathBuf,
+    /// SHA-256 of the weights file: recorded with descriptors so incompatible ones are never mixed.
+    pub sha256: String,
+}
+
+impl Vgg16 {
+    /// Load from a safetensors file with torchvision names; every shape and dtype is checked.
+    pub fn load(path: &Path) -> Result<Vgg16> {
+        use sha2::{Digest, Sha256};
+        let bytes = std::fs::read(path).map_err(|e| StyleError::Io {
+            path: path.into(),
+            source: e,
+        })?;
+        let sha256 = Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        let st =
+            safetensors::SafeTensors::deserialize(&bytes).map_err(|e| StyleError::Weights {
+                path: path.into(),
+                problem: format!("not a safetensors file: {e}"),
+            })?;
+        let mut convs = Vec::new();
+        let mut in_ch = 3;
+        // conv5_3 (index 28) is not needed for relu5_2.
+        for &(idx, out_ch) in &VGG16_CONVS[..12] {
+            let get = |name: &str, shape: &[usize]| -> Result<Vec<f32>> {
+                let t = st.tensor(name).map_err(|_| StyleError::Weights {
+                    path: path.into(),
+                    problem: format!(
+                        "tensor `{name}` is missing (torchvision VGG16 names expected)"
+                    ),
+                })?;
+                if t.dtype() != safetensors::Dtype::F32 || t.shape() != shape {
+                    return Err(StyleError::Weights {
+                        path: path.into(),
+                        problem: format!(
+                            "tensor `{name}` is {:?} {:?}, expected F32 {shape:?}",
+                            t.dtype(),
+                            t.shape()
+                        ),
+                    });
+                }
+                Ok(t.data()
+                    .chunks_exact(4)
+                    .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                    .collect())
+            };
+            let weight = get(&format!("features.{idx}.weight"), &[out_ch, in_ch, 3, 3])?;
+            let bias = get(&format!("features.{idx}.bias"), &[out_ch])?;
+            convs.push(Conv {
+                out_ch,
+                in_ch,
+                weight,
+                bias,
+            });
+            in_ch = out_ch;
+        }
+        Ok(Vgg16 {
+            convs,
+            path: path.into(),
+            sha256,
+        })
+    }
+
+    /// The five style layers' activations (C, H, W, data CHW) for a preprocessed CHW input.
+    pub fn style_features(
+        &self,
+        input: &[f32],
+        h: usize,
+        w: usize,
+        par: Parallelism,
+    ) -> Vec<(usize, usize, usize, Vec<f32>)> {
+        // Blocks of VGG16: convs per block; a pool precedes every block but the first.
+        const BLOCKS: [usize; 5] = [2, 2, 3, 3, 3];
+        let mut x = input.to_vec();
+        let (mut c, mut h, mut w) = (3usize, h, w);
+        let mut out = Vec::with_capacity(5);
+        let mut k = 0;
+        for (b, &n) in BLOCKS.iter().enumerate() {
+            if b > 0 {
+                (x, h, w) = maxpool2(&x, c, h, w);
+            }
+            for j in 0..n {
+                if k == self.convs.len() {
+                    break;
+                }
+                x = conv3x3_relu(&self.convs[k], &x, h, w, par);
+                c = self.convs[k].out_ch;
+                k += 1;
+                if j == 1 {
+                    out.push((c, h, w, x.clone())); // reluB_2
+                }
+            }
+        }
+        out
+    }
+}
+
+/// 3×3 convolution, stride 1, padding 1, then ReLU. Banded im2col bounds the scratch memory
+/// to about 16 MB whatever the image size.
+pub fn conv3x3_relu(conv: &Conv, x: &[f32], h: usize, w: usize, par: Parallelism) -> Vec<f32> {
+    let (ci, co) = (conv.in_ch, conv.out_ch);
+    let k = ci * 9;
+    let mut out = vec![0f32; co * h * w];
+    let band_rows = ((4 << 20) / (k * w).max(1)).clamp(1, h.max(1));
+    let mut cols = vec![0f32; k * band_rows * w];
+    let mut y0 = 0;
+    while y0 < h {
+        let rows = band_rows.min(h - y0);
+        let n = rows * w;
+        let cols = &mut cols[..k * n];
+        for c in 0..ci {
+            let plane = &x[c * h * w..(c + 1) * h * w];
+            for ky in 0..3 {
+                for kx in 0..3 {
+                    let row = &mut cols[(c * 9 + ky * 3 + kx) * n..(c * 9 + ky * 3 + kx + 1) * n];
+                    for yy in 0..rows {
+                        let sy = (y0 + yy + ky) as isize - 1;
+                        let dst = &mut row[yy * w..(yy + 1) * w];
+                        if sy < 0 || sy >= h as isize {
+                            dst.fill(0.0);
+                            continue;
+                        }
+                        let src = &plane[sy as usize * w..(sy as usize + 1) * w];
+                        // dst[x] = src[x + kx - 1], zero outside.
+                        match kx {
+                            0 => {
+                                dst[0] = 0.0;
+                                dst[1..].copy_from_slice(&src[..w - 1]);
+                            }
+                            1 => dst.copy_from_slice(src),
+                            _ => {
+                                dst[..w - 1].copy_from_slice(&src[1..]);
+                                dst[w - 1] = 0.0;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // out[o, y0.., :] (O × n, row stride h·w) = W (O × k) · cols (k × n)
+        // SAFETY: dimensions and strides describe exactly the slices passed: dst has co rows
+        // of h·w with n ≤ h·w − y0·w columns available from offset y0·w; lhs is co × k
+        // row-major; rhs is k × n row-major.
+        unsafe {
+            gemm::gemm(
+                co,
+                n,
+                k,
+                out.as_mut_ptr().add(y0 * w),
+                1,
+                (h * w) as isize,
+                false,
+                conv.weight.as_ptr(),
+                1,
+                k as isize,
+                cols.as_ptr(),
+                1,
+                n as isize,
+                0.0,
+                1.0,
+                false,
+                false,
+                false,
+                par,
+            );
+        }
+        y0 += rows;
+    }
+    for o in 0..co {
+        let b = conv.bias[o];
+        for v in &mut out[o * h * w..(o + 1) * h * w] {
+            *v = (*v + b).max(0.0);
+        }
+    }
+    out
+}
+
+/// 2×2 max pooling, stride 2, floor mode (PyTorch's default).
+pub fn maxpool2(x: &[f32], c: usize, h: usize, w: usize) -> (Vec<f32>, usize, usize) {
+    let (oh, ow) = (h / 2, w / 2);
+    let mut out = vec![0f32; c * oh * ow];
+    for ch in 0..c {
+        let p = &x[ch * h * w..];
+        for y in 0..oh {
+            for xx in 0..ow {
+                let i = (2 * y) * w + 2 * xx;
+                out[ch * oh * ow + y * ow + xx] =
+                    p[i].max(p[i + 1]).max(p[i + w]).max(p[i + w + 1]);
+            }
+        }
+    }
+    (out, oh, ow)
+}
+
+/// Gram matrix G = F Fᵀ / (C·H·W) of a C × (H·W) activation, accumulated in f64.
+pub fn gram(c: usize, h: usize, w: usize, f: &[f32], par: Parallelism) -> Vec<f64> {
+    let n = h * w;
+    let f64s: Vec<f64> = f.iter().map(|&v| v as f64).collect();
+    let mut g = vec![0f64; c * c];
+    // SAFETY: g is c × c row-major; lhs is F (c × n, row stride n); rhs is Fᵀ (n × c),
+    // i.e. element (k, j) at j·n + k: row stride 1, column stride n.
+    unsafe {
+        gemm::gemm(
+            c,
+            c,
+            n,
+            g.as_mut_ptr(),
+            1,
+            c as isize,
+            false,
+            f64s.as_ptr(),
+            1,
+            n as isize,
+            f64s.as_ptr(),
+            n as isize,
+            1,
+            0.0,
+            1.0 / (c * n) as f64,
+            false,
+            false,
+            false,
+            par,
+        );
+    }
+    g
+}

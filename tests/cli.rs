@@ -1036,3 +1036,63 @@ fn the_twenty_line_python_example_yields_aligned_training_tensors() {
         assert!(l.contains("(64, 64, 3) (64, 64, 4) (64, 64, 1)"), "{l}");
     }
 }
+
+#[test]
+fn style_image_writes_the_five_grams_that_match_pytorch() {
+    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("g.safetensors");
+    let png = shared.join("fixtures/vgg16/02928139_3448003521_320x240.png");
+    ok(&[
+        "style",
+        "--image",
+        png.to_str().unwrap(),
+        "--weights",
+        shared
+            .join("weights/vgg16_imagenet.safetensors")
+            .to_str()
+            .unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let ours = std::fs::read(&out).unwrap();
+    let ours = safetensors::SafeTensors::deserialize(&ours).unwrap();
+    let fix = std::fs::read(shared.join("fixtures/vgg16/02928139_3448003521_320x240.safetensors"))
+        .unwrap();
+    let fix = safetensors::SafeTensors::deserialize(&fix).unwrap();
+    for layer in ["relu1_2", "relu2_2", "relu3_2", "relu4_2", "relu5_2"] {
+        let name = format!("gram_{layer}");
+        let a = ours.tensor(&name).unwrap();
+        assert_eq!(a.dtype(), safetensors::Dtype::F32);
+        let a: Vec<f64> = a
+            .data()
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64)
+            .collect();
+        let b: Vec<f64> = fix
+            .tensor(&name)
+            .unwrap()
+            .data()
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+        let scale = b.iter().fold(0f64, |m, v| m.max(v.abs()));
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f64, f64::max)
+            / scale;
+        assert!(worst < 1e-4, "{layer}: {worst:e}");
+    }
+    let err = fails(&[
+        "style",
+        "--image",
+        png.to_str().unwrap(),
+        "--weights",
+        png.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(err.contains("not a safetensors file"), "{err}");
+}

@@ -37,6 +37,8 @@ enum Command {
     Split(cmd::split::SplitArgs),
     /// Write a dataset as files: the paper's official train/ val/ layout, or one folder per photo
     Export(cmd::export::ExportArgs),
+    /// VGG16 Gram matrices (relu1_2 … relu5_2) of one image as given, to safetensors
+    Style(cmd::style::StyleArgs),
     /// Render every registered photo's view, apply the filters, write shards, scene tables and manifest.json.
     ///
     /// Exit codes: 0 done; 1 error (message names file, record and field); 3 done, but every
@@ -64,6 +66,7 @@ fn main() -> std::process::ExitCode {
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Split(a) => cmd::split::run(a),
         Command::Export(a) => cmd::export::run(a),
+        Command::Style(a) => cmd::style::run(a),
         Command::Ingest(a) => cmd::ingest::run(a).map(|s| {
             if s.kept == 0 {
                 std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);

@@ -8,7 +8,7 @@ pub mod vgg;
 
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
-pub use preprocess::{to_input, Preprocess};
+pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};
 pub use vgg::{gram, Vgg16, STYLE_LAYERS};
 
 /// The five Gram matrices (relu1_2 … relu5_2) of a preprocessed CHW input, f64, row-major.
@@ -23,4 +23,49 @@ pub fn grams(
         .into_iter()
         .map(|(c, fh, fw, f)| (c, gram(c, fh, fw, &f, par)))
         .collect()
+}
+
+/// The five Gram matrices of one image file exactly as given (no resize or crop), as
+/// safetensors bytes with f32 tensors `gram_relu1_2` … `gram_relu5_2`.
+pub fn image_grams_safetensors(
+    net: &Vgg16,
+    path: &std::path::Path,
+    p: Preprocess,
+    par: Parallelism,
+) -> Result<Vec<u8>> {
+    let img = load_rgb01(path)?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let g = grams(net, &to_input_01(&img, p), h, w, par);
+    let data: Vec<(String, usize, Vec<u8>)> = g
+        .iter()
+        .zip(STYLE_LAYERS)
+        .map(|((c, m), layer)| {
+            (
+                format!("gram_{layer}"),
+                *c,
+                m.iter().flat_map(|v| (*v as f32).to_le_bytes()).collect(),
+            )
+        })
+        .collect();
+    let views: Vec<(String, safetensors::tensor::TensorView)> = data
+        .iter()
+        .map(|(n, c, b)| {
+            (
+                n.clone(),
+                safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![*c, *c], b)
+                    .expect("consistent tensor"),
+            )
+        })
+        .collect();
+    let mut meta = std::collections::HashMap::new();
+    meta.insert("weights_sha256".to_string(), net.sha256.clone());
+    meta.insert("preprocess".to_string(), format!("{p:?}"));
+    meta.insert(
+        "gram".to_string(),
+        "G = F F^T / (C*H*W), F = ReLU output as C x (H*W)".to_string(),
+    );
+    safetensors::serialize(views, Some(meta)).map_err(|e| StyleError::Image {
+        path: path.into(),
+        problem: format!("cannot serialise: {e}"),
+    })
 }

@@ -17,6 +17,55 @@ pub enum Preprocess {
     MinusOneToOne,
 }
 
+/// Largest image `style --image` takes as given: peak memory is about 1 KiB per pixel
+/// (two relu1_2-sized f32 activations of 64 channels plus their f64 copy for the Gram), so
+/// this bounds it near 2 GiB. Descriptor tiers resize first and never come near it.
+pub const MAX_EXACT_PIXELS: u64 = 2 * 1024 * 1024;
+
+/// VGG16 halves the size four times before relu5_2: smaller inputs leave no activation.
+pub const MIN_SIDE: u32 = 16;
+
+/// Read a photo as RGB in [0, 1]: 8- and 16-bit, grey or colour, alpha dropped. 16-bit
+/// samples keep their precision (no round trip through 8 bits).
+pub fn load_rgb01(path: &std::path::Path) -> crate::Result<image::Rgb32FImage> {
+    let img = image::open(path).map_err(|e| crate::StyleError::Image {
+        path: path.into(),
+        problem: format!("cannot read: {e}"),
+    })?;
+    let (w, h) = (img.width(), img.height());
+    if w < MIN_SIDE || h < MIN_SIDE {
+        return Err(crate::StyleError::Image {
+            path: path.into(),
+            problem: format!("{w}×{h} is too small: VGG16 needs at least {MIN_SIDE}×{MIN_SIDE} pixels to reach relu5_2"),
+        });
+    }
+    if w as u64 * h as u64 > MAX_EXACT_PIXELS {
+        return Err(crate::StyleError::Image {
+            path: path.into(),
+            problem: format!(
+                "{w}×{h} is more than {MAX_EXACT_PIXELS} pixels (about 1 KiB of memory per pixel); resize it first"
+            ),
+        });
+    }
+    Ok(img.into_rgb32f())
+}
+
+/// CHW f32 input of an RGB image already in [0, 1].
+pub fn to_input_01(img: &image::Rgb32FImage, p: Preprocess) -> Vec<f32> {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let mut out = vec![0f32; 3 * w * h];
+    for (i, px) in img.pixels().enumerate() {
+        for c in 0..3 {
+            let v = px[c];
+            out[c * w * h + i] = match p {
+                Preprocess::Imagenet => (v - IMAGENET_MEAN[c]) / IMAGENET_STD[c],
+                Preprocess::MinusOneToOne => v * 2.0 - 1.0,
+            };
+        }
+    }
+    out
+}
+
 /// CHW f32 input of an RGB8 image, computed in f32 in the same order as torchvision
 /// (`ToTensor` then `Normalize`), so the fixture inputs are reproduced bit for bit.
 pub fn to_input(img: &RgbImage, p: Preprocess) -> Vec<f32> {

@@ -5,6 +5,7 @@ pub mod export;
 pub mod ingest;
 pub mod inspect;
 pub mod split;
+pub mod style;
 pub mod synth;
 
 use std::path::{Path, PathBuf};

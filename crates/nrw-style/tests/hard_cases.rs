@@ -1,0 +1,118 @@
+//! Inputs that must not break the descriptor: black and constant photos, grey and 16-bit
+//! files, sizes the network cannot take.
+
+use std::path::{Path, PathBuf};
+
+use image::{GrayImage, ImageBuffer, Rgb, RgbImage};
+use nrw_style::{grams, load_rgb01, to_input_01, Parallelism, Preprocess, Vgg16};
+
+fn net() -> Vgg16 {
+    Vgg16::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/weights/vgg16_imagenet.safetensors"),
+    )
+    .unwrap()
+}
+
+fn grams_of(net: &Vgg16, path: &Path) -> Vec<(usize, Vec<f64>)> {
+    let img = load_rgb01(path).unwrap();
+    grams(
+        net,
+        &to_input_01(&img, Preprocess::Imagenet),
+        img.height() as usize,
+        img.width() as usize,
+        Parallelism::None,
+    )
+}
+
+fn save(dir: &Path, name: &str, img: impl FnOnce(&Path)) -> PathBuf {
+    let p = dir.join(name);
+    img(&p);
+    p
+}
+
+#[test]
+fn black_and_constant_photos_give_finite_grams() {
+    let net = net();
+    let dir = tempfile::tempdir().unwrap();
+    for (name, rgb) in [
+        ("black.png", [0u8, 0, 0]),
+        ("grey.png", [128, 128, 128]),
+        ("white.png", [255, 255, 255]),
+    ] {
+        let p = save(dir.path(), name, |p| {
+            RgbImage::from_pixel(48, 40, Rgb(rgb)).save(p).unwrap()
+        });
+        for (c, g) in grams_of(&net, &p) {
+            assert_eq!(g.len(), c * c);
+            assert!(
+                g.iter().all(|v| v.is_finite() && *v >= -1e-9),
+                "{name}: Gram entries finite, diagonal non-negative"
+            );
+        }
+    }
+}
+
+#[test]
+fn grey_and_16_bit_files_equal_their_8_bit_rgb_versions() {
+    let net = net();
+    let dir = tempfile::tempdir().unwrap();
+    let g8 = GrayImage::from_fn(40, 32, |x, y| image::Luma([((x * 7 + y * 3) % 256) as u8]));
+    let grey = save(dir.path(), "grey.png", |p| g8.save(p).unwrap());
+    let rgb = save(dir.path(), "rgb.png", |p| {
+        RgbImage::from_fn(40, 32, |x, y| {
+            let v = g8.get_pixel(x, y)[0];
+            Rgb([v, v, v])
+        })
+        .save(p)
+        .unwrap()
+    });
+    let sixteen = save(dir.path(), "rgb16.png", |p| {
+        ImageBuffer::<Rgb<u16>, Vec<u16>>::from_fn(40, 32, |x, y| {
+            let v = g8.get_pixel(x, y)[0] as u16 * 257;
+            Rgb([v, v, v])
+        })
+        .save(p)
+        .unwrap()
+    });
+    let (a, b, c) = (
+        grams_of(&net, &grey),
+        grams_of(&net, &rgb),
+        grams_of(&net, &sixteen),
+    );
+    for ((ga, gb), gc) in a.iter().zip(&b).zip(&c) {
+        let scale = gb.1.iter().fold(0f64, |m, v| m.max(v.abs())).max(1e-30);
+        for ((x, y), z) in ga.1.iter().zip(&gb.1).zip(&gc.1) {
+            // Not bit-equal: gemm's kernels depend on buffer alignment, so sums may round
+            // differently between two runs on equal inputs (about 1e-7 relative).
+            assert!((x - y).abs() / scale < 1e-6, "grey equals its RGB");
+            assert!((y - z).abs() / scale < 1e-6, "16-bit v·257 equals 8-bit v");
+        }
+    }
+}
+
+#[test]
+fn sizes_the_network_cannot_take_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let strip = save(dir.path(), "strip.png", |p| {
+        RgbImage::new(1, 300).save(p).unwrap()
+    });
+    let e = load_rgb01(&strip).unwrap_err().to_string();
+    assert!(
+        e.contains("strip.png") && e.contains("1×300") && e.contains("at least 16×16"),
+        "{e}"
+    );
+    let huge = save(dir.path(), "huge.png", |p| {
+        RgbImage::new(2000, 1100).save(p).unwrap()
+    });
+    let e = load_rgb01(&huge).unwrap_err().to_string();
+    assert!(
+        e.contains("huge.png") && e.contains("2000×1100") && e.contains("pixels"),
+        "{e}"
+    );
+    let e = Vgg16::load(&strip).unwrap_err().to_string();
+    assert!(
+        e.contains("strip.png") && e.contains("not a safetensors file"),
+        "{e}"
+    );
+}

@@ -1096,3 +1096,81 @@ fn style_image_writes_the_five_grams_that_match_pytorch() {
     ]);
     assert!(err.contains("not a safetensors file"), "{err}");
 }
+
+#[test]
+fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
+    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared");
+    let weights = shared.join("weights/vgg16_imagenet.safetensors");
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = small_dataset(tmp.path(), 5, false);
+    let d = ds.to_str().unwrap();
+    // Without weights a VGG tier is refused with the explicit fallback named.
+    let err = fails(&["style", d, "--tier", "vgg16-128"]);
+    assert!(
+        err.contains("--weights") && err.contains("color-stats"),
+        "{err}"
+    );
+    let o = nrw(&["style", d, "--tier", "color-stats"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (kind, rows) = nrw_dataset::descriptors::read_all(&ds).unwrap().unwrap();
+    assert_eq!(
+        (kind.tier.as_str(), rows.len(), rows[0].descriptor.len()),
+        ("color-stats", 5, 9)
+    );
+    // Rerun: nothing recomputed.
+    let o = nrw(&["style", d, "--tier", "color-stats"]);
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("0 parts written, 1 already there"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // Another kind is refused unless asked to overwrite.
+    let w = weights.to_str().unwrap();
+    let err = fails(&["style", d, "--tier", "vgg16-128", "--weights", w]);
+    assert!(
+        err.contains("--overwrite") && err.contains("color-stats"),
+        "{err}"
+    );
+    ok(&[
+        "style",
+        d,
+        "--tier",
+        "vgg16-128",
+        "--weights",
+        w,
+        "--overwrite",
+        "--quiet",
+    ]);
+    let (kind, rows) = nrw_dataset::descriptors::read_all(&ds).unwrap().unwrap();
+    assert_eq!(kind.tier, "vgg16-128");
+    assert_eq!(kind.weights_sha256.len(), 64);
+    assert_eq!(
+        rows[0].descriptor.len(),
+        [64usize, 128, 256, 512, 512]
+            .iter()
+            .map(|c| c * (c + 1) / 2)
+            .sum::<usize>()
+    );
+    // The squared distance of two descriptors is the style distance Σ‖ΔG‖²_F.
+    let net = nrw_style::Vgg16::load(&weights).unwrap();
+    let reader = nrw_dataset::reader::Dataset::open(&ds).unwrap();
+    let g = |id: u32| {
+        let img =
+            nrw_style::descriptor::prepare(&reader.get(id).unwrap().photo().unwrap(), Some(128));
+        nrw_style::grams(
+            &net,
+            &nrw_style::to_input(&img, nrw_style::Preprocess::Imagenet),
+            128,
+            128,
+            nrw_style::Parallelism::None,
+        )
+    };
+    let (ga, gb) = (g(rows[0].image_id), g(rows[1].image_id));
+    let direct: f64 = ga
+        .iter()
+        .zip(&gb)
+        .flat_map(|(a, b)| a.1.iter().zip(&b.1).map(|(x, y)| (x - y).powi(2)))
+        .sum();
+    let via = nrw_style::distance2(&rows[0].descriptor, &rows[1].descriptor);
+    assert!((via - direct).abs() <= 1e-4 * direct, "{via} vs {direct}");
+}

@@ -5,6 +5,7 @@
 pub mod atomic;
 pub mod codec;
 pub mod depth;
+pub mod descriptors;
 pub mod error;
 pub mod manifest;
 pub mod parquet_io;

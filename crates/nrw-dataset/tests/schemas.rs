@@ -20,6 +20,11 @@ fn written_tables() -> Vec<(&'static str, &'static str, SchemaRef)> {
             nrw_dataset::views_schema(),
         ),
         (
+            "descriptors.toml",
+            "descriptors/part-NNNNN.parquet",
+            nrw_dataset::descriptors::descriptors_schema(),
+        ),
+        (
             "splits.toml",
             nrw_dataset::split::SPLITS_TABLE,
             nrw_dataset::split::splits_schema(),

@@ -2,10 +2,12 @@
 //! appearance distance the paper mines its triplets with. Weights come from a file the user
 //! gives; the tool never downloads anything.
 
+pub mod descriptor;
 pub mod error;
 pub mod preprocess;
 pub mod vgg;
 
+pub use descriptor::{describe, distance2, Tier};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};

@@ -1,10 +1,17 @@
-//! `nrw-etl style --image`: the five VGG16 Gram matrices of one image exactly as given, so
+//! `nrw-etl style`: style descriptors of a dataset's kept photos (parallel over photos,
+//! progress bar, resumable by part), or the exact Gram matrices of one image (`--image`) so
 //! anyone can check parity against another implementation without writing code.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
-use nrw_style::{Parallelism, Preprocess, Vgg16};
+use indicatif::{ProgressBar, ProgressStyle};
+use nrw_dataset::descriptors::{
+    part_path, read_part, write_part, DescriptorKind, DescriptorRow, DESCRIPTORS_DIR,
+};
+use nrw_dataset::reader::Dataset;
+use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg16};
+use rayon::prelude::*;
 
 use crate::error::{EtlError, Result};
 
@@ -17,33 +24,156 @@ pub enum Pre {
     MinusOneToOne,
 }
 
+/// Photos per descriptor part: the unit of resumption.
+pub const PART_PHOTOS: usize = 64;
+
 /// Arguments of `style`.
 #[derive(Debug, Args)]
 pub struct StyleArgs {
-    /// Image to describe as given: no resize, no crop (8/16-bit, grey or colour; at least 16×16, at most 2 MP)
+    /// Dataset folder: describe every kept photo into DATASET/descriptors/
+    pub dataset: Option<PathBuf>,
+    /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>] or color-stats (no weights needed)
+    #[arg(long, default_value = "vgg16-512")]
+    pub tier: String,
+    /// VGG16 weights: safetensors with torchvision names (features.N.weight / .bias); never downloaded
     #[arg(long)]
-    pub image: PathBuf,
-    /// VGG16 weights: safetensors with torchvision names (features.N.weight / .bias)
+    pub weights: Option<PathBuf>,
+    /// Replace existing descriptors of another tier or weights
     #[arg(long)]
-    pub weights: PathBuf,
-    /// Output safetensors with f32 tensors gram_relu1_2 … gram_relu5_2
+    pub overwrite: bool,
+    /// Instead of a dataset: one image as given (no resize, no crop; 8/16-bit, grey or colour; 16×16 to 2 MP)
+    #[arg(long, requires = "out")]
+    pub image: Option<PathBuf>,
+    /// With --image: output safetensors with f32 tensors gram_relu1_2 … gram_relu5_2
     #[arg(long)]
-    pub out: PathBuf,
-    /// Input scaling
+    pub out: Option<PathBuf>,
+    /// Input scaling (with --image)
     #[arg(long, value_enum, default_value = "imagenet")]
     pub preprocess: Pre,
+    /// No progress bar
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg16>> {
+    match (tier.needs_weights(), path) {
+        (false, _) => Ok(None),
+        (true, None) => Err(EtlError::Usage(format!(
+            "--weights FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); --tier color-stats is the explicit non-neural fallback",
+            tier.name()
+        ))),
+        (true, Some(p)) => Vgg16::load(p).map(Some).map_err(|e| EtlError::Usage(e.to_string())),
+    }
 }
 
 /// Run `style`.
 pub fn run(args: &StyleArgs) -> Result<()> {
-    let net = Vgg16::load(&args.weights).map_err(|e| EtlError::Usage(e.to_string()))?;
-    let p = match args.preprocess {
-        Pre::Imagenet => Preprocess::Imagenet,
-        Pre::MinusOneToOne => Preprocess::MinusOneToOne,
+    if let Some(image) = &args.image {
+        let tier = Tier::reference();
+        let net = load_weights(args.weights.as_deref(), &tier)?.expect("VGG tier");
+        let p = match args.preprocess {
+            Pre::Imagenet => Preprocess::Imagenet,
+            Pre::MinusOneToOne => Preprocess::MinusOneToOne,
+        };
+        let bytes = nrw_style::image_grams_safetensors(&net, image, p, Parallelism::Rayon(0))
+            .map_err(|e| EtlError::Usage(e.to_string()))?;
+        let out = args.out.as_ref().expect("clap requires --out with --image");
+        nrw_dataset::atomic::write_bytes_atomic(out, &bytes)?;
+        println!("{}", out.display());
+        return Ok(());
+    }
+    let Some(dir) = &args.dataset else {
+        return Err(EtlError::Usage(
+            "give a DATASET folder, or --image FILE --out FILE".into(),
+        ));
     };
-    let bytes = nrw_style::image_grams_safetensors(&net, &args.image, p, Parallelism::Rayon(0))
-        .map_err(|e| EtlError::Usage(e.to_string()))?;
-    nrw_dataset::atomic::write_bytes_atomic(&args.out, &bytes)?;
-    println!("{}", args.out.display());
+    let tier = Tier::parse(&args.tier).ok_or_else(|| {
+        EtlError::Usage(format!(
+            "--tier {:?} is not a tier (vgg16-512, vgg16-256-l12, vgg16-full, color-stats, …)",
+            args.tier
+        ))
+    })?;
+    let net = load_weights(args.weights.as_deref(), &tier)?;
+    let kind = DescriptorKind {
+        tier: tier.name(),
+        weights_sha256: net.as_ref().map_or(String::new(), |n| n.sha256.clone()),
+        preprocess: format!("{:?}", Preprocess::Imagenet),
+    };
+    let ds = Dataset::open(dir)?;
+    // Existing parts of another kind are never mixed with new ones.
+    if let Ok(entries) = std::fs::read_dir(dir.join(DESCRIPTORS_DIR)) {
+        for e in entries.flatten() {
+            let (k, _) = read_part(&e.path())?;
+            if k.as_ref().is_some_and(|k| *k != kind) {
+                if !args.overwrite {
+                    return Err(EtlError::Usage(format!(
+                        "{}: holds descriptors of {:?}, not {:?}; pass --overwrite to replace them",
+                        e.path().display(),
+                        k.expect("some"),
+                        kind
+                    )));
+                }
+                std::fs::remove_file(e.path())
+                    .map_err(|err| nrw_dataset::DatasetError::io(e.path(), err))?;
+            }
+        }
+    }
+    let mut ids: Vec<u32> = ds
+        .splits()
+        .iter()
+        .flat_map(|(s, _)| ds.ids(s).expect("listed split").to_vec())
+        .collect();
+    ids.sort_unstable();
+    let groups: Vec<&[u32]> = ids.chunks(PART_PHOTOS).collect();
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(ids.len() as u64).with_style(
+            ProgressStyle::with_template(
+                "{msg:>10} [{bar:30}] {pos}/{len} photos {elapsed} (eta {eta})",
+            )
+            .expect("template")
+            .progress_chars("=> "),
+        )
+    };
+    bar.set_message(tier.name());
+    let (mut done, mut skipped) = (0usize, 0usize);
+    for (k, group) in groups.iter().enumerate() {
+        let path = dir.join(part_path(k));
+        if path.is_file() {
+            let (pk, rows) = read_part(&path)?;
+            if pk.as_ref() == Some(&kind)
+                && rows.iter().map(|r| r.image_id).eq(group.iter().copied())
+            {
+                bar.inc(group.len() as u64);
+                skipped += 1;
+                continue;
+            }
+        }
+        let rows: Vec<DescriptorRow> = group
+            .par_iter()
+            .map(|id| {
+                let v = ds.get(*id)?;
+                let d = describe(&tier, net.as_ref(), &v.photo()?, Parallelism::None);
+                bar.inc(1);
+                Ok(DescriptorRow {
+                    image_id: *id,
+                    name: v.name,
+                    descriptor: d,
+                })
+            })
+            .collect::<Result<_>>()?;
+        write_part(dir, k, &kind, &rows)?;
+        done += 1;
+    }
+    bar.finish_and_clear();
+    if !args.quiet {
+        eprintln!(
+            "described {} photos with {} into {} ({done} parts written, {skipped} already there)",
+            ids.len(),
+            tier.name(),
+            dir.join(DESCRIPTORS_DIR).display()
+        );
+    }
     Ok(())
 }

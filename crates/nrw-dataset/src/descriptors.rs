@@ -1,0 +1,181 @@
+//! Style descriptors of a dataset's kept photos: `descriptors/part-NNNNN.parquet`, one row
+//! per photo. Each row names its tier, weights hash and preprocessing, so descriptors of
+//! different kinds can never be mixed silently; parts are written atomically and a rerun
+//! with the same settings skips the parts already there.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use arrow_array::builder::{Float32Builder, ListBuilder};
+use arrow_array::{Array, Float32Array, ListArray, RecordBatch, StringArray, UInt32Array};
+use arrow_schema::{DataType, Field, Schema, SchemaRef};
+
+use crate::error::{DatasetError, Result};
+use crate::manifest::FileEntry;
+use crate::parquet_io::{column, read_batches, write_table};
+
+/// Folder of descriptor parts inside a dataset.
+pub const DESCRIPTORS_DIR: &str = "descriptors";
+
+/// What kind of descriptor a table holds: rows of different kinds are never compared.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DescriptorKind {
+    pub tier: String,
+    /// SHA-256 of the weights file; empty for tiers without weights.
+    pub weights_sha256: String,
+    pub preprocess: String,
+}
+
+/// One photo's descriptor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DescriptorRow {
+    pub image_id: u32,
+    pub name: String,
+    pub descriptor: Vec<f32>,
+}
+
+/// Arrow schema of a descriptors part (documented in schemas/descriptors.toml).
+pub fn descriptors_schema() -> SchemaRef {
+    Arc::new(Schema::new(vec![
+        Field::new("image_id", DataType::UInt32, false),
+        Field::new("name", DataType::Utf8, false),
+        Field::new("tier", DataType::Utf8, false),
+        Field::new("weights_sha256", DataType::Utf8, false),
+        Field::new("preprocess", DataType::Utf8, false),
+        Field::new(
+            "descriptor",
+            DataType::List(Arc::new(Field::new("item", DataType::Float32, false))),
+            false,
+        ),
+    ]))
+}
+
+/// Part file name of group `k`.
+pub fn part_path(k: usize) -> String {
+    format!("{DESCRIPTORS_DIR}/part-{k:05}.parquet")
+}
+
+/// Write one part atomically.
+pub fn write_part(
+    dir: &Path,
+    k: usize,
+    kind: &DescriptorKind,
+    rows: &[DescriptorRow],
+) -> Result<FileEntry> {
+    let schema = descriptors_schema();
+    let item = match schema.field(5).data_type() {
+        DataType::List(f) => f.clone(),
+        _ => unreachable!("descriptor is a list"),
+    };
+    let mut lists = ListBuilder::new(Float32Builder::new()).with_field(item);
+    for r in rows {
+        lists.values().append_slice(&r.descriptor);
+        lists.append(true);
+    }
+    let rep =
+        |s: &str| Arc::new(StringArray::from_iter_values(rows.iter().map(|_| s))) as Arc<dyn Array>;
+    let batch = RecordBatch::try_new(
+        schema,
+        vec![
+            Arc::new(UInt32Array::from_iter_values(
+                rows.iter().map(|r| r.image_id),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.name.as_str()),
+            )),
+            rep(&kind.tier),
+            rep(&kind.weights_sha256),
+            rep(&kind.preprocess),
+            Arc::new(lists.finish()),
+        ],
+    )
+    .map_err(|e| DatasetError::Arrow {
+        table: part_path(k),
+        source: e,
+    })?;
+    write_table(dir, &part_path(k), &batch)
+}
+
+/// Read a part: its kind (all rows must agree) and rows.
+pub fn read_part(path: &Path) -> Result<(Option<DescriptorKind>, Vec<DescriptorRow>)> {
+    let mut kind: Option<DescriptorKind> = None;
+    let mut rows = Vec::new();
+    for b in read_batches(path, None)? {
+        let ids = column::<UInt32Array>(&b, "image_id", path)?;
+        let names = column::<StringArray>(&b, "name", path)?;
+        let (tier, sha, pre) = (
+            column::<StringArray>(&b, "tier", path)?,
+            column::<StringArray>(&b, "weights_sha256", path)?,
+            column::<StringArray>(&b, "preprocess", path)?,
+        );
+        let desc = column::<ListArray>(&b, "descriptor", path)?;
+        for i in 0..b.num_rows() {
+            let k = DescriptorKind {
+                tier: tier.value(i).into(),
+                weights_sha256: sha.value(i).into(),
+                preprocess: pre.value(i).into(),
+            };
+            match &kind {
+                None => kind = Some(k),
+                Some(prev) if *prev != k => {
+                    return Err(DatasetError::Value {
+                        path: path.into(),
+                        record: format!("image {}", ids.value(i)),
+                        field: "tier/weights_sha256/preprocess".into(),
+                        problem: format!("descriptor kind {k:?} differs from the part's {prev:?}"),
+                    })
+                }
+                _ => {}
+            }
+            let v = desc.value(i);
+            let v =
+                v.as_any()
+                    .downcast_ref::<Float32Array>()
+                    .ok_or_else(|| DatasetError::Schema {
+                        path: path.into(),
+                        problem: "descriptor is not float32".into(),
+                    })?;
+            rows.push(DescriptorRow {
+                image_id: ids.value(i),
+                name: names.value(i).into(),
+                descriptor: v.values().to_vec(),
+            });
+        }
+    }
+    Ok((kind, rows))
+}
+
+/// Every descriptor of a dataset, refusing mixed kinds; `None` when there are none.
+pub fn read_all(dir: &Path) -> Result<Option<(DescriptorKind, Vec<DescriptorRow>)>> {
+    let d = dir.join(DESCRIPTORS_DIR);
+    let Ok(entries) = std::fs::read_dir(&d) else {
+        return Ok(None);
+    };
+    let mut parts: Vec<_> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "parquet"))
+        .collect();
+    parts.sort();
+    let mut kind: Option<DescriptorKind> = None;
+    let mut rows = Vec::new();
+    for p in parts {
+        let (k, r) = read_part(&p)?;
+        if let Some(k) = k {
+            if kind.as_ref().is_some_and(|prev| *prev != k) {
+                return Err(DatasetError::Value {
+                    path: p,
+                    record: "part".into(),
+                    field: "tier".into(),
+                    problem: format!(
+                        "descriptors of another kind ({k:?}) than earlier parts ({kind:?})"
+                    ),
+                });
+            }
+            kind = Some(k);
+        }
+        rows.extend(r);
+    }
+    rows.sort_by_key(|r| r.image_id);
+    Ok(kind.map(|k| (k, rows)))
+}

@@ -1,0 +1,229 @@
+//! Descriptors: vectors whose squared Euclidean distance *is* the style distance, so
+//! nearest-neighbour search needs no Gram algebra.
+//!
+//! The style distance of the paper (Gatys et al.'s style loss) is Σ_layers ‖G_a − G_b‖²_F.
+//! A symmetric Gram's Frobenius norm counts each off-diagonal entry twice, so the vector of
+//! its upper triangle with off-diagonals scaled by √2 has the same squared norm; concatenating
+//! those vectors over the layers turns the style distance into a plain squared L2 distance.
+
+use image::RgbImage;
+
+use crate::preprocess::{to_input, Preprocess};
+use crate::vgg::{gram, Vgg16, STYLE_LAYERS};
+use crate::Parallelism;
+
+/// A way of describing a photo's style, from the reference (VGG16, 512², five layers) down
+/// to a cheap colour statistic.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Tier {
+    /// VGG16 Grams of a centre square resized to `size` (None: the photo as it is), on
+    /// the style layers whose indices (0 = relu1_2 … 4 = relu5_2) are listed.
+    Vgg16 {
+        size: Option<u32>,
+        layers: Vec<usize>,
+    },
+    /// Mean and covariance of RGB in [0, 1] (9 numbers): no network, no weights.
+    ColorStats,
+}
+
+impl Tier {
+    /// The paper's reference: VGG16, 512 × 512 centre crop, all five layers.
+    pub fn reference() -> Tier {
+        Tier::Vgg16 {
+            size: Some(512),
+            layers: vec![0, 1, 2, 3, 4],
+        }
+    }
+
+    /// Parse `vgg16-256`, `vgg16-512-l12`, `vgg16-full`, `color-stats`.
+    pub fn parse(s: &str) -> Option<Tier> {
+        if s == "color-stats" {
+            return Some(Tier::ColorStats);
+        }
+        let rest = s.strip_prefix("vgg16-")?;
+        let mut parts = rest.split("-l");
+        let size = match parts.next()? {
+            "full" => None,
+            n => Some(n.parse::<u32>().ok().filter(|&n| n >= 16)?),
+        };
+        let layers = match parts.next() {
+            None => vec![0, 1, 2, 3, 4],
+            Some(ls) => {
+                let v: Option<Vec<usize>> = ls
+                    .chars()
+                    .map(|c| {
+                        c.to_digit(10)
+                            .map(|d| d as usize)
+                            .filter(|d| (1..=5).contains(d))
+                            .map(|d| d - 1)
+                    })
+                    .collect();
+                let mut v = v?;
+                v.sort_unstable();
+                v.dedup();
+                if v.is_empty() {
+                    return None;
+                }
+                v
+            }
+        };
+        Some(Tier::Vgg16 { size, layers })
+    }
+
+    /// The name `parse` reads back.
+    pub fn name(&self) -> String {
+        match self {
+            Tier::ColorStats => "color-stats".into(),
+            Tier::Vgg16 { size, layers } => {
+                let s = size.map_or("full".to_string(), |n| n.to_string());
+                if layers.len() == 5 {
+                    format!("vgg16-{s}")
+                } else {
+                    format!(
+                        "vgg16-{s}-l{}",
+                        layers
+                            .iter()
+                            .map(|l| (l + 1).to_string())
+                            .collect::<String>()
+                    )
+                }
+            }
+        }
+    }
+
+    /// Whether this tier needs network weights.
+    pub fn needs_weights(&self) -> bool {
+        matches!(self, Tier::Vgg16 { .. })
+    }
+}
+
+/// Upper triangle of a symmetric c × c matrix, off-diagonals times √2 (norm-preserving).
+pub fn pack_symmetric(c: usize, g: &[f64], out: &mut Vec<f32>) {
+    let s2 = std::f64::consts::SQRT_2;
+    for i in 0..c {
+        out.push(g[i * c + i] as f32);
+        for j in i + 1..c {
+            out.push((g[i * c + j] * s2) as f32);
+        }
+    }
+}
+
+/// The square centre of a photo resized to `size` (Lanczos3), or the photo itself.
+pub fn prepare(photo: &RgbImage, size: Option<u32>) -> RgbImage {
+    let Some(s) = size else { return photo.clone() };
+    let side = photo.width().min(photo.height());
+    let (x, y) = ((photo.width() - side) / 2, (photo.height() - side) / 2);
+    let square = image::imageops::crop_imm(photo, x, y, side, side).to_image();
+    if side == s {
+        return square;
+    }
+    image::imageops::resize(&square, s, s, image::imageops::FilterType::Lanczos3)
+}
+
+/// The descriptor of a photo under a tier (`net` is required for VGG tiers).
+pub fn describe(tier: &Tier, net: Option<&Vgg16>, photo: &RgbImage, par: Parallelism) -> Vec<f32> {
+    match tier {
+        Tier::ColorStats => {
+            let n = (photo.width() * photo.height()) as f64;
+            let mut mean = [0f64; 3];
+            for p in photo.pixels() {
+                for c in 0..3 {
+                    mean[c] += p[c] as f64 / 255.0;
+                }
+            }
+            mean.iter_mut().for_each(|m| *m /= n);
+            let mut cov = [0f64; 9];
+            for p in photo.pixels() {
+                let d = [
+                    p[0] as f64 / 255.0 - mean[0],
+                    p[1] as f64 / 255.0 - mean[1],
+                    p[2] as f64 / 255.0 - mean[2],
+                ];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        cov[i * 3 + j] += d[i] * d[j] / n;
+                    }
+                }
+            }
+            let mut out: Vec<f32> = mean.iter().map(|v| *v as f32).collect();
+            pack_symmetric(3, &cov, &mut out);
+            out
+        }
+        Tier::Vgg16 { size, layers } => {
+            let net = net.expect("VGG tiers need weights (checked by the caller)");
+            let img = prepare(photo, *size);
+            let (w, h) = (img.width() as usize, img.height() as usize);
+            let feats = net.style_features(&to_input(&img, Preprocess::Imagenet), h, w, par);
+            let mut out = Vec::new();
+            for (k, (c, fh, fw, f)) in feats.iter().enumerate() {
+                if layers.contains(&k) {
+                    pack_symmetric(*c, &gram(*c, *fh, *fw, f, par), &mut out);
+                }
+            }
+            debug_assert_eq!(STYLE_LAYERS.len(), feats.len());
+            out
+        }
+    }
+}
+
+/// Squared L2 distance, accumulated in f64.
+pub fn distance2(a: &[f32], b: &[f32]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).powi(2))
+        .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packed_distance_is_the_frobenius_distance() {
+        let c = 4;
+        let sym = |seed: f64| {
+            let mut g = vec![0.0; c * c];
+            for i in 0..c {
+                for j in i..c {
+                    let v = ((i * 7 + j * 3) as f64 * seed).sin();
+                    g[i * c + j] = v;
+                    g[j * c + i] = v;
+                }
+            }
+            g
+        };
+        let (a, b) = (sym(1.3), sym(0.7));
+        let frob: f64 = a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum();
+        let (mut pa, mut pb) = (Vec::new(), Vec::new());
+        pack_symmetric(c, &a, &mut pa);
+        pack_symmetric(c, &b, &mut pb);
+        assert_eq!(pa.len(), c * (c + 1) / 2);
+        assert!((distance2(&pa, &pb) - frob).abs() < 1e-6 * frob);
+    }
+
+    #[test]
+    fn tier_names_round_trip() {
+        for s in [
+            "vgg16-512",
+            "vgg16-256-l12",
+            "vgg16-full",
+            "vgg16-128-l5",
+            "color-stats",
+        ] {
+            assert_eq!(Tier::parse(s).unwrap().name(), s);
+        }
+        assert_eq!(Tier::parse("vgg16-512").unwrap(), Tier::reference());
+        for bad in ["vgg16-8", "vgg16-256-l9", "vgg19-256", "vgg16-", "colour"] {
+            assert!(Tier::parse(bad).is_none(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn color_stats_of_a_constant_photo_have_zero_covariance() {
+        let img = RgbImage::from_pixel(10, 10, image::Rgb([255, 0, 51]));
+        let d = describe(&Tier::ColorStats, None, &img, Parallelism::None);
+        assert_eq!(d.len(), 9);
+        assert!((d[0] - 1.0).abs() < 1e-6 && d[1].abs() < 1e-6 && (d[2] - 0.2).abs() < 1e-6);
+        assert!(d[3..].iter().all(|v| v.abs() < 1e-9));
+    }
+}

@@ -115,6 +115,19 @@ impl Vgg16 {
         w: usize,
         par: Parallelism,
     ) -> Vec<(usize, usize, usize, Vec<f32>)> {
+        self.style_features_upto(input, h, w, 5, par)
+    }
+
+    /// The first `layers` style activations only: the trunk stops after the last one needed,
+    /// so a tier on relu1_2 costs two convolutions, not twelve.
+    pub fn style_features_upto(
+        &self,
+        input: &[f32],
+        h: usize,
+        w: usize,
+        layers: usize,
+        par: Parallelism,
+    ) -> Vec<(usize, usize, usize, Vec<f32>)> {
         // Blocks of VGG16: convs per block; a pool precedes every block but the first.
         const BLOCKS: [usize; 5] = [2, 2, 3, 3, 3];
         let mut x = input.to_vec();
@@ -122,6 +135,9 @@ impl Vgg16 {
         let mut out = Vec::with_capacity(5);
         let mut k = 0;
         for (b, &n) in BLOCKS.iter().enumerate() {
+            if out.len() >= layers {
+                break;
+            }
             if b > 0 {
                 (x, h, w) = maxpool2(&x, c, h, w);
             }
@@ -134,6 +150,9 @@ impl Vgg16 {
                 k += 1;
                 if j == 1 {
                     out.push((c, h, w, x.clone())); // reluB_2
+                    if out.len() >= layers {
+                        break;
+                    }
                 }
             }
         }

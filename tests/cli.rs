@@ -1152,7 +1152,7 @@ fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
             .sum::<usize>()
     );
     // The squared distance of two descriptors is the style distance Σ‖ΔG‖²_F.
-    let net = nrw_style::Vgg16::load(&weights).unwrap();
+    let net = nrw_style::Vgg::load(&weights).unwrap();
     let reader = nrw_dataset::reader::Dataset::open(&ds).unwrap();
     let g = |id: u32| {
         let img =

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use image::RgbImage;
-use nrw_style::{describe, distance2, Parallelism, Tier, Vgg16};
+use nrw_style::{describe, distance2, Parallelism, Tier, Vgg};
 use rayon::prelude::*;
 
 fn knn(desc: &[Vec<f32>], i: usize, k: usize) -> Vec<usize> {
@@ -120,7 +120,7 @@ fn real(root: &Path) -> Scene {
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let net = Vgg16::load(&root.join("../shared/weights/vgg16_imagenet.safetensors")).unwrap();
+    let net = Vgg::load(&root.join("../shared/weights/vgg16_imagenet.safetensors")).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let scenes = [synthetic(quick, tmp.path()), real(&root)];
     let tiers = [

@@ -9,16 +9,17 @@
 use image::RgbImage;
 
 use crate::preprocess::{to_input, Preprocess};
-use crate::vgg::{gram, Vgg16, STYLE_LAYERS};
+use crate::vgg::{gram, Arch, Vgg, STYLE_LAYERS};
 use crate::Parallelism;
 
 /// A way of describing a photo's style, from the reference (VGG16, 512², five layers) down
 /// to a cheap colour statistic.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Tier {
-    /// VGG16 Grams of a centre square resized to `size` (None: the photo as it is), on
-    /// the style layers whose indices (0 = relu1_2 … 4 = relu5_2) are listed.
-    Vgg16 {
+    /// VGG Grams of a centre square resized to `size` (None: the photo as it is), on the
+    /// style layers whose indices (0 = relu1_2 … 4 = relu5_2) are listed.
+    Vgg {
+        arch: Arch,
         size: Option<u32>,
         layers: Vec<usize>,
     },
@@ -29,18 +30,23 @@ pub enum Tier {
 impl Tier {
     /// The paper's reference: VGG16, 512 × 512 centre crop, all five layers.
     pub fn reference() -> Tier {
-        Tier::Vgg16 {
+        Tier::Vgg {
+            arch: Arch::Vgg16,
             size: Some(512),
             layers: vec![0, 1, 2, 3, 4],
         }
     }
 
-    /// Parse `vgg16-256`, `vgg16-512-l12`, `vgg16-full`, `color-stats`.
+    /// Parse `vgg16-256`, `vgg16-512-l12`, `vgg19-full`, `color-stats`.
     pub fn parse(s: &str) -> Option<Tier> {
         if s == "color-stats" {
             return Some(Tier::ColorStats);
         }
-        let rest = s.strip_prefix("vgg16-")?;
+        let (arch, rest) = if let Some(r) = s.strip_prefix("vgg16-") {
+            (Arch::Vgg16, r)
+        } else {
+            (Arch::Vgg19, s.strip_prefix("vgg19-")?)
+        };
         let mut parts = rest.split("-l");
         let size = match parts.next()? {
             "full" => None,
@@ -67,25 +73,21 @@ impl Tier {
                 v
             }
         };
-        Some(Tier::Vgg16 { size, layers })
+        Some(Tier::Vgg { arch, size, layers })
     }
 
     /// The name `parse` reads back.
     pub fn name(&self) -> String {
         match self {
             Tier::ColorStats => "color-stats".into(),
-            Tier::Vgg16 { size, layers } => {
+            Tier::Vgg { arch, size, layers } => {
                 let s = size.map_or("full".to_string(), |n| n.to_string());
+                let a = arch.name();
                 if layers.len() == 5 {
-                    format!("vgg16-{s}")
+                    format!("{a}-{s}")
                 } else {
-                    format!(
-                        "vgg16-{s}-l{}",
-                        layers
-                            .iter()
-                            .map(|l| (l + 1).to_string())
-                            .collect::<String>()
-                    )
+                    let ls: String = layers.iter().map(|l| (l + 1).to_string()).collect();
+                    format!("{a}-{s}-l{ls}")
                 }
             }
         }
@@ -93,7 +95,7 @@ impl Tier {
 
     /// Whether this tier needs network weights.
     pub fn needs_weights(&self) -> bool {
-        matches!(self, Tier::Vgg16 { .. })
+        matches!(self, Tier::Vgg { .. })
     }
 }
 
@@ -121,7 +123,7 @@ pub fn prepare(photo: &RgbImage, size: Option<u32>) -> RgbImage {
 }
 
 /// The descriptor of a photo under a tier (`net` is required for VGG tiers).
-pub fn describe(tier: &Tier, net: Option<&Vgg16>, photo: &RgbImage, par: Parallelism) -> Vec<f32> {
+pub fn describe(tier: &Tier, net: Option<&Vgg>, photo: &RgbImage, par: Parallelism) -> Vec<f32> {
     match tier {
         Tier::ColorStats => {
             let n = (photo.width() * photo.height()) as f64;
@@ -149,8 +151,12 @@ pub fn describe(tier: &Tier, net: Option<&Vgg16>, photo: &RgbImage, par: Paralle
             pack_symmetric(3, &cov, &mut out);
             out
         }
-        Tier::Vgg16 { size, layers } => {
+        Tier::Vgg { arch, size, layers } => {
             let net = net.expect("VGG tiers need weights (checked by the caller)");
+            assert_eq!(
+                net.arch, *arch,
+                "weights and tier architecture (checked by the caller)"
+            );
             let img = prepare(photo, *size);
             let (w, h) = (img.width() as usize, img.height() as usize);
             let upto = layers.iter().max().map_or(0, |l| l + 1);
@@ -215,7 +221,7 @@ mod tests {
             assert_eq!(Tier::parse(s).unwrap().name(), s);
         }
         assert_eq!(Tier::parse("vgg16-512").unwrap(), Tier::reference());
-        for bad in ["vgg16-8", "vgg16-256-l9", "vgg19-256", "vgg16-", "colour"] {
+        for bad in ["vgg16-8", "vgg16-256-l9", "vgg11-256", "vgg16-", "colour"] {
             assert!(Tier::parse(bad).is_none(), "{bad}");
         }
     }

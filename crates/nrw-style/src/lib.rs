@@ -11,11 +11,11 @@ pub use descriptor::{describe, distance2, Tier};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};
-pub use vgg::{gram, Vgg16, STYLE_LAYERS};
+pub use vgg::{gram, Arch, Vgg, STYLE_LAYERS};
 
 /// The five Gram matrices (relu1_2 … relu5_2) of a preprocessed CHW input, f64, row-major.
 pub fn grams(
-    net: &Vgg16,
+    net: &Vgg,
     input: &[f32],
     h: usize,
     w: usize,
@@ -30,7 +30,7 @@ pub fn grams(
 /// The five Gram matrices of one image file exactly as given (no resize or crop), as
 /// safetensors bytes with f32 tensors `gram_relu1_2` … `gram_relu5_2`.
 pub fn image_grams_safetensors(
-    net: &Vgg16,
+    net: &Vgg,
     path: &std::path::Path,
     p: Preprocess,
     par: Parallelism,

@@ -1,4 +1,4 @@
-//! VGG16's convolutional trunk up to relu5_2, on the CPU: 3×3 convolutions as banded
+//! VGG16's (or VGG19's) convolutional trunk up to relu5_2, on the CPU: 3×3 convolutions as banded
 //! im2col + GEMM (the `gemm` crate), ReLU, 2×2 max pooling. Weights come from a user's
 //! safetensors file with torchvision names (`features.N.weight` OIHW f32, `features.N.bias`);
 //! nothing is downloaded.
@@ -9,22 +9,50 @@ use gemm::Parallelism;
 
 use crate::error::{Result, StyleError};
 
-/// torchvision `features` indices of VGG16's 13 convolutions, and channels out.
-pub const VGG16_CONVS: [(usize, usize); 13] = [
-    (0, 64),
-    (2, 64),
-    (5, 128),
-    (7, 128),
-    (10, 256),
-    (12, 256),
-    (14, 256),
-    (17, 512),
-    (19, 512),
-    (21, 512),
-    (24, 512),
-    (26, 512),
-    (28, 512),
-];
+/// Which VGG: the two torchvision layouts differ only in convolutions per block.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Arch {
+    Vgg16,
+    Vgg19,
+}
+
+impl Arch {
+    /// Convolutions per block.
+    pub fn blocks(self) -> [usize; 5] {
+        match self {
+            Arch::Vgg16 => [2, 2, 3, 3, 3],
+            Arch::Vgg19 => [2, 2, 4, 4, 4],
+        }
+    }
+
+    /// `vgg16` or `vgg19`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Arch::Vgg16 => "vgg16",
+            Arch::Vgg19 => "vgg19",
+        }
+    }
+
+    /// (torchvision `features` index, channels out) of every convolution up to conv5_2,
+    /// the last one relu5_2 needs: in `features`, each conv is followed by its ReLU and each
+    /// block by a max pool.
+    pub fn convs_to_relu5_2(self) -> Vec<(usize, usize)> {
+        const CHANNELS: [usize; 5] = [64, 128, 256, 512, 512];
+        let mut out = Vec::new();
+        let mut idx = 0;
+        for (b, &n) in self.blocks().iter().enumerate() {
+            for j in 0..n {
+                if b == 4 && j == 2 {
+                    return out;
+                }
+                out.push((idx, CHANNELS[b]));
+                idx += 2;
+            }
+            idx += 1;
+        }
+        out
+    }
+}
 
 /// The ReLU outputs the paper's published code used for the style loss.
 pub const STYLE_LAYERS: [&str; 5] = ["relu1_2", "relu2_2", "relu3_2", "relu4_2", "relu5_2"];
@@ -38,18 +66,20 @@ pub struct Conv {
     pub bias: Vec<f32>,
 }
 
-/// VGG16 convolutions up to conv5_2 (the last one relu5_2 needs).
+/// A VGG's convolutions up to conv5_2 (the last one relu5_2 needs).
 #[derive(Debug, Clone)]
-pub struct Vgg16 {
+pub struct Vgg {
+    pub arch: Arch,
     pub convs: Vec<Conv>,
     pub path: PathBuf,
     /// SHA-256 of the weights file: recorded with descriptors so incompatible ones are never mixed.
     pub sha256: String,
 }
 
-impl Vgg16 {
+impl Vgg {
     /// Load from a safetensors file with torchvision names; every shape and dtype is checked.
-    pub fn load(path: &Path) -> Result<Vgg16> {
+    /// The architecture is recognised by its tensors (VGG19 has `features.34`, VGG16 does not).
+    pub fn load(path: &Path) -> Result<Vgg> {
         use sha2::{Digest, Sha256};
         let bytes = std::fs::read(path).map_err(|e| StyleError::Io {
             path: path.into(),
@@ -64,15 +94,19 @@ impl Vgg16 {
                 path: path.into(),
                 problem: format!("not a safetensors file: {e}"),
             })?;
+        let arch = if st.tensor("features.34.weight").is_ok() {
+            Arch::Vgg19
+        } else {
+            Arch::Vgg16
+        };
         let mut convs = Vec::new();
         let mut in_ch = 3;
-        // conv5_3 (index 28) is not needed for relu5_2.
-        for &(idx, out_ch) in &VGG16_CONVS[..12] {
+        for (idx, out_ch) in arch.convs_to_relu5_2() {
             let get = |name: &str, shape: &[usize]| -> Result<Vec<f32>> {
                 let t = st.tensor(name).map_err(|_| StyleError::Weights {
                     path: path.into(),
                     problem: format!(
-                        "tensor `{name}` is missing (torchvision VGG16 names expected)"
+                        "tensor `{name}` is missing (torchvision VGG16/VGG19 names expected)"
                     ),
                 })?;
                 if t.dtype() != safetensors::Dtype::F32 || t.shape() != shape {
@@ -100,7 +134,8 @@ impl Vgg16 {
             });
             in_ch = out_ch;
         }
-        Ok(Vgg16 {
+        Ok(Vgg {
+            arch,
             convs,
             path: path.into(),
             sha256,
@@ -129,12 +164,12 @@ impl Vgg16 {
         par: Parallelism,
     ) -> Vec<(usize, usize, usize, Vec<f32>)> {
         // Blocks of VGG16: convs per block; a pool precedes every block but the first.
-        const BLOCKS: [usize; 5] = [2, 2, 3, 3, 3];
+        let blocks = self.arch.blocks();
         let mut x = input.to_vec();
         let (mut c, mut h, mut w) = (3usize, h, w);
         let mut out = Vec::with_capacity(5);
         let mut k = 0;
-        for (b, &n) in BLOCKS.iter().enumerate() {
+        for (b, &n) in blocks.iter().enumerate() {
             if out.len() >= layers {
                 break;
             }
@@ -288,4 +323,17 @@ pub fn gram(c: usize, h: usize, w: usize, f: &[f32], par: Parallelism) -> Vec<f6
         );
     }
     g
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torchvision_indices_of_both_architectures() {
+        let v16: Vec<usize> = Arch::Vgg16.convs_to_relu5_2().iter().map(|c| c.0).collect();
+        assert_eq!(v16, [0, 2, 5, 7, 10, 12, 14, 17, 19, 21, 24, 26]);
+        let v19: Vec<usize> = Arch::Vgg19.convs_to_relu5_2().iter().map(|c| c.0).collect();
+        assert_eq!(v19, [0, 2, 5, 7, 10, 12, 14, 16, 19, 21, 23, 25, 28, 30]);
+    }
 }

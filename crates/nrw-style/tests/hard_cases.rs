@@ -4,17 +4,17 @@
 use std::path::{Path, PathBuf};
 
 use image::{GrayImage, ImageBuffer, Rgb, RgbImage};
-use nrw_style::{grams, load_rgb01, to_input_01, Parallelism, Preprocess, Vgg16};
+use nrw_style::{grams, load_rgb01, to_input_01, Parallelism, Preprocess, Vgg};
 
-fn net() -> Vgg16 {
-    Vgg16::load(
+fn net() -> Vgg {
+    Vgg::load(
         &Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../../shared/weights/vgg16_imagenet.safetensors"),
     )
     .unwrap()
 }
 
-fn grams_of(net: &Vgg16, path: &Path) -> Vec<(usize, Vec<f64>)> {
+fn grams_of(net: &Vgg, path: &Path) -> Vec<(usize, Vec<f64>)> {
     let img = load_rgb01(path).unwrap();
     grams(
         net,
@@ -110,7 +110,7 @@ fn sizes_the_network_cannot_take_are_clear_errors() {
         e.contains("huge.png") && e.contains("2000×1100") && e.contains("pixels"),
         "{e}"
     );
-    let e = Vgg16::load(&strip).unwrap_err().to_string();
+    let e = Vgg::load(&strip).unwrap_err().to_string();
     assert!(
         e.contains("strip.png") && e.contains("not a safetensors file"),
         "{e}"

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use nrw_style::{grams, to_input, Parallelism, Preprocess, Vgg16, STYLE_LAYERS};
+use nrw_style::{grams, to_input, Parallelism, Preprocess, Vgg, STYLE_LAYERS};
 
 fn shared() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared")
@@ -33,7 +33,7 @@ fn tensor_f64(st: &safetensors::SafeTensors, name: &str) -> Vec<f64> {
 
 #[test]
 fn grams_match_pytorch_float64_on_both_fixtures() {
-    let net = Vgg16::load(&shared().join("weights/vgg16_imagenet.safetensors")).unwrap();
+    let net = Vgg::load(&shared().join("weights/vgg16_imagenet.safetensors")).unwrap();
     for stem in ["100_7100_256x256", "02928139_3448003521_320x240"] {
         let bytes =
             std::fs::read(shared().join(format!("fixtures/vgg16/{stem}.safetensors"))).unwrap();

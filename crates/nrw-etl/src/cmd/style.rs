@@ -10,7 +10,7 @@ use nrw_dataset::descriptors::{
     part_path, read_part, write_part, DescriptorKind, DescriptorRow, DESCRIPTORS_DIR,
 };
 use nrw_dataset::reader::Dataset;
-use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg16};
+use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
 use crate::error::{EtlError, Result};
@@ -32,10 +32,10 @@ pub const PART_PHOTOS: usize = 64;
 pub struct StyleArgs {
     /// Dataset folder: describe every kept photo into DATASET/descriptors/
     pub dataset: Option<PathBuf>,
-    /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>] or color-stats (no weights needed)
+    /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>], the same with vgg19, or color-stats (no weights needed)
     #[arg(long, default_value = "vgg16-512")]
     pub tier: String,
-    /// VGG16 weights: safetensors with torchvision names (features.N.weight / .bias); never downloaded
+    /// VGG16 or VGG19 weights: safetensors with torchvision names (features.N.weight / .bias); never downloaded
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Replace existing descriptors of another tier or weights
@@ -55,22 +55,43 @@ pub struct StyleArgs {
     pub quiet: bool,
 }
 
-fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg16>> {
+fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
     match (tier.needs_weights(), path) {
         (false, _) => Ok(None),
         (true, None) => Err(EtlError::Usage(format!(
             "--weights FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); --tier color-stats is the explicit non-neural fallback",
             tier.name()
         ))),
-        (true, Some(p)) => Vgg16::load(p).map(Some).map_err(|e| EtlError::Usage(e.to_string())),
+        (true, Some(p)) => {
+            let net = Vgg::load(p).map_err(|e| EtlError::Usage(e.to_string()))?;
+            if let Tier::Vgg { arch, .. } = tier {
+                if net.arch != *arch {
+                    return Err(EtlError::Usage(format!(
+                        "{}: these are {} weights but tier {} needs {}",
+                        p.display(),
+                        net.arch.name(),
+                        tier.name(),
+                        arch.name()
+                    )));
+                }
+            }
+            Ok(Some(net))
+        }
     }
 }
 
 /// Run `style`.
 pub fn run(args: &StyleArgs) -> Result<()> {
     if let Some(image) = &args.image {
-        let tier = Tier::reference();
-        let net = load_weights(args.weights.as_deref(), &tier)?.expect("VGG tier");
+        // Exact mode runs whichever VGG the weights are.
+        let net = load_weights(args.weights.as_deref(), &Tier::reference())
+            .or_else(|_| {
+                load_weights(
+                    args.weights.as_deref(),
+                    &Tier::parse("vgg19-512").expect("valid tier"),
+                )
+            })?
+            .expect("VGG tier");
         let p = match args.preprocess {
             Pre::Imagenet => Preprocess::Imagenet,
             Pre::MinusOneToOne => Preprocess::MinusOneToOne,

@@ -1174,3 +1174,68 @@ fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
     let via = nrw_style::distance2(&rows[0].descriptor, &rows[1].descriptor);
     assert!((via - direct).abs() <= 1e-4 * direct, "{via} vs {direct}");
 }
+
+#[test]
+fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
+    let tmp = tempfile::tempdir().unwrap();
+    let pipelines = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines");
+    let paper = pipelines.join("paper.toml");
+    // sceaux_castle keeps its 11 views, then split asks for the paper's 100: a clear error.
+    let out = tmp.path().join("sceaux");
+    let err = fails(&[
+        "run",
+        paper.to_str().unwrap(),
+        data().join("sceaux_castle").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(err.contains("--val 100") && err.contains("11"), "{err}");
+    assert!(
+        out.join("shards").is_dir(),
+        "ingest ran before split failed"
+    );
+    // The same stages with a small validation set run through to the export.
+    let small = tmp.path().join("small.toml");
+    std::fs::write(
+        &small,
+        std::fs::read_to_string(&paper)
+            .unwrap()
+            .replace("val = 100", "val = 2")
+            .replace("min_dim = 600", "min_dim = 200"),
+    )
+    .unwrap();
+    let out = tmp.path().join("sceaux2");
+    ok(&[
+        "run",
+        small.to_str().unwrap(),
+        data().join("sceaux_castle").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        std::fs::read_dir(out.join("export/val")).unwrap().count(),
+        2 * 3 + 1
+    );
+    // sacre_coeur keeps nothing: exit 3, later stages skipped.
+    let o = nrw(&[
+        "run",
+        paper.to_str().unwrap(),
+        data().join("sacre_coeur").to_str().unwrap(),
+        "--out",
+        tmp.path().join("sc").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    // A typo in a pipeline is an error, not a silent default.
+    std::fs::write(&small, "name = 'x'\n[ingest]\nmin_dimm = 600\n").unwrap();
+    let err = fails(&[
+        "run",
+        small.to_str().unwrap(),
+        data().join("sceaux_castle").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("small.toml") && err.contains("min_dimm"),
+        "{err}"
+    );
+}

@@ -33,18 +33,20 @@ enum Command {
     Synth(cmd::synth::SynthArgs),
     /// Summarise a COLMAP model (counts, camera models, reprojection errors) or a dataset (verdicts, split)
     Inspect(cmd::inspect::InspectArgs),
-    /// Assign kept photos to train and val (seeded, incremental: earlier assignments never change)
-    Split(cmd::split::SplitArgs),
-    /// Write a dataset as files: the paper's official train/ val/ layout, or one folder per photo
-    Export(cmd::export::ExportArgs),
-    /// VGG16 Gram matrices (relu1_2 … relu5_2) of one image as given, to safetensors
-    Style(cmd::style::StyleArgs),
     /// Render every registered photo's view, apply the filters, write shards, scene tables and manifest.json.
     ///
     /// Exit codes: 0 done; 1 error (message names file, record and field); 3 done, but every
     /// view was dropped by the filters (the dataset records each verdict); 130 interrupted
     /// (run again to resume).
     Ingest(cmd::ingest::IngestArgs),
+    /// Assign kept photos to train and val (seeded, incremental: earlier assignments never change)
+    Split(cmd::split::SplitArgs),
+    /// Style descriptors of a dataset's kept photos, or the VGG Gram matrices of one image (--image)
+    Style(cmd::style::StyleArgs),
+    /// Write a dataset as files: the paper's official train/ val/ layout, or one folder per photo
+    Export(cmd::export::ExportArgs),
+    /// Run the stages a pipeline file lists (pipelines/paper.toml: the paper's settings)
+    Run(cmd::run::RunArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -67,6 +69,11 @@ fn main() -> std::process::ExitCode {
         Command::Split(a) => cmd::split::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Style(a) => cmd::style::run(a),
+        Command::Run(a) => cmd::run::run(a).map(|kept| {
+            if !kept {
+                std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);
+            }
+        }),
         Command::Ingest(a) => cmd::ingest::run(a).map(|s| {
             if s.kept == 0 {
                 std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);

@@ -14,6 +14,7 @@ pub mod scene;
 pub mod schema;
 pub mod semantics;
 pub mod split;
+pub mod triplets;
 pub mod views;
 
 pub use error::{DatasetError, Result};

@@ -25,6 +25,11 @@ fn written_tables() -> Vec<(&'static str, &'static str, SchemaRef)> {
             nrw_dataset::descriptors::descriptors_schema(),
         ),
         (
+            "triplets.toml",
+            nrw_dataset::triplets::TRIPLETS_TABLE,
+            nrw_dataset::triplets::triplets_schema(),
+        ),
+        (
             "splits.toml",
             nrw_dataset::split::SPLITS_TABLE,
             nrw_dataset::split::splits_schema(),

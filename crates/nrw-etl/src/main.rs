@@ -43,6 +43,8 @@ enum Command {
     Split(cmd::split::SplitArgs),
     /// Style descriptors of a dataset's kept photos, or the VGG Gram matrices of one image (--image)
     Style(cmd::style::StyleArgs),
+    /// Per anchor photo, the k nearest and k furthest photos in style (exact; train split by default)
+    Triplets(cmd::triplets::TripletsArgs),
     /// Write a dataset as files: the paper's official train/ val/ layout, or one folder per photo
     Export(cmd::export::ExportArgs),
     /// Run the stages a pipeline file lists (pipelines/paper.toml: the paper's settings)
@@ -69,6 +71,7 @@ fn main() -> std::process::ExitCode {
         Command::Split(a) => cmd::split::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Style(a) => cmd::style::run(a),
+        Command::Triplets(a) => cmd::triplets::run(a),
         Command::Run(a) => cmd::run::run(a).map(|kept| {
             if !kept {
                 std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);

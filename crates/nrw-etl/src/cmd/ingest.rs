@@ -533,6 +533,15 @@ pub fn run(args: &IngestArgs) -> Result<IngestSummary> {
     if args.out.join(nrw_dataset::split::SPLITS_TABLE).is_file() {
         tables.push(FileEntry::of(&args.out, nrw_dataset::split::SPLITS_TABLE)?);
     }
+    // Triplets depend on which views survive: a new ingest makes them stale.
+    let stale = args.out.join(nrw_dataset::triplets::TRIPLETS_TABLE);
+    if stale.is_file() {
+        std::fs::remove_file(&stale).map_err(|e| nrw_dataset::DatasetError::io(&stale, e))?;
+        warnings.push(format!(
+            "{}: removed (stale after a new ingest); run `nrw-etl triplets` again",
+            stale.display()
+        ));
+    }
     let count = |v: &str| outcomes.values().filter(|o| o.verdict == v).count();
     let (kept, too_small, too_sparse) = (count("kept"), count("too_small"), count("too_sparse"));
     let manifest = Manifest {

@@ -8,6 +8,7 @@ pub mod run;
 pub mod split;
 pub mod style;
 pub mod synth;
+pub mod triplets;
 
 use std::path::{Path, PathBuf};
 

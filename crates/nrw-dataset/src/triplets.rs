@@ -1,0 +1,105 @@
+//! `triplets.parquet`: per anchor photo, its k nearest and k furthest photos under the style
+//! distance, in order, with squared distances: what appearance pretraining samples from.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use arrow_array::builder::{Float64Builder, ListBuilder, UInt32Builder};
+use arrow_array::{RecordBatch, StringArray, UInt32Array};
+use arrow_schema::{DataType, Field, Schema, SchemaRef};
+
+use crate::error::{DatasetError, Result};
+use crate::manifest::FileEntry;
+
+/// Table path of the triplets inside a dataset.
+pub const TRIPLETS_TABLE: &str = "triplets.parquet";
+
+/// One anchor's row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TripletRow {
+    pub anchor_id: u32,
+    pub anchor_name: String,
+    pub nearest_ids: Vec<u32>,
+    pub nearest_d2: Vec<f64>,
+    pub furthest_ids: Vec<u32>,
+    pub furthest_d2: Vec<f64>,
+}
+
+/// How a table was made (same value on every row).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TripletInfo {
+    /// Descriptor tier the distances are in.
+    pub tier: String,
+    /// `exact`, or the approximate method.
+    pub method: String,
+    /// Splits anchors and neighbours were drawn from, e.g. `train`.
+    pub scope: String,
+}
+
+/// Arrow schema of `triplets.parquet` (documented in schemas/triplets.toml).
+pub fn triplets_schema() -> SchemaRef {
+    let list = |t: DataType| DataType::List(Arc::new(Field::new("item", t, false)));
+    Arc::new(Schema::new(vec![
+        Field::new("anchor_id", DataType::UInt32, false),
+        Field::new("anchor_name", DataType::Utf8, false),
+        Field::new("nearest_ids", list(DataType::UInt32), false),
+        Field::new("nearest_d2", list(DataType::Float64), false),
+        Field::new("furthest_ids", list(DataType::UInt32), false),
+        Field::new("furthest_d2", list(DataType::Float64), false),
+        Field::new("tier", DataType::Utf8, false),
+        Field::new("method", DataType::Utf8, false),
+        Field::new("scope", DataType::Utf8, false),
+    ]))
+}
+
+/// Write the table atomically.
+pub fn write_triplets(dir: &Path, info: &TripletInfo, rows: &[TripletRow]) -> Result<FileEntry> {
+    let schema = triplets_schema();
+    let field = |i: usize| match schema.field(i).data_type() {
+        DataType::List(f) => f.clone(),
+        _ => unreachable!("list column"),
+    };
+    let ids = |get: &dyn Fn(&TripletRow) -> &Vec<u32>, i: usize| {
+        let mut b = ListBuilder::new(UInt32Builder::new()).with_field(field(i));
+        for r in rows {
+            b.values().append_slice(get(r));
+            b.append(true);
+        }
+        Arc::new(b.finish()) as Arc<dyn arrow_array::Array>
+    };
+    let d2 = |get: &dyn Fn(&TripletRow) -> &Vec<f64>, i: usize| {
+        let mut b = ListBuilder::new(Float64Builder::new()).with_field(field(i));
+        for r in rows {
+            b.values().append_slice(get(r));
+            b.append(true);
+        }
+        Arc::new(b.finish()) as Arc<dyn arrow_array::Array>
+    };
+    let rep = |s: &str| {
+        Arc::new(StringArray::from_iter_values(rows.iter().map(|_| s)))
+            as Arc<dyn arrow_array::Array>
+    };
+    let batch = RecordBatch::try_new(
+        schema.clone(),
+        vec![
+            Arc::new(UInt32Array::from_iter_values(
+                rows.iter().map(|r| r.anchor_id),
+            )),
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.anchor_name.as_str()),
+            )),
+            ids(&|r| &r.nearest_ids, 2),
+            d2(&|r| &r.nearest_d2, 3),
+            ids(&|r| &r.furthest_ids, 4),
+            d2(&|r| &r.furthest_d2, 5),
+            rep(&info.tier),
+            rep(&info.method),
+            rep(&info.scope),
+        ],
+    )
+    .map_err(|e| DatasetError::Arrow {
+        table: TRIPLETS_TABLE.into(),
+        source: e,
+    })?;
+    crate::parquet_io::write_table(dir, TRIPLETS_TABLE, &batch)
+}

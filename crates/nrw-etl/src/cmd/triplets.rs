@@ -1,0 +1,116 @@
+//! `nrw-etl triplets`: for each anchor photo, its k nearest and k furthest photos under the
+//! style distance, from the descriptors `nrw-etl style` wrote.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use clap::Args;
+use nrw_dataset::triplets::{write_triplets, TripletInfo, TripletRow, TRIPLETS_TABLE};
+use nrw_dataset::Manifest;
+
+use crate::error::{EtlError, Result};
+
+/// Arguments of `triplets`.
+#[derive(Debug, Args)]
+pub struct TripletsArgs {
+    /// Dataset folder with descriptors (run `nrw-etl style` first)
+    pub dataset: PathBuf,
+    /// Neighbours per anchor, nearest and furthest (the paper: 20)
+    #[arg(long, default_value_t = 20)]
+    pub k: usize,
+    /// Draw anchors and neighbours from every split (default: the training split only, so
+    /// validation photos never appear)
+    #[arg(long)]
+    pub all_splits: bool,
+}
+
+/// Run `triplets`.
+pub fn run(args: &TripletsArgs) -> Result<()> {
+    let mut manifest = Manifest::read(&args.dataset)?;
+    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(&args.dataset)? else {
+        return Err(EtlError::Usage(format!(
+            "{}: no descriptors; run `nrw-etl style {}` first",
+            args.dataset.display(),
+            args.dataset.display()
+        )));
+    };
+    let splits = nrw_dataset::split::read_splits(&args.dataset)?;
+    let scope = if args.all_splits || splits.is_empty() {
+        "all"
+    } else {
+        "train"
+    };
+    let allowed: Option<BTreeMap<u32, ()>> = (scope == "train").then(|| {
+        splits
+            .iter()
+            .filter(|a| a.split == "train")
+            .map(|a| (a.image_id, ()))
+            .collect()
+    });
+    if let Some(a) = &allowed {
+        let described: std::collections::BTreeSet<u32> = rows.iter().map(|r| r.image_id).collect();
+        if let Some(missing) = a.keys().find(|id| !described.contains(id)) {
+            return Err(EtlError::Usage(format!(
+                "{}: training photo {missing} has no descriptor; run `nrw-etl style` again",
+                args.dataset.display()
+            )));
+        }
+    }
+    let rows: Vec<_> = rows
+        .into_iter()
+        .filter(|r| allowed.as_ref().is_none_or(|a| a.contains_key(&r.image_id)))
+        .collect();
+    if args.k + 1 > rows.len() {
+        return Err(EtlError::Usage(format!(
+            "{}: --k {} needs at least {} photos in scope {scope}, found {}; use --k {} or fewer",
+            args.dataset.display(),
+            args.k,
+            args.k + 1,
+            rows.len(),
+            rows.len().saturating_sub(1)
+        )));
+    }
+    let desc: Vec<Vec<f32>> = rows.iter().map(|r| r.descriptor.clone()).collect();
+    let found = nrw_knn::exact(&desc, args.k).map_err(|e| match e {
+        nrw_knn::KnnError::NotFinite { row, index, value } => EtlError::Usage(format!(
+            "{}: descriptor of photo {} (image {}) has value {value} at {index}: not finite",
+            args.dataset.display(),
+            rows[row].name,
+            rows[row].image_id
+        )),
+        other => EtlError::Usage(format!("{}: {other}", args.dataset.display())),
+    })?;
+    let table: Vec<TripletRow> = rows
+        .iter()
+        .zip(&found)
+        .map(|(r, n)| TripletRow {
+            anchor_id: r.image_id,
+            anchor_name: r.name.clone(),
+            nearest_ids: n.nearest.iter().map(|p| rows[p.0].image_id).collect(),
+            nearest_d2: n.nearest.iter().map(|p| p.1).collect(),
+            furthest_ids: n.furthest.iter().map(|p| rows[p.0].image_id).collect(),
+            furthest_d2: n.furthest.iter().map(|p| p.1).collect(),
+        })
+        .collect();
+    let info = TripletInfo {
+        tier: kind.tier.clone(),
+        method: "exact".into(),
+        scope: scope.into(),
+    };
+    let entry = write_triplets(&args.dataset, &info, &table)?;
+    manifest.tables.retain(|t| t.path != TRIPLETS_TABLE);
+    manifest.tables.push(entry);
+    manifest
+        .parameters
+        .insert("triplets_k".into(), args.k.into());
+    manifest.write(&args.dataset)?;
+    println!(
+        "triplets {}: {} anchors × {} nearest / {} furthest ({}, scope {scope}, exact)",
+        args.dataset.display(),
+        table.len(),
+        args.k,
+        args.k,
+        kind.tier
+    );
+    Ok(())
+}

@@ -1,0 +1,143 @@
+//! The exact path equals a naive f64 double loop, including on the hard cases.
+
+use nrw_knn::{exact, naive, KnnError};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn random(n: usize, dim: usize, seed: u64) -> Vec<Vec<f32>> {
+    let mut r = ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| (0..dim).map(|_| r.random_range(-1.0f32..1.0)).collect())
+        .collect()
+}
+
+fn same(a: &[nrw_knn::Neighbours], b: &[nrw_knn::Neighbours]) {
+    assert_eq!(a.len(), b.len());
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        let ids = |v: &[(usize, f64)]| v.iter().map(|p| p.0).collect::<Vec<_>>();
+        assert_eq!(ids(&x.nearest), ids(&y.nearest), "anchor {i}: nearest");
+        assert_eq!(ids(&x.furthest), ids(&y.furthest), "anchor {i}: furthest");
+        for (p, q) in x
+            .nearest
+            .iter()
+            .chain(&x.furthest)
+            .zip(y.nearest.iter().chain(&y.furthest))
+        {
+            assert!(
+                (p.1 - q.1).abs() <= 1e-6 * q.1.abs().max(f64::MIN_POSITIVE),
+                "anchor {i}: {} vs {}",
+                p.1,
+                q.1
+            );
+        }
+    }
+}
+
+#[test]
+fn random_descriptors_match_the_naive_loop_exactly() {
+    for (n, dim, k) in [(300, 64, 20), (600, 9, 20), (120, 2080, 5)] {
+        let rows = random(n, dim, n as u64);
+        same(&exact(&rows, k).unwrap(), &naive(&rows, k));
+    }
+}
+
+#[test]
+fn clusters_of_near_duplicates_are_ordered_right() {
+    // Where f32 GEMM loses the digits: points 1e-4 apart around a centre of norm ~10.
+    let mut r = ChaCha8Rng::seed_from_u64(3);
+    let centre: Vec<f32> = (0..64).map(|_| r.random_range(5.0f32..6.0)).collect();
+    let rows: Vec<Vec<f32>> = (0..200)
+        .map(|_| {
+            centre
+                .iter()
+                .map(|c| c + r.random_range(-1e-4f32..1e-4))
+                .collect()
+        })
+        .collect();
+    same(&exact(&rows, 20).unwrap(), &naive(&rows, 20));
+}
+
+#[test]
+fn duplicates_identical_rows_and_ties_go_by_index() {
+    let mut rows = random(50, 16, 9);
+    rows[7] = rows[3].clone();
+    rows[20] = rows[3].clone();
+    let e = exact(&rows, 5).unwrap();
+    assert_eq!(e[3].nearest[..2], [(7, 0.0), (20, 0.0)]);
+    same(&e, &naive(&rows, 5));
+    let all = vec![vec![0.25f32; 8]; 12];
+    let e = exact(&all, 4).unwrap();
+    assert_eq!(
+        e[5].nearest.iter().map(|p| p.0).collect::<Vec<_>>(),
+        [0, 1, 2, 3]
+    );
+    assert_eq!(
+        e[0].furthest.iter().map(|p| p.0).collect::<Vec<_>>(),
+        [1, 2, 3, 4]
+    );
+}
+
+#[test]
+fn tiny_n_and_k_equal_to_n_minus_one() {
+    let two = random(2, 10, 1);
+    let e = exact(&two, 1).unwrap();
+    assert_eq!(
+        (e[0].nearest[0].0, e[0].furthest[0].0, e[1].nearest[0].0),
+        (1, 1, 0)
+    );
+    let rows = random(21, 10, 2);
+    same(&exact(&rows, 20).unwrap(), &naive(&rows, 20));
+    assert_eq!(
+        exact(&rows, 21).unwrap_err(),
+        KnnError::TooFew {
+            k: 21,
+            need: 22,
+            n: 21
+        }
+    );
+}
+
+#[test]
+fn huge_and_tiny_magnitudes_together() {
+    // Night photos have orders of magnitude less Gram energy than day photos.
+    let mut rows = random(150, 32, 5);
+    for (i, r) in rows.iter_mut().enumerate() {
+        let s = if i % 3 == 0 {
+            1e6
+        } else if i % 3 == 1 {
+            1e-6
+        } else {
+            1.0
+        };
+        r.iter_mut().for_each(|v| *v *= s);
+    }
+    same(&exact(&rows, 20).unwrap(), &naive(&rows, 20));
+}
+
+#[test]
+fn nan_and_ragged_rows_name_the_row() {
+    let mut rows = random(10, 4, 1);
+    rows[6][2] = f32::NAN;
+    let e = exact(&rows, 3).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            KnnError::NotFinite {
+                row: 6,
+                index: 2,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let mut rows = random(10, 4, 1);
+    rows[4].pop();
+    assert_eq!(
+        exact(&rows, 3).unwrap_err(),
+        KnnError::Dimension {
+            row: 4,
+            len: 3,
+            dim: 4
+        }
+    );
+}

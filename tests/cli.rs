@@ -318,6 +318,12 @@ fn demo_builds_the_embedded_scene_and_runs_every_stage() {
         .count();
     assert_eq!(exported, kept);
     assert!(stdout.contains("export:  "), "{stdout}");
+    // Style descriptors and triplets ran too, on the training photos.
+    let (kind, desc) = nrw_dataset::descriptors::read_all(&dataset)
+        .unwrap()
+        .unwrap();
+    assert_eq!((kind.tier.as_str(), desc.len()), ("color-stats", kept));
+    assert!(dataset.join("triplets.parquet").is_file());
     let report: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(scene.join("ground_truth/report.json")).unwrap(),
     )

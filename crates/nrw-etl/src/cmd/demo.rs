@@ -20,9 +20,14 @@ pub struct DemoArgs {
     /// Override the scene's seed
     #[arg(long)]
     pub seed: Option<u64>,
+    /// VGG16 weights (safetensors, torchvision names) for the paper's style tier; without
+    /// them the demo uses the colour-statistics tier
+    #[arg(long)]
+    pub weights: Option<std::path::PathBuf>,
 }
 
-/// Run `demo`: synthesise the scene, then every pipeline stage that exists (ingest, split, export).
+/// Run `demo`: synthesise the scene, then every pipeline stage that exists (ingest, split,
+/// style, triplets, export).
 pub fn run(args: &DemoArgs) -> Result<()> {
     let spec = super::synth::load_spec(args.spec.as_deref(), args.seed)?;
     let scene = args.out.join("scene");
@@ -40,6 +45,29 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         dataset: dataset.clone(),
         val,
         seed: 0,
+    })?;
+    // The demo ships no network weights (nothing is downloaded): it describes style with the
+    // explicit non-neural tier; `--weights FILE` selects the paper's VGG16 tier instead.
+    let tier = if args.weights.is_some() {
+        "vgg16-512"
+    } else {
+        "color-stats"
+    };
+    super::style::run(&super::style::StyleArgs {
+        dataset: Some(dataset.clone()),
+        tier: tier.into(),
+        weights: args.weights.clone(),
+        overwrite: true,
+        image: None,
+        out: None,
+        preprocess: super::style::Pre::Imagenet,
+        quiet: false,
+    })?;
+    let train = summary.kept - val;
+    super::triplets::run(&super::triplets::TripletsArgs {
+        dataset: dataset.clone(),
+        k: 20.min(train.saturating_sub(1)).max(1),
+        all_splits: false,
     })?;
     let export = args.out.join("export");
     super::export::run(&super::export::ExportArgs {

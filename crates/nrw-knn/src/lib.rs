@@ -10,6 +10,8 @@
 //! The result equals a naive f64 double loop: same ids, same order, same distances. Ties are
 //! broken by the lower index, so tables are deterministic.
 
+pub mod approx;
+
 use gemm::Parallelism;
 use rayon::prelude::*;
 

@@ -1319,3 +1319,26 @@ fn triplets_come_from_the_training_split_in_exact_order() {
         .iter()
         .any(|t| t["path"] == "triplets.parquet"));
 }
+
+#[test]
+fn approximate_triplets_store_their_measured_recall() {
+    use arrow_array::{Float64Array, StringArray};
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = small_dataset(tmp.path(), 8, false);
+    let d = ds.to_str().unwrap();
+    ok(&["split", d, "--val", "0"]);
+    ok(&["style", d, "--tier", "color-stats", "--quiet"]);
+    ok(&["triplets", d, "--k", "3", "--pca", "9"]);
+    let b = &nrw_dataset::parquet_io::read_batches(&ds.join("triplets.parquet"), None).unwrap()[0];
+    assert_eq!(column::<StringArray>(b, "method").value(0), "pca-9");
+    // PCA to the full 9 dimensions loses nothing: recall is exactly 1 and was stored.
+    assert_eq!(column::<Float64Array>(b, "recall_nearest").value(0), 1.0);
+    assert_eq!(column::<Float64Array>(b, "recall_furthest").value(0), 1.0);
+    ok(&["triplets", d, "--k", "3"]);
+    let b = &nrw_dataset::parquet_io::read_batches(&ds.join("triplets.parquet"), None).unwrap()[0];
+    assert_eq!(column::<StringArray>(b, "method").value(0), "exact");
+    assert!(arrow_array::Array::is_null(
+        column::<Float64Array>(b, "recall_nearest"),
+        0
+    ));
+}

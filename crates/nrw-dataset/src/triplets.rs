@@ -34,6 +34,8 @@ pub struct TripletInfo {
     pub method: String,
     /// Splits anchors and neighbours were drawn from, e.g. `train`.
     pub scope: String,
+    /// Recall@k of the nearest and furthest lists against the exact path, when measured.
+    pub recall: Option<(f64, f64)>,
 }
 
 /// Arrow schema of `triplets.parquet` (documented in schemas/triplets.toml).
@@ -49,6 +51,8 @@ pub fn triplets_schema() -> SchemaRef {
         Field::new("tier", DataType::Utf8, false),
         Field::new("method", DataType::Utf8, false),
         Field::new("scope", DataType::Utf8, false),
+        Field::new("recall_nearest", DataType::Float64, true),
+        Field::new("recall_furthest", DataType::Float64, true),
     ]))
 }
 
@@ -95,6 +99,12 @@ pub fn write_triplets(dir: &Path, info: &TripletInfo, rows: &[TripletRow]) -> Re
             rep(&info.tier),
             rep(&info.method),
             rep(&info.scope),
+            Arc::new(arrow_array::Float64Array::from_iter(
+                rows.iter().map(|_| info.recall.map(|r| r.0)),
+            )),
+            Arc::new(arrow_array::Float64Array::from_iter(
+                rows.iter().map(|_| info.recall.map(|r| r.1)),
+            )),
         ],
     )
     .map_err(|e| DatasetError::Arrow {

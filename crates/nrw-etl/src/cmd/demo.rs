@@ -68,6 +68,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         dataset: dataset.clone(),
         k: 20.min(train.saturating_sub(1)).max(1),
         all_splits: false,
+        pca: None,
+        check_up_to: 20_000,
     })?;
     let export = args.out.join("export");
     super::export::run(&super::export::ExportArgs {

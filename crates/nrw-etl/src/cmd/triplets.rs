@@ -22,6 +22,13 @@ pub struct TripletsArgs {
     /// validation photos never appear)
     #[arg(long)]
     pub all_splits: bool,
+    /// Approximate: candidates from a PCA projection to this many dimensions, re-ranked
+    /// exactly (for large N; recall against the exact path is measured and stored when N ≤ --check-up-to)
+    #[arg(long)]
+    pub pca: Option<usize>,
+    /// Measure the approximate path's recall against the exact one up to this many photos
+    #[arg(long, default_value_t = 20_000)]
+    pub check_up_to: usize,
 }
 
 /// Run `triplets`.
@@ -71,7 +78,7 @@ pub fn run(args: &TripletsArgs) -> Result<()> {
         )));
     }
     let desc: Vec<Vec<f32>> = rows.iter().map(|r| r.descriptor.clone()).collect();
-    let found = nrw_knn::exact(&desc, args.k).map_err(|e| match e {
+    let name_err = |e: nrw_knn::KnnError| match e {
         nrw_knn::KnnError::NotFinite { row, index, value } => EtlError::Usage(format!(
             "{}: descriptor of photo {} (image {}) has value {value} at {index}: not finite",
             args.dataset.display(),
@@ -79,7 +86,31 @@ pub fn run(args: &TripletsArgs) -> Result<()> {
             rows[row].image_id
         )),
         other => EtlError::Usage(format!("{}: {other}", args.dataset.display())),
-    })?;
+    };
+    let (found, method, recall) = match args.pca {
+        None => (
+            nrw_knn::exact(&desc, args.k).map_err(name_err)?,
+            "exact".to_string(),
+            None,
+        ),
+        Some(rank) => {
+            let approx =
+                nrw_knn::approx::approximate(&desc, args.k, rank, 3, 0).map_err(name_err)?;
+            let recall = (desc.len() <= args.check_up_to)
+                .then(|| {
+                    nrw_knn::exact(&desc, args.k).map(|e| nrw_knn::approx::recall(&e, &approx))
+                })
+                .transpose()
+                .map_err(name_err)?;
+            if let Some((n, f)) = recall {
+                eprintln!(
+                    "pca-{rank}: recall@{} against the exact path: nearest {n:.3}, furthest {f:.3}",
+                    args.k
+                );
+            }
+            (approx, format!("pca-{rank}"), recall)
+        }
+    };
     let table: Vec<TripletRow> = rows
         .iter()
         .zip(&found)
@@ -94,8 +125,9 @@ pub fn run(args: &TripletsArgs) -> Result<()> {
         .collect();
     let info = TripletInfo {
         tier: kind.tier.clone(),
-        method: "exact".into(),
+        method: method.clone(),
         scope: scope.into(),
+        recall,
     };
     let entry = write_triplets(&args.dataset, &info, &table)?;
     manifest.tables.retain(|t| t.path != TRIPLETS_TABLE);
@@ -105,7 +137,7 @@ pub fn run(args: &TripletsArgs) -> Result<()> {
         .insert("triplets_k".into(), args.k.into());
     manifest.write(&args.dataset)?;
     println!(
-        "triplets {}: {} anchors × {} nearest / {} furthest ({}, scope {scope}, exact)",
+        "triplets {}: {} anchors × {} nearest / {} furthest ({}, scope {scope}, {method})",
         args.dataset.display(),
         table.len(),
         args.k,

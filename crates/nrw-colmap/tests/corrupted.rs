@@ -56,7 +56,12 @@ fn every_truncation_of_every_file_is_an_error_naming_the_file() {
             for cut in cuts(full.len()) {
                 std::fs::write(&path, &full[..cut]).unwrap();
                 let err = expect_err(dir.path(), f, &[]);
-                assert_located(&err, &format!("{name}.{}", f.ext()), f, cut == 0 || full[cut - 1] == b'\n');
+                assert_located(
+                    &err,
+                    &format!("{name}.{}", f.ext()),
+                    f,
+                    cut == 0 || full[cut - 1] == b'\n',
+                );
             }
             std::fs::write(&path, &full).unwrap();
         }
@@ -68,13 +73,25 @@ fn every_truncation_of_every_file_is_an_error_naming_the_file() {
 /// named, except where a text file was cut between whole lines: it then parses, and the
 /// records it lost are reported where another file refers to them.
 fn assert_located(err: &str, cut_file: &str, f: Format, whole_lines: bool) {
-    let (file, rest) = err.split_once(": ").unwrap_or_else(|| panic!("no file in {err:?}"));
-    let model_file = ["cameras", "images", "points3D"].iter().any(|n| file.ends_with(&format!("{n}.{}", f.ext())));
+    let (file, rest) = err
+        .split_once(": ")
+        .unwrap_or_else(|| panic!("no file in {err:?}"));
+    let model_file = ["cameras", "images", "points3D"]
+        .iter()
+        .any(|n| file.ends_with(&format!("{n}.{}", f.ext())));
     assert!(model_file, "{err:?} does not start with a model file");
-    let record = ["file header", "#", "line ", " id "].iter().any(|r| rest.split(": field `").next().unwrap().contains(r));
-    assert!(record && rest.contains(": field `"), "{err:?} lacks record or field");
+    let record = ["file header", "#", "line ", " id "]
+        .iter()
+        .any(|r| rest.split(": field `").next().unwrap().contains(r));
+    assert!(
+        record && rest.contains(": field `"),
+        "{err:?} lacks record or field"
+    );
     if f == Format::Binary || !whole_lines {
-        assert!(file.ends_with(cut_file), "{err:?} should name the truncated {cut_file}");
+        assert!(
+            file.ends_with(cut_file),
+            "{err:?} should name the truncated {cut_file}"
+        );
     }
 }
 

@@ -126,15 +126,19 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             }
             written += 1;
         }
-        if args.layout == Layout::Official {
-            let ids: Vec<u32> = ds.ids(split)?.to_vec();
-            write(
-                &dir.join("index.json"),
-                serde_json::to_string_pretty(&serde_json::json!({ "image_ids": ids }))
-                    .expect("json")
-                    .as_bytes(),
-            )?;
-        }
+    }
+    if args.layout == Layout::Official {
+        // Beside the split folders, not in them: those hold exactly the paper's files.
+        let index: serde_json::Map<String, serde_json::Value> = splits
+            .iter()
+            .map(|s| Ok((s.clone(), serde_json::json!(ds.ids(s)?))))
+            .collect::<Result<_>>()?;
+        write(
+            &args.out.join("index.json"),
+            serde_json::to_string_pretty(&index)
+                .expect("json")
+                .as_bytes(),
+        )?;
     }
     let scale = serde_json::json!({
         "depth_max": depth_max,

@@ -382,12 +382,7 @@ fn files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
 
 /// A small synthetic scene whose photos pass a lowered size filter.
 fn small_scene(dir: &Path, photos: usize) {
-    let mut spec = nrw_synth::SceneSpec::demo();
-    spec.cameras.count = photos;
-    spec.cameras.min_size = 120;
-    spec.cameras.max_size = 160;
-    spec.cameras.small_fraction = 0.0;
-    spec.geometry.points = 60_000;
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(photos, (120, 160), 60_000);
     spec.observations.features = 300;
     nrw_synth::generate(&spec, dir, &|| {}).unwrap();
 }
@@ -654,14 +649,8 @@ fn semantics_are_stored_colour_coded_with_a_transient_mask() {
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
     let tmp = tempfile::tempdir().unwrap();
     let scene = tmp.path().join("scene");
-    let mut spec = nrw_synth::SceneSpec::demo();
-    spec.cameras.count = 4;
-    spec.cameras.min_size = 120;
-    spec.cameras.max_size = 150;
-    spec.cameras.small_fraction = 0.0;
-    spec.cameras.away_fraction = 0.0;
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(4, (120, 150), 60_000);
     spec.effects.transients = Some(6.0);
-    spec.geometry.points = 60_000;
     nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
     let out = tmp.path().join("ds");
     let labels = scene.join("ground_truth/semantics");
@@ -740,13 +729,7 @@ fn semantics_are_stored_colour_coded_with_a_transient_mask() {
 /// A dataset of a small synthetic scene (photos pass lowered filters), with `n` photos.
 fn small_dataset(tmp: &Path, n: usize, semantics: bool) -> PathBuf {
     let scene = tmp.join(format!("scene{n}"));
-    let mut spec = nrw_synth::SceneSpec::demo();
-    spec.cameras.count = n;
-    spec.cameras.min_size = 120;
-    spec.cameras.max_size = 150;
-    spec.cameras.small_fraction = 0.0;
-    spec.cameras.away_fraction = 0.0;
-    spec.geometry.points = 60_000;
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(n, (120, 150), 60_000);
     spec.observations.features = 300;
     nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
     let out = tmp.join(format!("ds{n}"));

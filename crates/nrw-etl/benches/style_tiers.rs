@@ -58,13 +58,7 @@ struct Scene {
 }
 
 fn synthetic(quick: bool, dir: &Path) -> Scene {
-    let mut spec = nrw_synth::SceneSpec::demo();
-    spec.cameras.count = if quick { 24 } else { 60 };
-    spec.cameras.min_size = 520;
-    spec.cameras.max_size = 600;
-    spec.cameras.small_fraction = 0.0;
-    spec.cameras.away_fraction = 0.0;
-    spec.geometry.points = 10_000;
+    let spec = nrw_synth::SceneSpec::demo().shrunk(if quick { 24 } else { 60 }, (520, 600), 10_000);
     nrw_synth::generate(&spec, dir, &|| {}).unwrap();
     let truth: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.join("ground_truth/appearance.json")).unwrap(),

@@ -40,13 +40,9 @@ struct Row {
 }
 
 fn accuracy(quick: bool) {
-    let mut spec = SceneSpec::demo();
+    let points = SceneSpec::demo().geometry.points;
+    let mut spec = SceneSpec::demo().shrunk(if quick { 3 } else { 8 }, (600, 600), points);
     spec.effects = Default::default();
-    spec.cameras.count = if quick { 3 } else { 8 };
-    spec.cameras.min_size = 600;
-    spec.cameras.max_size = 600;
-    spec.cameras.small_fraction = 0.0;
-    spec.cameras.away_fraction = 0.0;
     let dir = tempfile::tempdir().unwrap();
     nrw_synth::generate(&spec, dir.path(), &|| {}).unwrap();
     let rec = read_model(&dir.path().join("sparse/0"), Some(Format::Binary)).unwrap();

@@ -15,14 +15,10 @@ fn root() -> PathBuf {
 
 fn synth(name: &str, edit: impl Fn(&mut SceneSpec)) -> tempfile::TempDir {
     let text = std::fs::read_to_string(root().join("scenes").join(format!("{name}.toml"))).unwrap();
-    let mut s = SceneSpec::from_toml(&text, name).unwrap();
-    s.cameras.count = 3;
-    s.cameras.min_size = 120;
-    s.cameras.max_size = 150;
-    s.cameras.small_fraction = 0.0;
-    s.cameras.away_fraction = 0.0;
     // Dense enough that neighbouring points are about a pixel apart at these sizes.
-    s.geometry.points = 400_000;
+    let mut s = SceneSpec::from_toml(&text, name)
+        .unwrap()
+        .shrunk(3, (120, 150), 400_000);
     s.observations.features = 300;
     s.effects.transients = None;
     edit(&mut s);

@@ -165,6 +165,17 @@ impl SceneSpec {
         toml::from_str(DEMO_TOML).expect("embedded demo spec parses")
     }
 
+    /// The same scene at test or benchmark size: `photos` photos whose shorter sides lie in
+    /// `sizes`, every one usable (none small, none looking away), `points` dense points.
+    pub fn shrunk(mut self, photos: usize, sizes: (u32, u32), points: usize) -> SceneSpec {
+        self.cameras.count = photos;
+        (self.cameras.min_size, self.cameras.max_size) = sizes;
+        self.cameras.small_fraction = 0.0;
+        self.cameras.away_fraction = 0.0;
+        self.geometry.points = points;
+        self
+    }
+
     /// Parse a spec file's text; `origin` names the file in errors.
     pub fn from_toml(text: &str, origin: &str) -> Result<SceneSpec> {
         let spec: SceneSpec = toml::from_str(text).map_err(|e| SynthError::Spec {

@@ -1336,3 +1336,132 @@ fn approximate_triplets_store_their_measured_recall() {
         0
     ));
 }
+
+/// A hard-case scene from scenes/, at test size.
+fn hard_case(tmp: &Path, name: &str) -> PathBuf {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{name}.toml")),
+    )
+    .unwrap();
+    let spec = nrw_synth::SceneSpec::from_toml(&text, name).unwrap();
+    let photos = spec.cameras.count.min(5);
+    let points = spec.geometry.points.min(60_000);
+    let mut spec = spec.shrunk(photos, (120, 150), points);
+    spec.observations.features = 300;
+    let scene = tmp.join(name);
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    scene
+}
+
+#[test]
+fn hard_case_scenes_go_through_every_later_stage() {
+    let tmp = tempfile::tempdir().unwrap();
+    for name in ["utm", "fisheye", "one_photo", "sparse_views"] {
+        let scene = hard_case(tmp.path(), name);
+        let ds = tmp.path().join(format!("{name}_ds"));
+        let d = ds.to_str().unwrap();
+        let o = nrw(&[
+            "ingest",
+            scene.to_str().unwrap(),
+            "--out",
+            d,
+            "--min-photo-side",
+            "100",
+            "--min-dim",
+            "96",
+            "--quiet",
+            "--json",
+        ]);
+        let kept = serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["kept"]
+            .as_u64()
+            .unwrap() as usize;
+        match name {
+            // Every view far more than 85% empty: exit 3, and the later stages say why they stop.
+            "sparse_views" => {
+                assert_eq!((o.status.code(), kept), (Some(3), 0));
+                ok(&["split", d, "--val", "0"]);
+                for args in [
+                    vec!["triplets", d, "--k", "1"],
+                    vec!["export", d, "--out", tmp.path().join("x").to_str().unwrap()],
+                ] {
+                    let err = fails(&args);
+                    assert!(
+                        err.contains("no kept view") && err.contains("dropped all"),
+                        "{err}"
+                    );
+                }
+                continue;
+            }
+            _ => assert!(
+                o.status.success() && kept >= 1,
+                "{name}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            ),
+        }
+        ok(&["split", d, "--val", if kept > 2 { "1" } else { "0" }]);
+        ok(&["style", d, "--tier", "color-stats", "--quiet"]);
+        let train = nrw_dataset::split::read_splits(&ds)
+            .unwrap()
+            .iter()
+            .filter(|a| a.split == "train")
+            .count();
+        if train >= 2 {
+            ok(&["triplets", d, "--k", "1"]);
+        } else {
+            // One photo: no neighbour exists; the error says how many are needed.
+            let err = fails(&["triplets", d, "--k", "1"]);
+            assert!(
+                err.contains("needs at least 2 photos") && err.contains("found 1"),
+                "{name}: {err}"
+            );
+        }
+        let out = tmp.path().join(format!("{name}_export"));
+        ok(&["export", d, "--out", out.to_str().unwrap()]);
+        let exported = walk(&out)
+            .iter()
+            .filter(|p| p.to_string_lossy().ends_with("_reference.png"))
+            .count();
+        assert_eq!(exported, kept, "{name}");
+        // The georeferenced scene's shards carry its far-away poses in full precision.
+        if name == "utm" {
+            let v = nrw_dataset::reader::Dataset::open(&ds).unwrap();
+            let first = v.iter_split("train").unwrap().next().unwrap().unwrap();
+            let c = nrw_colmap::Rigid3::from_colmap(first.qvec, first.tvec)
+                .unwrap()
+                .0
+                .centre();
+            assert!(c.x > 4.9e6 && c.y > 4.9e6, "{c:?}");
+        }
+    }
+}
+
+#[test]
+fn the_generator_works_with_every_camera_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    for model in nrw_colmap::CameraModel::ALL {
+        let mut spec = nrw_synth::SceneSpec::demo().shrunk(3, (120, 160), 3000);
+        spec.cameras.model = model.name().into();
+        spec.observations.features = 1500;
+        spec.effects = Default::default();
+        let scene = tmp.path().join(model.name());
+        let report = nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&ok(&["inspect", scene.to_str().unwrap(), "--json"])).unwrap();
+        assert_eq!(v["camera_models"][0], model.name());
+        let mean = report
+            .mean_reprojection_error_px
+            .unwrap_or_else(|| panic!("{}: no 3D point to compare", model.name()));
+        assert!(
+            report.sparse_points > 20,
+            "{}: {} points",
+            model.name(),
+            report.sparse_points
+        );
+        let got = v["mean_reprojection_error_px"].as_f64().unwrap();
+        assert!(
+            (got - mean).abs() < 1e-9,
+            "{}: inspect {got} vs generator {mean}",
+            model.name()
+        );
+    }
+}

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 use nrw_dataset::atomic::write_bytes_atomic;
-use nrw_dataset::reader::Dataset;
 
 use crate::error::{EtlError, Result};
 
@@ -62,7 +61,7 @@ fn write(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Run `export`.
 pub fn run(args: &ExportArgs) -> Result<()> {
-    let ds = Dataset::open(&args.dataset)?;
+    let ds = super::require_views(&args.dataset)?;
     let splits: Vec<String> = ds.splits().into_iter().map(|(k, _)| k).collect();
     if args.layout == Layout::Official && !splits.iter().any(|s| s == "train") {
         return Err(EtlError::Usage(format!(

@@ -42,6 +42,21 @@ pub fn load_model(
     Ok((dir, rec))
 }
 
+/// Refuse stages that need views when ingest kept none, saying so (rather than pointing at a
+/// missing earlier stage).
+pub fn require_views(dataset: &Path) -> crate::error::Result<nrw_dataset::reader::Dataset> {
+    let ds = nrw_dataset::reader::Dataset::open(dataset)?;
+    if ds.is_empty() {
+        let registered = nrw_dataset::scene::read_verdicts(dataset)?.len();
+        return Err(crate::error::EtlError::Usage(format!(
+            "{}: no kept view: ingest dropped all {registered} registered photos (`nrw-etl inspect {}` shows why)",
+            dataset.display(),
+            dataset.display()
+        )));
+    }
+    Ok(ds)
+}
+
 /// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
 pub fn describe(rec: &nrw_colmap::Reconstruction) -> (&'static str, &'static str) {
     let enc = rec.format.map_or("?", |f| f.ext());

@@ -33,6 +33,7 @@ pub struct TripletsArgs {
 
 /// Run `triplets`.
 pub fn run(args: &TripletsArgs) -> Result<()> {
+    super::require_views(&args.dataset)?;
     let mut manifest = Manifest::read(&args.dataset)?;
     let Some((kind, rows)) = nrw_dataset::descriptors::read_all(&args.dataset)? else {
         return Err(EtlError::Usage(format!(

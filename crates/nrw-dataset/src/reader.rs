@@ -308,6 +308,20 @@ impl Dataset {
         split: &str,
     ) -> Result<impl Iterator<Item = Result<View>> + 'a> {
         let ids = self.ids(split)?;
+        self.iter_ids(ids)
+    }
+
+    /// Stream the views of any kept image ids, a row group at a time (each row group read
+    /// once however many of its rows are wanted), in shard and row order.
+    pub fn iter_ids<'a>(&'a self, ids: &[u32]) -> Result<impl Iterator<Item = Result<View>> + 'a> {
+        for id in ids {
+            if !self.index.contains_key(id) {
+                return Err(DatasetError::Schema {
+                    path: self.dir.clone(),
+                    problem: format!("image {id} is not a kept view of this dataset"),
+                });
+            }
+        }
         let mut per_shard: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
         for id in ids {
             let loc = self.index[id];

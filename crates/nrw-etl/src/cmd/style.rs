@@ -171,19 +171,22 @@ pub fn run(args: &StyleArgs) -> Result<()> {
                 continue;
             }
         }
-        let rows: Vec<DescriptorRow> = group
+        // Read the group's photos a row group at a time (sequential I/O), then describe them
+        // in parallel.
+        let views: Vec<_> = ds.iter_ids(group)?.collect::<std::result::Result<_, _>>()?;
+        let mut rows: Vec<DescriptorRow> = views
             .par_iter()
-            .map(|id| {
-                let v = ds.get(*id)?;
+            .map(|v| {
                 let d = describe(&tier, net.as_ref(), &v.photo()?, Parallelism::None);
                 bar.inc(1);
                 Ok(DescriptorRow {
-                    image_id: *id,
-                    name: v.name,
+                    image_id: v.image_id,
+                    name: v.name.clone(),
                     descriptor: d,
                 })
             })
             .collect::<Result<_>>()?;
+        rows.sort_by_key(|r| r.image_id);
         write_part(dir, k, &kind, &rows)?;
         done += 1;
     }

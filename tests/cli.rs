@@ -920,6 +920,20 @@ fn official_export_has_the_papers_files_and_round_trips_losslessly() {
         serde_json::from_str(&std::fs::read_to_string(out.join("depth_scale.json")).unwrap())
             .unwrap();
     let depth_max = scale["depth_max"].as_f64().unwrap();
+    // The scale recorded at ingest is the largest depth of any view, checked by decoding them all.
+    let decoded_max = ["train", "val"]
+        .iter()
+        .flat_map(|s| ds.iter_split(s).unwrap())
+        .map(|v| {
+            v.unwrap()
+                .depth()
+                .unwrap()
+                .data
+                .iter()
+                .fold(0f32, |m, d| m.max(*d))
+        })
+        .fold(0f32, f32::max);
+    assert_eq!(depth_max, decoded_max as f64);
     for (split, n) in [("train", 4), ("val", 2)] {
         let files: Vec<String> = std::fs::read_dir(out.join(split))
             .unwrap()

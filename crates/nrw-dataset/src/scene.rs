@@ -62,6 +62,8 @@ pub fn images_schema() -> SchemaRef {
         Field::new("render_width", DataType::UInt32, true),
         Field::new("render_height", DataType::UInt32, true),
         Field::new("shard", DataType::Utf8, true),
+        Field::new("depth_min", DataType::Float64, true),
+        Field::new("depth_max", DataType::Float64, true),
     ]))
 }
 
@@ -76,6 +78,8 @@ pub struct ImageOutcome {
     pub render_size: Option<(u32, u32)>,
     /// Shard holding the view's row, when kept.
     pub shard: Option<String>,
+    /// Smallest and largest rendered depth (camera-space z) of the view, when kept.
+    pub depth_range: Option<(f64, f64)>,
 }
 
 fn to_u32(v: u64, table: &str, record: String, field: &str) -> Result<u32> {
@@ -230,6 +234,12 @@ pub fn images_batch(
             Arc::new(StringArray::from_iter(
                 outs.iter().map(|o| o.shard.as_deref()),
             )),
+            Arc::new(Float64Array::from_iter(
+                outs.iter().map(|o| o.depth_range.map(|r| r.0)),
+            )),
+            Arc::new(Float64Array::from_iter(
+                outs.iter().map(|o| o.depth_range.map(|r| r.1)),
+            )),
         ],
     )
 }
@@ -265,4 +275,18 @@ pub fn read_verdicts(dir: &Path) -> Result<Vec<(u32, String, String)>> {
         }
     }
     Ok(out)
+}
+
+/// The largest rendered depth over the kept views (from `depth_max`), if any view was kept.
+pub fn read_depth_max(dir: &Path) -> Result<Option<f64>> {
+    use crate::parquet_io::column;
+    let path = dir.join(IMAGES_TABLE);
+    let mut max: Option<f64> = None;
+    for b in crate::parquet_io::read_batches(&path, Some(&["depth_max"]))? {
+        let d = column::<Float64Array>(&b, "depth_max", &path)?;
+        for v in d.iter().flatten() {
+            max = Some(max.map_or(v, |m: f64| m.max(v)));
+        }
+    }
+    Ok(max)
 }

@@ -70,15 +70,8 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             args.dataset.display()
         )));
     }
-    // One pass for the depth scale: the largest depth of the dataset maps to 65535.
-    let mut depth_max = 0.0f64;
-    for split in &splits {
-        for v in ds.iter_split(split)? {
-            let d = v?.depth()?;
-            depth_max = d.data.iter().fold(depth_max, |m, &x| m.max(x as f64));
-        }
-    }
-    let depth_max = if depth_max > 0.0 { depth_max } else { 1.0 };
+    // The depth scale: the largest depth of the dataset (recorded per view by ingest) maps to 65535.
+    let depth_max = nrw_dataset::scene::read_depth_max(&args.dataset)?.unwrap_or(1.0);
     let mut written = 0usize;
     for split in &splits {
         let dir = args.out.join(split);

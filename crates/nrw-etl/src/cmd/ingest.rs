@@ -288,6 +288,7 @@ fn process(
                 empty_ratio: None,
                 render_size: None,
                 shard: None,
+                depth_range: None,
             },
             None,
         ));
@@ -303,10 +304,22 @@ fn process(
         empty_ratio: Some(empty),
         render_size: Some((w, h)),
         shard: None,
+        depth_range: None,
     };
     if !matches!(verdict, Verdict::Kept { .. }) {
         return Ok((outcome, None));
     }
+    // Kept: record its depth range (export's 16-bit scale and QA's depth plots read it).
+    let outcome = ImageOutcome {
+        depth_range: buf.depth.iter().filter(|d| **d > 0.0).fold(
+            None,
+            |r: Option<(f64, f64)>, &d| {
+                let d = d as f64;
+                Some(r.map_or((d, d), |(lo, hi)| (lo.min(d), hi.max(d))))
+            },
+        ),
+        ..outcome
+    };
     let photo_path = photos_dir.join(&img.name);
     let photo = resize_photo(&load_photo(&photo_path)?, w, h);
     let name = format!("image {}", img.id);

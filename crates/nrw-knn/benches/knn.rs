@@ -17,6 +17,9 @@ use nrw_knn::{exact, naive};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+#[path = "../../../tests/support/npy.rs"]
+mod npy;
+
 const DIM: usize = 2080; // the size of a relu1_2 Gram descriptor (vgg16-*-l1)
 const K: usize = 20;
 
@@ -59,27 +62,6 @@ t = time.perf_counter(); index = faiss.IndexFlatL2(x.shape[1]); index.add(x); D,
 np.save(sys.argv[4], I[:, 1:].astype(np.int64))
 print(t)
 "#;
-
-fn write_npy(path: &Path, rows: &[Vec<f32>]) {
-    let mut header = format!(
-        "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}), }}",
-        rows.len(),
-        DIM
-    );
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for r in rows {
-        for v in r {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-    std::fs::write(path, out).unwrap();
-}
 
 fn read_npy_i64(path: &Path) -> Vec<i64> {
     let b = std::fs::read(path).unwrap();
@@ -130,7 +112,8 @@ fn main() {
             );
             eprintln!("N {n}: pca-{rank} {ta:.2} s recall {rn:.3}/{rf:.3}");
         }
-        write_npy(&tmp.path().join("x.npy"), &rows);
+        let flat: Vec<f32> = rows.iter().flatten().copied().collect();
+        npy::write_npy_f32(&tmp.path().join("x.npy"), &flat, DIM);
         let out = Command::new("python3")
             .args(["-c", FAISS])
             .arg(tmp.path().join("x.npy"))

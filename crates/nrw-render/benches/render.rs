@@ -20,6 +20,10 @@ use nrw_synth::geometry::Landmark;
 use nrw_synth::SceneSpec;
 use rand::SeedableRng;
 
+#[path = "../../../tests/support/npy.rs"]
+mod npy;
+use npy::write_npy_f32 as write_npy;
+
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
@@ -239,23 +243,6 @@ fn svg(rows: &[Row]) -> String {
     }
     s.push_str("</svg>\n");
     s
-}
-
-fn write_npy(path: &Path, data: &[f32], cols: usize) {
-    let rows = data.len() / cols;
-    let mut header =
-        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for v in data {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    std::fs::write(path, out).unwrap();
 }
 
 const OPEN3D: &str = r#"

@@ -1,13 +1,14 @@
 //! Exact k-nearest and k-furthest neighbours under squared Euclidean distance (which, for
 //! `nrw-style` descriptors, is the style distance), for triplet mining.
 //!
-//! All-pairs distances come from the GEMM identity ‖a−b‖² = ‖a‖² + ‖b‖² − 2a·b in f32,
-//! blocked over anchors so memory stays O(block · N), never N × N. In f32 that identity loses
-//! digits when two descriptors are close, so it only *selects* candidates: with the standard
-//! bound |fl(a·b) − a·b| ≤ γ_D ‖a‖‖b‖ (γ_D = D·u / (1 − D·u), u = 2⁻²⁴) every pair gets an
-//! interval that must contain its true distance; any point that could be among the true k
-//! nearest (furthest) is kept, and the candidates are re-ranked with Σ(a−b)² summed in f64.
-//! The result equals a naive f64 double loop: same ids, same order, same distances. Ties are
+//! All-pairs distances come from the GEMM identity ‖a−b‖² = ‖a‖² + ‖b‖² − 2a·b in f32 (or
+//! f64 for small N), blocked over anchors so memory stays O(block · N), never N × N. That
+//! identity loses digits when two descriptors are close, so it only *selects* candidates: with
+//! the standard bound |fl(a·b) − a·b| ≤ γ_D ‖a‖‖b‖ (γ_D = D·u / (1 − D·u), u = 2⁻²⁴ or 2⁻⁵³)
+//! every pair gets an interval that must contain its true distance; any point that could be
+//! among the true k nearest (furthest) is kept, and the candidates are re-ranked with Σ(a−b)²
+//! summed in f64 unless their intervals already prove the order and seven digits. The result
+//! equals a naive f64 double loop: same ids, same order, distances to 1e-7 relative. Ties are
 //! broken by the lower index, so tables are deterministic.
 
 pub mod approx;
@@ -37,14 +38,55 @@ pub struct Neighbours {
     pub furthest: Vec<(usize, f64)>,
 }
 
-/// Squared distance summed in f64, in index order: the reference every result must equal.
+/// Squared distance summed in f64 (eight interleaved partial sums, so it vectorises; the
+/// f64 sum of f32 differences is exact to ~1e-15 relative either way).
 pub fn distance2_f64(a: &[f32], b: &[f32]) -> f64 {
-    let mut s = 0f64;
-    for (x, y) in a.iter().zip(b) {
+    let mut acc = [0f64; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            let d = x[l] as f64 - y[l] as f64;
+            acc[l] += d * d;
+        }
+    }
+    let mut s = acc.iter().sum::<f64>();
+    for (x, y) in ra.iter().zip(rb) {
         let d = *x as f64 - *y as f64;
         s += d * d;
     }
     s
+}
+
+/// The k smallest values pushed so far, kept sorted; `kth` is the largest of them (∞ until
+/// k values arrived). Insertion is rare once the list is full, so a pass is O(N).
+struct Smallest {
+    v: Vec<f64>,
+    k: usize,
+}
+
+impl Smallest {
+    fn new(k: usize) -> Self {
+        Smallest {
+            v: Vec::with_capacity(k + 1),
+            k,
+        }
+    }
+    fn push(&mut self, x: f64) {
+        if self.v.len() == self.k && x >= self.v[self.k - 1] {
+            return;
+        }
+        let at = self.v.partition_point(|y| *y <= x);
+        self.v.insert(at, x);
+        self.v.truncate(self.k);
+    }
+    fn kth(&self) -> f64 {
+        if self.v.len() < self.k {
+            f64::INFINITY
+        } else {
+            self.v[self.k - 1]
+        }
+    }
 }
 
 /// Check descriptors: one dimension, all finite; returns the dimension.
@@ -79,16 +121,64 @@ pub fn exact(rows: &[Vec<f32>], k: usize) -> Result<Vec<Neighbours>, KnnError> {
     if k == 0 || k + 1 > n {
         return Err(KnnError::TooFew { k, need: k + 1, n });
     }
-    let flat: Vec<f32> = rows.iter().flat_map(|r| r.iter().copied()).collect();
+    // Dot products in f64 when re-ranking f32 candidates would cost more than the GEMM itself
+    // (small N: each anchor re-ranks ~2k candidates, each a cache-missing pass over D values,
+    // measured here ≈ 36 GEMM dot products; see docs/triplets.md) and the f64 copy stays
+    // under 1 GiB. f64 intervals are so narrow that re-ranking is rarely needed at all.
+    if n < 64 * k && n * dim * 8 <= 1 << 30 {
+        exact_with::<f64>(rows, k, dim)
+    } else {
+        exact_with::<f32>(rows, k, dim)
+    }
+}
+
+/// A GEMM element type: f32 (fast) or f64 (narrow error bound).
+trait Dot: Copy + Send + Sync + Into<f64> + 'static {
+    const ZERO: Self;
+    const ONE: Self;
+    /// Unit roundoff u = ε/2.
+    const U: f64;
+    fn from_f32(v: f32) -> Self;
+}
+
+impl Dot for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const U: f64 = f32::EPSILON as f64 / 2.0;
+    fn from_f32(v: f32) -> Self {
+        v
+    }
+}
+
+impl Dot for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const U: f64 = f64::EPSILON / 2.0;
+    fn from_f32(v: f32) -> Self {
+        v as f64
+    }
+}
+
+fn exact_with<T: Dot>(
+    rows: &[Vec<f32>],
+    k: usize,
+    dim: usize,
+) -> Result<Vec<Neighbours>, KnnError> {
+    let n = rows.len();
+    let flat: Vec<T> = rows
+        .iter()
+        .flat_map(|r| r.iter().map(|v| T::from_f32(*v)))
+        .collect();
     let norm2: Vec<f64> = rows
         .iter()
         .map(|r| r.iter().map(|v| (*v as f64) * (*v as f64)).sum())
         .collect();
     let norm: Vec<f64> = norm2.iter().map(|v| v.sqrt()).collect();
-    let u = f32::EPSILON as f64 / 2.0;
+    let eps4: Vec<f64> = norm2.iter().map(|v| 4.0 * f64::EPSILON * v).collect();
+    let u = T::U;
     let gamma = (dim as f64 * u) / (1.0 - dim as f64 * u);
     let mut out = Vec::with_capacity(n);
-    let mut dots = vec![0f32; BLOCK.min(n) * n];
+    let mut dots = vec![T::ZERO; BLOCK.min(n) * n];
     for start in (0..n).step_by(BLOCK) {
         let b = BLOCK.min(n - start);
         let dots = &mut dots[..b * n];
@@ -110,8 +200,8 @@ pub fn exact(rows: &[Vec<f32>], k: usize) -> Result<Vec<Neighbours>, KnnError> {
                 flat.as_ptr(),
                 dim as isize,
                 1,
-                0.0,
-                1.0,
+                T::ZERO,
+                T::ONE,
                 false,
                 false,
                 false,
@@ -120,52 +210,74 @@ pub fn exact(rows: &[Vec<f32>], k: usize) -> Result<Vec<Neighbours>, KnnError> {
         }
         let block: Vec<Neighbours> = (0..b)
             .into_par_iter()
-            .map(|r| {
-                let i = start + r;
-                let row = &dots[r * n..(r + 1) * n];
-                // Interval of every distance: approx ± bound (bound also covers rounding of
-                // the approximate sum itself, at 4 ulps of its largest term).
-                let mut lo = Vec::with_capacity(n - 1);
-                let mut hi = Vec::with_capacity(n - 1);
-                for j in (0..n).filter(|&j| j != i) {
-                    let approx = norm2[i] + norm2[j] - 2.0 * row[j] as f64;
-                    let bound = 2.0 * gamma * norm[i] * norm[j]
-                        + 4.0 * f64::EPSILON * (norm2[i] + norm2[j])
-                        + 2.0 * u * (row[j] as f64).abs();
-                    lo.push((approx - bound, j));
-                    hi.push((approx + bound, j));
-                }
-                // Nearest: j can be among the true k nearest only if its lower end does not
-                // exceed the k-th smallest upper end.
-                let mut ub: Vec<f64> = hi.iter().map(|h| h.0).collect();
-                let kth_ub = *ub.select_nth_unstable_by(k - 1, |a, b| a.total_cmp(b)).1;
-                let near: Vec<usize> = lo
-                    .iter()
-                    .filter(|(l, _)| *l <= kth_ub)
-                    .map(|(_, j)| *j)
-                    .collect();
-                // Furthest: j can be among the true k furthest only if its upper end reaches
-                // the k-th largest lower end.
-                let mut lb: Vec<f64> = lo.iter().map(|l| l.0).collect();
-                let kth_lb = *lb.select_nth_unstable_by(k - 1, |a, b| b.total_cmp(a)).1;
-                let far: Vec<usize> = hi
-                    .iter()
-                    .filter(|(h, _)| *h >= kth_lb)
-                    .map(|(_, j)| *j)
-                    .collect();
-                let exact_of = |js: Vec<usize>| -> Vec<(usize, f64)> {
-                    js.into_iter()
-                        .map(|j| (j, distance2_f64(&rows[i], &rows[j])))
-                        .collect()
-                };
-                let mut nearest = exact_of(near);
-                nearest.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-                nearest.truncate(k);
-                let mut furthest = exact_of(far);
-                furthest.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-                furthest.truncate(k);
-                Neighbours { nearest, furthest }
-            })
+            .map_init(
+                || (vec![0f64; n], vec![0f64; n]),
+                |(lo, hi), r| {
+                    let i = start + r;
+                    let row = &dots[r * n..(r + 1) * n];
+                    // Interval of every distance: approx ± bound (bound also covers rounding of
+                    // the approximate sum itself, at 4 ulps of its largest term). One straight
+                    // loop over arrays, so it vectorises.
+                    let (gi, ei) = (2.0 * gamma * norm[i], 4.0 * f64::EPSILON * norm2[i]);
+                    for j in 0..n {
+                        let d: f64 = row[j].into();
+                        let approx = norm2[i] + norm2[j] - 2.0 * d;
+                        let bound = gi * norm[j] + ei + eps4[j] + 2.0 * u * d.abs();
+                        lo[j] = approx - bound;
+                        hi[j] = approx + bound;
+                    }
+                    let others = || (0..i).chain(i + 1..n);
+                    // Pass 1: the k-th smallest upper end and the k-th largest lower end.
+                    let mut low_hi = Smallest::new(k);
+                    let mut high_lo = Smallest::new(k);
+                    for j in others() {
+                        low_hi.push(hi[j]);
+                        high_lo.push(-lo[j]);
+                    }
+                    let (kth_ub, kth_lb) = (low_hi.kth(), -high_lo.kth());
+                    // Pass 2: j can be among the true k nearest only if its lower end does not
+                    // exceed the k-th smallest upper end; among the k furthest only if its upper
+                    // end reaches the k-th largest lower end.
+                    let near: Vec<usize> = others().filter(|&j| lo[j] <= kth_ub).collect();
+                    let far: Vec<usize> = others().filter(|&j| hi[j] >= kth_lb).collect();
+                    // Re-rank with exact distances, each computed once: once the lists are
+                    // drawn, lo/hi are free, so lo[j] caches j's distance and a NaN in hi[j]
+                    // marks it cached (small N makes the two lists overlap). A list whose
+                    // intervals are disjoint (its order is certain) and narrower than 1e-7 of
+                    // their distance keeps the midpoints: re-ranking could change nothing
+                    // beyond the seventh digit. Only f64 dot products get there.
+                    let mut rank = |js: Vec<usize>, furthest: bool| -> Vec<(usize, f64)> {
+                        let mut v: Vec<(usize, f64, f64)> =
+                            js.iter().map(|&j| (j, lo[j], hi[j])).collect();
+                        v.sort_by(|a, b| (a.1 + a.2).total_cmp(&(b.1 + b.2)));
+                        let certain = v.iter().all(|p| p.1 > 0.0 && p.2 - p.1 <= 2e-7 * p.1)
+                            && v.windows(2).all(|w| w[0].2 < w[1].1);
+                        let mut out: Vec<(usize, f64)> = if certain {
+                            v.iter().map(|p| (p.0, 0.5 * (p.1 + p.2))).collect()
+                        } else {
+                            js.into_iter()
+                                .map(|j| {
+                                    if !hi[j].is_nan() {
+                                        lo[j] = distance2_f64(&rows[i], &rows[j]);
+                                        hi[j] = f64::NAN;
+                                    }
+                                    (j, lo[j])
+                                })
+                                .collect()
+                        };
+                        if furthest {
+                            out.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+                        } else {
+                            out.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+                        }
+                        out.truncate(k);
+                        out
+                    };
+                    let nearest = rank(near, false);
+                    let furthest = rank(far, true);
+                    Neighbours { nearest, furthest }
+                },
+            )
             .collect();
         out.extend(block);
     }
@@ -178,7 +290,14 @@ pub fn naive(rows: &[Vec<f32>], k: usize) -> Vec<Neighbours> {
         .map(|i| {
             let mut d: Vec<(usize, f64)> = (0..rows.len())
                 .filter(|&j| j != i)
-                .map(|j| (j, distance2_f64(&rows[i], &rows[j])))
+                .map(|j| {
+                    let s: f64 = rows[i]
+                        .iter()
+                        .zip(&rows[j])
+                        .map(|(x, y)| (*x as f64 - *y as f64).powi(2))
+                        .sum();
+                    (j, s)
+                })
                 .collect();
             let mut near = d.clone();
             near.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));

@@ -35,7 +35,14 @@ fn same(a: &[nrw_knn::Neighbours], b: &[nrw_knn::Neighbours]) {
 
 #[test]
 fn random_descriptors_match_the_naive_loop_exactly() {
-    for (n, dim, k) in [(300, 64, 20), (600, 9, 20), (120, 2080, 5)] {
+    // N < 64k runs f64 dot products, N ≥ 64k f32 ones: both paths.
+    for (n, dim, k) in [
+        (300, 64, 20),
+        (600, 9, 20),
+        (120, 2080, 5),
+        (400, 300, 5),
+        (700, 9, 3),
+    ] {
         let rows = random(n, dim, n as u64);
         same(&exact(&rows, k).unwrap(), &naive(&rows, k));
     }

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use image::RgbImage;
-use nrw_style::{describe, distance2, Parallelism, Tier, Vgg};
+use nrw_style::{describe, distance2, Parallelism, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
 fn knn(desc: &[Vec<f32>], i: usize, k: usize) -> Vec<usize> {
@@ -139,7 +139,15 @@ fn main() {
             let desc: Vec<Vec<f32>> = scene
                 .photos
                 .par_iter()
-                .map(|p| describe(&tier, Some(&net), p, Parallelism::None))
+                .map(|p| {
+                    describe(
+                        &tier,
+                        Some(&net),
+                        p,
+                        Preprocess::Imagenet,
+                        Parallelism::None,
+                    )
+                })
                 .collect();
             let ms = t.elapsed().as_secs_f64() * 1e3 / scene.photos.len() as f64
                 * rayon::current_num_threads() as f64;

@@ -122,8 +122,15 @@ pub fn prepare(photo: &RgbImage, size: Option<u32>) -> RgbImage {
     image::imageops::resize(&square, s, s, image::imageops::FilterType::Lanczos3)
 }
 
-/// The descriptor of a photo under a tier (`net` is required for VGG tiers).
-pub fn describe(tier: &Tier, net: Option<&Vgg>, photo: &RgbImage, par: Parallelism) -> Vec<f32> {
+/// The descriptor of a photo under a tier (`net` is required for VGG tiers; `pre` is the
+/// network's input scaling and does not affect `color-stats`).
+pub fn describe(
+    tier: &Tier,
+    net: Option<&Vgg>,
+    photo: &RgbImage,
+    pre: Preprocess,
+    par: Parallelism,
+) -> Vec<f32> {
     match tier {
         Tier::ColorStats => {
             let n = (photo.width() * photo.height()) as f64;
@@ -160,8 +167,7 @@ pub fn describe(tier: &Tier, net: Option<&Vgg>, photo: &RgbImage, par: Paralleli
             let img = prepare(photo, *size);
             let (w, h) = (img.width() as usize, img.height() as usize);
             let upto = layers.iter().max().map_or(0, |l| l + 1);
-            let feats =
-                net.style_features_upto(&to_input(&img, Preprocess::Imagenet), h, w, upto, par);
+            let feats = net.style_features_upto(&to_input(&img, pre), h, w, upto, par);
             let mut out = Vec::new();
             for (k, (c, fh, fw, f)) in feats.iter().enumerate() {
                 if layers.contains(&k) {
@@ -229,7 +235,13 @@ mod tests {
     #[test]
     fn color_stats_of_a_constant_photo_have_zero_covariance() {
         let img = RgbImage::from_pixel(10, 10, image::Rgb([255, 0, 51]));
-        let d = describe(&Tier::ColorStats, None, &img, Parallelism::None);
+        let d = describe(
+            &Tier::ColorStats,
+            None,
+            &img,
+            Preprocess::Imagenet,
+            Parallelism::None,
+        );
         assert_eq!(d.len(), 9);
         assert!((d[0] - 1.0).abs() < 1e-6 && d[1].abs() < 1e-6 && (d[2] - 0.2).abs() < 1e-6);
         assert!(d[3..].iter().all(|v| v.abs() < 1e-9));

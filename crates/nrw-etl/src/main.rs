@@ -47,6 +47,8 @@ enum Command {
     Triplets(cmd::triplets::TripletsArgs),
     /// Write a dataset as files: the paper's official train/ val/ layout, or one folder per photo
     Export(cmd::export::ExportArgs),
+    /// Write the dataset QA report (report.html, qa.json): counts, drops, distributions, alignment, split, triplets
+    Qa(cmd::qa::QaArgs),
     /// Run the stages a pipeline file lists (pipelines/paper.toml: the paper's settings)
     Run(cmd::run::RunArgs),
 }
@@ -72,6 +74,7 @@ fn main() -> std::process::ExitCode {
         Command::Export(a) => cmd::export::run(a),
         Command::Style(a) => cmd::style::run(a),
         Command::Triplets(a) => cmd::triplets::run(a),
+        Command::Qa(a) => cmd::qa::run(a).map(|_| ()),
         Command::Run(a) => cmd::run::run(a).map(|kept| {
             if !kept {
                 std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);

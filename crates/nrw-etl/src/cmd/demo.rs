@@ -27,7 +27,7 @@ pub struct DemoArgs {
 }
 
 /// Run `demo`: synthesise the scene, then every pipeline stage that exists (ingest, split,
-/// style, triplets, export).
+/// style, triplets, export) and the QA report.
 pub fn run(args: &DemoArgs) -> Result<()> {
     let spec = super::synth::load_spec(args.spec.as_deref(), args.seed)?;
     let scene = args.out.join("scene");
@@ -77,8 +77,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         layout: super::export::Layout::Official,
         out: export.clone(),
     })?;
+    let report = super::qa::run(&super::qa::QaArgs {
+        dataset: dataset.clone(),
+        out: None,
+    })?;
     println!("scene:   {}", scene.display());
     println!("dataset: {}", dataset.display());
     println!("export:  {}", export.display());
+    println!("report:  {}", report.display());
     Ok(())
 }

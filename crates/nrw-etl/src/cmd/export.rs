@@ -61,6 +61,15 @@ fn write(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Run `export`.
 pub fn run(args: &ExportArgs) -> Result<()> {
+    let started = std::time::Instant::now();
+    let r = run_stage(args);
+    if let (Ok(_), Some(dir)) = (&r, Some(args.dataset.as_path())) {
+        super::qa::record(dir, "export", started);
+    }
+    r
+}
+
+fn run_stage(args: &ExportArgs) -> Result<()> {
     let ds = super::require_views(&args.dataset)?;
     let splits: Vec<String> = ds.splits().into_iter().map(|(k, _)| k).collect();
     if args.layout == Layout::Official && !splits.iter().any(|s| s == "train") {

@@ -385,6 +385,15 @@ pub struct IngestSummary {
 
 /// Run `ingest`; returns the summary (the caller maps "nothing kept" to its exit code).
 pub fn run(args: &IngestArgs) -> Result<IngestSummary> {
+    let started = std::time::Instant::now();
+    let r = run_stage(args);
+    if let (Ok(_), Some(dir)) = (&r, Some(args.out.as_path())) {
+        super::qa::record(dir, "ingest", started);
+    }
+    r
+}
+
+fn run_stage(args: &IngestArgs) -> Result<IngestSummary> {
     let t0 = Instant::now();
     if args.rows_per_shard == 0 {
         return Err(EtlError::Usage(

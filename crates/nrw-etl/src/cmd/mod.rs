@@ -4,6 +4,7 @@ pub mod demo;
 pub mod export;
 pub mod ingest;
 pub mod inspect;
+pub mod qa;
 pub mod run;
 pub mod split;
 pub mod style;

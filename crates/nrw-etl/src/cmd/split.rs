@@ -23,6 +23,15 @@ pub struct SplitArgs {
 
 /// Run `split`.
 pub fn run(args: &SplitArgs) -> Result<()> {
+    let started = std::time::Instant::now();
+    let r = run_stage(args);
+    if let (Ok(_), Some(dir)) = (&r, Some(args.dataset.as_path())) {
+        super::qa::record(dir, "split", started);
+    }
+    r
+}
+
+fn run_stage(args: &SplitArgs) -> Result<()> {
     let mut manifest = Manifest::read(&args.dataset)?;
     let kept: Vec<(u32, String)> = nrw_dataset::scene::read_verdicts(&args.dataset)?
         .into_iter()

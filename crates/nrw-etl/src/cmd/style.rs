@@ -47,7 +47,7 @@ pub struct StyleArgs {
     /// With --image: output safetensors with f32 tensors gram_relu1_2 … gram_relu5_2
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Input scaling (with --image)
+    /// Network input scaling: torchvision's ImageNet mean/std, or the official code's v/127.5 − 1 (recorded with the descriptors)
     #[arg(long, value_enum, default_value = "imagenet")]
     pub preprocess: Pre,
     /// No progress bar
@@ -82,6 +82,19 @@ fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
 
 /// Run `style`.
 pub fn run(args: &StyleArgs) -> Result<()> {
+    let started = std::time::Instant::now();
+    let r = run_stage(args);
+    if let (Ok(_), Some(dir)) = (&r, args.dataset.as_deref().filter(|_| args.image.is_none())) {
+        super::qa::record(dir, "style", started);
+    }
+    r
+}
+
+fn run_stage(args: &StyleArgs) -> Result<()> {
+    let pre = match args.preprocess {
+        Pre::Imagenet => Preprocess::Imagenet,
+        Pre::MinusOneToOne => Preprocess::MinusOneToOne,
+    };
     if let Some(image) = &args.image {
         // Exact mode runs whichever VGG the weights are.
         let net = load_weights(args.weights.as_deref(), &Tier::reference())
@@ -92,11 +105,7 @@ pub fn run(args: &StyleArgs) -> Result<()> {
                 )
             })?
             .expect("VGG tier");
-        let p = match args.preprocess {
-            Pre::Imagenet => Preprocess::Imagenet,
-            Pre::MinusOneToOne => Preprocess::MinusOneToOne,
-        };
-        let bytes = nrw_style::image_grams_safetensors(&net, image, p, Parallelism::Rayon(0))
+        let bytes = nrw_style::image_grams_safetensors(&net, image, pre, Parallelism::Rayon(0))
             .map_err(|e| EtlError::Usage(e.to_string()))?;
         let out = args.out.as_ref().expect("clap requires --out with --image");
         nrw_dataset::atomic::write_bytes_atomic(out, &bytes)?;
@@ -118,7 +127,12 @@ pub fn run(args: &StyleArgs) -> Result<()> {
     let kind = DescriptorKind {
         tier: tier.name(),
         weights_sha256: net.as_ref().map_or(String::new(), |n| n.sha256.clone()),
-        preprocess: format!("{:?}", Preprocess::Imagenet),
+        // color-stats ignores the network's input scaling, so it never tells descriptors apart
+        preprocess: if tier.needs_weights() {
+            format!("{pre:?}")
+        } else {
+            String::new()
+        },
     };
     let ds = Dataset::open(dir)?;
     // Existing parts of another kind are never mixed with new ones.
@@ -177,7 +191,7 @@ pub fn run(args: &StyleArgs) -> Result<()> {
         let mut rows: Vec<DescriptorRow> = views
             .par_iter()
             .map(|v| {
-                let d = describe(&tier, net.as_ref(), &v.photo()?, Parallelism::None);
+                let d = describe(&tier, net.as_ref(), &v.photo()?, pre, Parallelism::None);
                 bar.inc(1);
                 Ok(DescriptorRow {
                     image_id: v.image_id,

@@ -33,6 +33,15 @@ pub struct TripletsArgs {
 
 /// Run `triplets`.
 pub fn run(args: &TripletsArgs) -> Result<()> {
+    let started = std::time::Instant::now();
+    let r = run_stage(args);
+    if let (Ok(_), Some(dir)) = (&r, Some(args.dataset.as_path())) {
+        super::qa::record(dir, "triplets", started);
+    }
+    r
+}
+
+fn run_stage(args: &TripletsArgs) -> Result<()> {
     super::require_views(&args.dataset)?;
     let mut manifest = Manifest::read(&args.dataset)?;
     let Some((kind, rows)) = nrw_dataset::descriptors::read_all(&args.dataset)? else {

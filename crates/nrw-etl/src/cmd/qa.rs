@@ -1,0 +1,46 @@
+//! `nrw-etl qa`: the dataset QA report, to look at before training on a dataset.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::error::{EtlError, Result};
+
+/// Arguments of `qa`.
+#[derive(Debug, Args)]
+pub struct QaArgs {
+    /// Dataset folder (written by `nrw-etl ingest`; split, style and triplets are shown when present)
+    pub dataset: PathBuf,
+    /// Folder for report.html and qa.json [default: DATASET/qa]
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Run `qa`; returns the report's path.
+pub fn run(args: &QaArgs) -> Result<PathBuf> {
+    let out = args.out.clone().unwrap_or_else(|| args.dataset.join("qa"));
+    let w = nrw_qa::build(&args.dataset, &out).map_err(|e| match e {
+        nrw_qa::QaError::Dataset(d) => EtlError::Dataset(d),
+        other => EtlError::Usage(other.to_string()),
+    })?;
+    let c = &w.figures.counts;
+    eprintln!(
+        "QA: {} registered → {} rendered → {} kept → {} train / {} val; {} warning(s)",
+        c.registered,
+        c.rendered,
+        c.kept,
+        c.train,
+        c.val,
+        w.figures.warnings.len()
+    );
+    println!("{}", w.report.display());
+    Ok(w.report)
+}
+
+/// Record a stage's duration in the dataset's timings.json (shown by the report); a failure
+/// to record is only worth a warning.
+pub fn record(dataset: &std::path::Path, stage: &str, started: std::time::Instant) {
+    if let Err(e) = nrw_qa::record_timing(dataset, stage, started.elapsed().as_secs_f64()) {
+        eprintln!("warning: could not record {stage}'s time: {e}");
+    }
+}

@@ -1,0 +1,343 @@
+//! Dataset QA: before training for days on a dataset, see it. `build` reads a dataset's tables
+//! (polars lazy scans) and views, and writes a self-contained `report.html` (charts as inline
+//! SVG, thumbnails as data URIs: no network, no side files) and `qa.json` with the same figures.
+
+pub mod error;
+pub mod html;
+pub mod plots;
+pub mod tables;
+pub mod thumbs;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+pub use error::{QaError, Result};
+use tables::ImageRow;
+
+/// The report's numbers, also written as qa.json.
+#[derive(Debug, Clone, Serialize)]
+pub struct Figures {
+    pub dataset: String,
+    pub scene_dir: String,
+    pub tool: String,
+    pub counts: Counts,
+    /// Dropped photos by reason (`too_small`, `too_sparse`, …).
+    pub drops: BTreeMap<String, usize>,
+    /// Stage parameters as the manifest records them.
+    pub parameters: serde_json::Map<String, serde_json::Value>,
+    /// Seconds per stage (from timings.json; stages run before it existed are missing).
+    pub timings: BTreeMap<String, f64>,
+    pub distributions: BTreeMap<String, Summary>,
+    pub triplets: Option<TripletFigures>,
+    pub warnings: Vec<Warning>,
+}
+
+/// Photos at every stage.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Counts {
+    pub registered: usize,
+    /// Photos large enough to render (not dropped as too small).
+    pub rendered: usize,
+    pub kept: usize,
+    pub dropped: usize,
+    /// Rows in the view shards (equals `kept` in a consistent dataset).
+    pub shard_rows: u64,
+    pub train: usize,
+    pub val: usize,
+    pub descriptors: usize,
+}
+
+/// Five-number summary of a distribution.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub n: usize,
+    pub min: f64,
+    pub p25: f64,
+    pub median: f64,
+    pub p75: f64,
+    pub max: f64,
+}
+
+impl Summary {
+    fn of(values: &[f64]) -> Option<Summary> {
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(|a, b| a.total_cmp(b));
+        let q = |f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
+        Some(Summary {
+            n: v.len(),
+            min: v[0],
+            p25: q(0.25),
+            median: q(0.5),
+            p75: q(0.75),
+            max: v[v.len() - 1],
+        })
+    }
+}
+
+/// The triplet table's settings.
+#[derive(Debug, Clone, Serialize)]
+pub struct TripletFigures {
+    pub anchors: usize,
+    pub k: usize,
+    pub tier: String,
+    pub method: String,
+    pub scope: String,
+    pub recall_nearest: Option<f64>,
+}
+
+/// Something worth a human's attention, with the photos it concerns.
+#[derive(Debug, Clone, Serialize)]
+pub struct Warning {
+    pub kind: String,
+    pub message: String,
+    pub photos: Vec<String>,
+}
+
+/// Where the report went.
+#[derive(Debug, Clone)]
+pub struct Written {
+    pub report: PathBuf,
+    pub json: PathBuf,
+    pub figures: Figures,
+}
+
+/// Name of the per-stage timing log inside a dataset (not part of the reproducible dataset:
+/// times differ between runs, so they stay out of manifest.json).
+pub const TIMINGS_FILE: &str = "timings.json";
+
+/// Record how long a stage took in `DATASET/timings.json` (atomic read-modify-write).
+pub fn record_timing(dir: &Path, stage: &str, seconds: f64) -> Result<()> {
+    let path = dir.join(TIMINGS_FILE);
+    let mut t: BTreeMap<String, f64> = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|s| serde_json::from_str(&s).ok())
+        .unwrap_or_default();
+    t.insert(stage.to_string(), seconds);
+    let text = serde_json::to_string_pretty(&t).expect("map of numbers");
+    nrw_dataset::atomic::write_bytes_atomic(&path, text.as_bytes())?;
+    Ok(())
+}
+
+fn param_f64(p: &serde_json::Map<String, serde_json::Value>, key: &str, default: f64) -> f64 {
+    p.get(key).and_then(|v| v.as_f64()).unwrap_or(default)
+}
+
+/// Compute the figures and write `report.html` and `qa.json` into `out`.
+pub fn build(dir: &Path, out: &Path) -> Result<Written> {
+    let manifest = nrw_dataset::Manifest::read(dir)?;
+    let images = tables::images(dir)?;
+    let triplets = tables::triplets(dir, 3)?;
+    let shard_rows = tables::shard_rows(dir)?;
+    let descriptors = nrw_dataset::descriptors::read_all(dir)?;
+    let timings: BTreeMap<String, f64> = std::fs::read_to_string(dir.join(TIMINGS_FILE))
+        .ok()
+        .and_then(|s| serde_json::from_str(&s).ok())
+        .unwrap_or_default();
+    let kept: Vec<&ImageRow> = images.iter().filter(|r| r.verdict == "kept").collect();
+    let mut drops = BTreeMap::new();
+    for r in images.iter().filter(|r| r.verdict != "kept") {
+        *drops.entry(r.verdict.clone()).or_insert(0) += 1;
+    }
+    let counts = Counts {
+        registered: images.len(),
+        rendered: images.iter().filter(|r| r.verdict != "too_small").count(),
+        kept: kept.len(),
+        dropped: images.len() - kept.len(),
+        shard_rows,
+        train: images
+            .iter()
+            .filter(|r| r.split.as_deref() == Some("train"))
+            .count(),
+        val: images
+            .iter()
+            .filter(|r| r.split.as_deref() == Some("val"))
+            .count(),
+        descriptors: descriptors.as_ref().map_or(0, |d| d.1.len()),
+    };
+    let p = &manifest.parameters;
+    let max_empty = param_f64(p, "max_empty", 0.85);
+    let short = |r: &ImageRow| match (r.photo_width, r.photo_height) {
+        (Some(w), Some(h)) => Some(w.min(h) as f64),
+        _ => None,
+    };
+    let mut distributions = BTreeMap::new();
+    let series: [(&str, Vec<f64>); 5] = [
+        (
+            "empty_ratio",
+            images.iter().filter_map(|r| r.empty_ratio).collect(),
+        ),
+        (
+            "photo_shorter_side",
+            images.iter().filter_map(short).collect(),
+        ),
+        (
+            "depth_min",
+            kept.iter().filter_map(|r| r.depth_min).collect(),
+        ),
+        (
+            "depth_max",
+            kept.iter().filter_map(|r| r.depth_max).collect(),
+        ),
+        (
+            "observations_per_view",
+            images.iter().map(|r| r.num_observations as f64).collect(),
+        ),
+    ];
+    for (name, v) in &series {
+        if let Some(s) = Summary::of(v) {
+            distributions.insert(name.to_string(), s);
+        }
+    }
+    let warnings = warnings(&images, &counts, max_empty);
+    let figures = Figures {
+        dataset: dir.display().to_string(),
+        scene_dir: manifest.scene.scene_dir.clone(),
+        tool: format!("{} {}", manifest.tool.name, manifest.tool.version),
+        counts,
+        drops,
+        parameters: manifest.parameters.clone(),
+        timings,
+        distributions,
+        triplets: triplets.as_ref().map(|t| TripletFigures {
+            anchors: t.anchors,
+            k: t.k,
+            tier: t.tier.clone(),
+            method: t.method.clone(),
+            scope: t.scope.clone(),
+            recall_nearest: t.recall_nearest,
+        }),
+        warnings,
+    };
+    let page = html::render(&html::Inputs {
+        dir,
+        manifest: &manifest,
+        figures: &figures,
+        images: &images,
+        triplets: triplets.as_ref(),
+        descriptors: descriptors.as_ref().map(|d| &d.1),
+        max_empty,
+        min_side: param_f64(p, "min_photo_side", 450.0),
+    })?;
+    std::fs::create_dir_all(out).map_err(|source| QaError::Io {
+        path: out.to_path_buf(),
+        source,
+    })?;
+    let report = out.join("report.html");
+    let json = out.join("qa.json");
+    nrw_dataset::atomic::write_bytes_atomic(&report, page.as_bytes())?;
+    let mut text = serde_json::to_string_pretty(&figures).expect("figures serialise");
+    text.push('\n');
+    nrw_dataset::atomic::write_bytes_atomic(&json, text.as_bytes())?;
+    Ok(Written {
+        report,
+        json,
+        figures,
+    })
+}
+
+fn warnings(images: &[ImageRow], counts: &Counts, max_empty: f64) -> Vec<Warning> {
+    let mut w = Vec::new();
+    let mut add = |kind: &str, message: String, photos: Vec<String>| {
+        if !photos.is_empty() || kind == "small_validation_set" || kind == "nothing_kept" {
+            w.push(Warning {
+                kind: kind.into(),
+                message,
+                photos,
+            });
+        }
+    };
+    let names = |f: &dyn Fn(&ImageRow) -> bool| -> Vec<String> {
+        images
+            .iter()
+            .filter(|r| f(r))
+            .map(|r| r.name.clone())
+            .collect()
+    };
+    let mismatch = names(&|r| r.photo_matches_camera == Some(false));
+    add(
+        "photo_size_disagrees_with_camera",
+        format!(
+            "{} photo(s) differ in size from their COLMAP camera: intrinsics were scaled to the photo; check that these are the images COLMAP saw",
+            mismatch.len()
+        ),
+        mismatch,
+    );
+    let renorm = names(&|r| r.quat_renormalized);
+    add(
+        "quaternion_renormalized",
+        format!(
+            "{} pose quaternion(s) were not unit length and were normalised; the model may have been edited by hand",
+            renorm.len()
+        ),
+        renorm,
+    );
+    let edge =
+        names(&|r| r.verdict == "kept" && r.empty_ratio.is_some_and(|e| e > max_empty - 0.02));
+    add(
+        "coverage_near_threshold",
+        format!(
+            "{} kept view(s) are within 2 points of the {:.0}% empty threshold: a slightly different radius or cloud would drop them",
+            edge.len(),
+            max_empty * 100.0
+        ),
+        edge,
+    );
+    let dense = names(&|r| r.verdict == "kept" && r.empty_ratio.is_some_and(|e| e < 0.01));
+    add(
+        "suspiciously_full_render",
+        format!(
+            "{} view(s) are rendered with under 1% empty pixels: a camera inside the cloud or a wrong scale?",
+            dense.len()
+        ),
+        dense,
+    );
+    if counts.kept == 0 {
+        add(
+            "nothing_kept",
+            "every view was dropped: there is nothing to train on (see Drops)".into(),
+            Vec::new(),
+        );
+    }
+    if counts.train + counts.val > 0 && counts.val < 10 {
+        add(
+            "small_validation_set",
+            format!(
+                "the validation split holds {} photo(s): its metrics will be noisy",
+                counts.val
+            ),
+            Vec::new(),
+        );
+    }
+    w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summaries_skip_non_finite_values() {
+        let s = Summary::of(&[5.0, 1.0, f64::NAN, 3.0, 2.0, 4.0]).unwrap();
+        assert_eq!((s.n, s.min, s.median, s.max), (5, 1.0, 3.0, 5.0));
+        assert_eq!((s.p25, s.p75), (2.0, 4.0));
+        assert!(Summary::of(&[f64::NAN]).is_none());
+    }
+
+    #[test]
+    fn timings_accumulate_per_stage() {
+        let d = tempfile::tempdir().unwrap();
+        record_timing(d.path(), "ingest", 2.5).unwrap();
+        record_timing(d.path(), "split", 0.5).unwrap();
+        record_timing(d.path(), "ingest", 3.0).unwrap();
+        let t: BTreeMap<String, f64> =
+            serde_json::from_str(&std::fs::read_to_string(d.path().join(TIMINGS_FILE)).unwrap())
+                .unwrap();
+        assert_eq!(t.len(), 2);
+        assert_eq!(t["ingest"], 3.0);
+    }
+}

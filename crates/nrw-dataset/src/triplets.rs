@@ -113,3 +113,58 @@ pub fn write_triplets(dir: &Path, info: &TripletInfo, rows: &[TripletRow]) -> Re
     })?;
     crate::parquet_io::write_table(dir, TRIPLETS_TABLE, &batch)
 }
+
+/// Read the table back (the trainer's triplet sampler reads it), or None before `triplets`.
+pub fn read_triplets(dir: &Path) -> Result<Option<Vec<TripletRow>>> {
+    use crate::parquet_io::column;
+    use arrow_array::{Array, Float64Array, ListArray};
+    let path = dir.join(TRIPLETS_TABLE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let mut out = Vec::new();
+    for b in crate::parquet_io::read_batches(&path, None)? {
+        let anchors = column::<UInt32Array>(&b, "anchor_id", &path)?;
+        let names = column::<StringArray>(&b, "anchor_name", &path)?;
+        let lists = |name: &str| column::<ListArray>(&b, name, &path);
+        let (ni, nd, fi, fd) = (
+            lists("nearest_ids")?,
+            lists("nearest_d2")?,
+            lists("furthest_ids")?,
+            lists("furthest_d2")?,
+        );
+        let ids = |l: &ListArray, i: usize, name: &str| -> Result<Vec<u32>> {
+            let v = l.value(i);
+            let a =
+                v.as_any()
+                    .downcast_ref::<UInt32Array>()
+                    .ok_or_else(|| DatasetError::Schema {
+                        path: path.clone(),
+                        problem: format!("column `{name}` does not hold uint32 lists"),
+                    })?;
+            Ok(a.values().to_vec())
+        };
+        let d2 = |l: &ListArray, i: usize, name: &str| -> Result<Vec<f64>> {
+            let v = l.value(i);
+            let a =
+                v.as_any()
+                    .downcast_ref::<Float64Array>()
+                    .ok_or_else(|| DatasetError::Schema {
+                        path: path.clone(),
+                        problem: format!("column `{name}` does not hold float64 lists"),
+                    })?;
+            Ok(a.values().to_vec())
+        };
+        for i in 0..b.num_rows() {
+            out.push(TripletRow {
+                anchor_id: anchors.value(i),
+                anchor_name: names.value(i).to_string(),
+                nearest_ids: ids(ni, i, "nearest_ids")?,
+                nearest_d2: d2(nd, i, "nearest_d2")?,
+                furthest_ids: ids(fi, i, "furthest_ids")?,
+                furthest_d2: d2(fd, i, "furthest_d2")?,
+            });
+        }
+    }
+    Ok(Some(out))
+}

@@ -61,12 +61,7 @@ fn write(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Run `export`.
 pub fn run(args: &ExportArgs) -> Result<()> {
-    let started = std::time::Instant::now();
-    let r = run_stage(args);
-    if let (Ok(_), Some(dir)) = (&r, Some(args.dataset.as_path())) {
-        super::qa::record(dir, "export", started);
-    }
-    r
+    super::qa::timed(Some(args.dataset.as_path()), "export", || run_stage(args))
 }
 
 fn run_stage(args: &ExportArgs) -> Result<()> {

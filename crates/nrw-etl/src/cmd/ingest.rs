@@ -385,12 +385,7 @@ pub struct IngestSummary {
 
 /// Run `ingest`; returns the summary (the caller maps "nothing kept" to its exit code).
 pub fn run(args: &IngestArgs) -> Result<IngestSummary> {
-    let started = std::time::Instant::now();
-    let r = run_stage(args);
-    if let (Ok(_), Some(dir)) = (&r, Some(args.out.as_path())) {
-        super::qa::record(dir, "ingest", started);
-    }
-    r
+    super::qa::timed(Some(args.out.as_path()), "ingest", || run_stage(args))
 }
 
 fn run_stage(args: &IngestArgs) -> Result<IngestSummary> {

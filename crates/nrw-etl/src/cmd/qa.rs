@@ -37,10 +37,19 @@ pub fn run(args: &QaArgs) -> Result<PathBuf> {
     Ok(w.report)
 }
 
-/// Record a stage's duration in the dataset's timings.json (shown by the report); a failure
-/// to record is only worth a warning.
-pub fn record(dataset: &std::path::Path, stage: &str, started: std::time::Instant) {
-    if let Err(e) = nrw_qa::record_timing(dataset, stage, started.elapsed().as_secs_f64()) {
-        eprintln!("warning: could not record {stage}'s time: {e}");
+/// Run a stage and, when it succeeds on a dataset, record its duration in the dataset's
+/// timings.json (shown by the report); failing to record is only worth a warning.
+pub fn timed<T>(
+    dataset: Option<&std::path::Path>,
+    stage: &str,
+    run: impl FnOnce() -> Result<T>,
+) -> Result<T> {
+    let started = std::time::Instant::now();
+    let r = run();
+    if let (Ok(_), Some(dir)) = (&r, dataset) {
+        if let Err(e) = nrw_qa::record_timing(dir, stage, started.elapsed().as_secs_f64()) {
+            eprintln!("warning: could not record {stage}'s time: {e}");
+        }
     }
+    r
 }

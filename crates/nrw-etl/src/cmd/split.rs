@@ -23,12 +23,7 @@ pub struct SplitArgs {
 
 /// Run `split`.
 pub fn run(args: &SplitArgs) -> Result<()> {
-    let started = std::time::Instant::now();
-    let r = run_stage(args);
-    if let (Ok(_), Some(dir)) = (&r, Some(args.dataset.as_path())) {
-        super::qa::record(dir, "split", started);
-    }
-    r
+    super::qa::timed(Some(args.dataset.as_path()), "split", || run_stage(args))
 }
 
 fn run_stage(args: &SplitArgs) -> Result<()> {

@@ -82,12 +82,7 @@ fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
 
 /// Run `style`.
 pub fn run(args: &StyleArgs) -> Result<()> {
-    let started = std::time::Instant::now();
-    let r = run_stage(args);
-    if let (Ok(_), Some(dir)) = (&r, args.dataset.as_deref().filter(|_| args.image.is_none())) {
-        super::qa::record(dir, "style", started);
-    }
-    r
+    super::qa::timed(args.dataset.as_deref().filter(|_| args.image.is_none()), "style", || run_stage(args))
 }
 
 fn run_stage(args: &StyleArgs) -> Result<()> {

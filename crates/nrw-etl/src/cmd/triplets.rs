@@ -33,12 +33,7 @@ pub struct TripletsArgs {
 
 /// Run `triplets`.
 pub fn run(args: &TripletsArgs) -> Result<()> {
-    let started = std::time::Instant::now();
-    let r = run_stage(args);
-    if let (Ok(_), Some(dir)) = (&r, Some(args.dataset.as_path())) {
-        super::qa::record(dir, "triplets", started);
-    }
-    r
+    super::qa::timed(Some(args.dataset.as_path()), "triplets", || run_stage(args))
 }
 
 fn run_stage(args: &TripletsArgs) -> Result<()> {

@@ -148,9 +148,15 @@ pub fn render(inp: &Inputs) -> Result<String> {
     }
     drops(&mut h, inp)?;
     distributions(&mut h, inp)?;
-    contact_sheet(&mut h, inp)?;
+    // Views are read only when something was kept (an all-dropped dataset has no shards).
+    let ds = if inp.figures.counts.shard_rows > 0 {
+        Some(Dataset::open(inp.dir)?)
+    } else {
+        None
+    };
+    contact_sheet(&mut h, inp, ds.as_ref())?;
     split(&mut h, inp)?;
-    triplets(&mut h, inp)?;
+    triplets(&mut h, inp, ds.as_ref())?;
     let _ = writeln!(h, "<script>{CHECK}</script></body></html>");
     Ok(h)
 }
@@ -255,7 +261,7 @@ fn distributions(h: &mut String, inp: &Inputs) -> Result<()> {
     Ok(())
 }
 
-fn contact_sheet(h: &mut String, inp: &Inputs) -> Result<()> {
+fn contact_sheet(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<()> {
     h.push_str("<h2>Alignment</h2>");
     let kept: Vec<u32> = inp
         .images
@@ -263,12 +269,11 @@ fn contact_sheet(h: &mut String, inp: &Inputs) -> Result<()> {
         .filter(|r| r.verdict == "kept")
         .map(|r| r.image_id)
         .collect();
-    if kept.is_empty() || inp.figures.counts.shard_rows == 0 {
+    let Some(ds) = ds.filter(|_| !kept.is_empty()) else {
         h.push_str("<p>No kept views to show.</p>");
         return Ok(());
-    }
+    };
     h.push_str("<p>Photo | colour render | depth (near dark, far bright, empty white) | checkerboard of photo and render in 32-pixel tiles (empty render pixels show the photo dimmed): where they align, edges run straight across tile borders; a misaligned render breaks them.</p><div class=\"sheet\">");
-    let ds = Dataset::open(inp.dir)?;
     let step = (kept.len() / 6).max(1);
     for id in kept.iter().step_by(step).take(6) {
         let v = ds.get(*id)?;
@@ -353,59 +358,19 @@ fn split(h: &mut String, inp: &Inputs) -> Result<()> {
     Ok(())
 }
 
-/// The first two principal components of the descriptors (power iteration on the covariance,
-/// in f64; enough for a picture).
+/// The first two principal components of the descriptors (the randomised PCA the approximate
+/// k-NN path uses), as plot coordinates; empty when they cannot be fitted.
 fn pca2(rows: &[Vec<f32>]) -> Vec<(f64, f64)> {
-    let n = rows.len();
-    let d = rows.first().map_or(0, |r| r.len());
-    if n == 0 || d == 0 {
+    let Ok(pca) = nrw_knn::approx::Pca::fit(rows, 2, 0) else {
         return Vec::new();
-    }
-    let mean: Vec<f64> = (0..d)
-        .map(|j| rows.iter().map(|r| r[j] as f64).sum::<f64>() / n as f64)
-        .collect();
-    let x: Vec<Vec<f64>> = rows
-        .iter()
-        .map(|r| r.iter().zip(&mean).map(|(v, m)| *v as f64 - m).collect())
-        .collect();
-    let mut comps: Vec<Vec<f64>> = Vec::new();
-    for c in 0..2 {
-        let mut v: Vec<f64> = (0..d)
-            .map(|j| ((j * 7919 + c * 104729) % 1000) as f64 / 1000.0 - 0.5)
-            .collect();
-        for _ in 0..60 {
-            // v ← Xᵀ X v, deflated against earlier components.
-            let s: Vec<f64> = x
-                .iter()
-                .map(|r| r.iter().zip(&v).map(|(a, b)| a * b).sum())
-                .collect();
-            let mut nv = vec![0f64; d];
-            for (r, si) in x.iter().zip(&s) {
-                for (o, a) in nv.iter_mut().zip(r) {
-                    *o += a * si;
-                }
-            }
-            for p in &comps {
-                let dot: f64 = nv.iter().zip(p).map(|(a, b)| a * b).sum();
-                nv.iter_mut().zip(p).for_each(|(a, b)| *a -= dot * b);
-            }
-            let norm = nv.iter().map(|a| a * a).sum::<f64>().sqrt();
-            if norm == 0.0 {
-                break;
-            }
-            v = nv.into_iter().map(|a| a / norm).collect();
-        }
-        comps.push(v);
-    }
-    x.iter()
-        .map(|r| {
-            let p = |c: &Vec<f64>| r.iter().zip(c).map(|(a, b)| a * b).sum::<f64>();
-            (p(&comps[0]), p(&comps[1]))
-        })
+    };
+    pca.project(rows)
+        .into_iter()
+        .map(|p| (p[0] as f64, p.get(1).copied().unwrap_or(0.0) as f64))
         .collect()
 }
 
-fn triplets(h: &mut String, inp: &Inputs) -> Result<()> {
+fn triplets(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<()> {
     h.push_str("<h2>Style neighbours</h2>");
     if let Some(desc) = inp.descriptors.filter(|d| d.len() >= 2) {
         let xy = pca2(
@@ -460,12 +425,11 @@ fn triplets(h: &mut String, inp: &Inputs) -> Result<()> {
     } else {
         h.push_str("<p>No style descriptors yet (run <code>nrw-etl style</code>).</p>");
     }
-    let Some(t) = inp.triplets else {
+    let (Some(t), Some(ds)) = (inp.triplets, ds) else {
         h.push_str("<p>No triplets yet (run <code>nrw-etl triplets</code>).</p>");
         return Ok(());
     };
     h.push_str("<p>Anchors with their nearest (blue) and furthest (orange) photos in style: nearest should share the anchor's look (light, weather, season), furthest should not.</p>");
-    let ds = Dataset::open(inp.dir)?;
     let thumb_of = |id: u32| -> Result<(String, String)> {
         let v = ds.get(id)?;
         Ok((

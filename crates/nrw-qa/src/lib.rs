@@ -203,14 +203,7 @@ pub fn build(dir: &Path, out: &Path) -> Result<Written> {
         parameters: manifest.parameters.clone(),
         timings,
         distributions,
-        triplets: triplets.as_ref().map(|t| TripletFigures {
-            anchors: t.anchors,
-            k: t.k,
-            tier: t.tier.clone(),
-            method: t.method.clone(),
-            scope: t.scope.clone(),
-            recall_nearest: t.recall_nearest,
-        }),
+        triplets: triplets.as_ref().map(|t| t.settings.clone()),
         warnings,
     };
     let page = html::render(&html::Inputs {

@@ -93,7 +93,7 @@ pub fn images(dir: &Path) -> Result<Vec<ImageRow>> {
     let obs = column!(df, &path, "num_observations", u32);
     let dmin = column!(df, &path, "depth_min", f64);
     let dmax = column!(df, &path, "depth_max", f64);
-    let splits = splits(dir)?;
+    let splits: std::collections::HashMap<u32, String> = splits(dir)?.into_iter().collect();
     let mut rows = Vec::with_capacity(df.height());
     for i in 0..df.height() {
         let image_id = ids
@@ -112,10 +112,7 @@ pub fn images(dir: &Path) -> Result<Vec<ImageRow>> {
             num_observations: obs.get(i).unwrap_or(0),
             depth_min: dmin.get(i),
             depth_max: dmax.get(i),
-            split: splits
-                .iter()
-                .find(|(id, _)| *id == image_id)
-                .map(|(_, s)| s.clone()),
+            split: splits.get(&image_id).cloned(),
         });
     }
     rows.sort_by_key(|r| r.image_id);
@@ -163,12 +160,7 @@ pub fn shard_rows(dir: &Path) -> Result<u64> {
 /// The first anchors of the triplet table with their neighbour ids, and its settings.
 #[derive(Debug, Clone)]
 pub struct Triplets {
-    pub anchors: usize,
-    pub k: usize,
-    pub tier: String,
-    pub method: String,
-    pub scope: String,
-    pub recall_nearest: Option<f64>,
+    pub settings: crate::TripletFigures,
     pub sample: Vec<(u32, Vec<u32>, Vec<u32>)>,
 }
 
@@ -215,12 +207,14 @@ pub fn triplets(dir: &Path, sample: usize) -> Result<Option<Triplets>> {
             .to_string())
     };
     Ok(Some(Triplets {
-        anchors: n,
-        k: picked.first().map_or(0, |p| p.1.len()),
-        tier: first_str("tier")?,
-        method: first_str("method")?,
-        scope: first_str("scope")?,
-        recall_nearest: column!(df, &path, "recall_nearest", f64).get(0),
+        settings: crate::TripletFigures {
+            anchors: n,
+            k: picked.first().map_or(0, |p| p.1.len()),
+            tier: first_str("tier")?,
+            method: first_str("method")?,
+            scope: first_str("scope")?,
+            recall_nearest: column!(df, &path, "recall_nearest", f64).get(0),
+        },
         sample: picked,
     }))
 }

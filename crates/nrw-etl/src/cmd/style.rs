@@ -82,7 +82,11 @@ fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
 
 /// Run `style`.
 pub fn run(args: &StyleArgs) -> Result<()> {
-    super::qa::timed(args.dataset.as_deref().filter(|_| args.image.is_none()), "style", || run_stage(args))
+    super::qa::timed(
+        args.dataset.as_deref().filter(|_| args.image.is_none()),
+        "style",
+        || run_stage(args),
+    )
 }
 
 fn run_stage(args: &StyleArgs) -> Result<()> {

@@ -117,7 +117,8 @@ pub fn write_triplets(dir: &Path, info: &TripletInfo, rows: &[TripletRow]) -> Re
 /// Read the table back (the trainer's triplet sampler reads it), or None before `triplets`.
 pub fn read_triplets(dir: &Path) -> Result<Option<Vec<TripletRow>>> {
     use crate::parquet_io::column;
-    use arrow_array::{Array, Float64Array, ListArray};
+    use arrow_array::types::{Float64Type, UInt32Type};
+    use arrow_array::ListArray;
     let path = dir.join(TRIPLETS_TABLE);
     if !path.is_file() {
         return Ok(None);
@@ -133,38 +134,34 @@ pub fn read_triplets(dir: &Path) -> Result<Option<Vec<TripletRow>>> {
             lists("furthest_ids")?,
             lists("furthest_d2")?,
         );
-        let ids = |l: &ListArray, i: usize, name: &str| -> Result<Vec<u32>> {
-            let v = l.value(i);
-            let a =
-                v.as_any()
-                    .downcast_ref::<UInt32Array>()
-                    .ok_or_else(|| DatasetError::Schema {
-                        path: path.clone(),
-                        problem: format!("column `{name}` does not hold uint32 lists"),
-                    })?;
-            Ok(a.values().to_vec())
-        };
-        let d2 = |l: &ListArray, i: usize, name: &str| -> Result<Vec<f64>> {
-            let v = l.value(i);
-            let a =
-                v.as_any()
-                    .downcast_ref::<Float64Array>()
-                    .ok_or_else(|| DatasetError::Schema {
-                        path: path.clone(),
-                        problem: format!("column `{name}` does not hold float64 lists"),
-                    })?;
-            Ok(a.values().to_vec())
-        };
         for i in 0..b.num_rows() {
             out.push(TripletRow {
                 anchor_id: anchors.value(i),
                 anchor_name: names.value(i).to_string(),
-                nearest_ids: ids(ni, i, "nearest_ids")?,
-                nearest_d2: d2(nd, i, "nearest_d2")?,
-                furthest_ids: ids(fi, i, "furthest_ids")?,
-                furthest_d2: d2(fd, i, "furthest_d2")?,
+                nearest_ids: list_values::<UInt32Type>(ni, i, "nearest_ids", &path)?,
+                nearest_d2: list_values::<Float64Type>(nd, i, "nearest_d2", &path)?,
+                furthest_ids: list_values::<UInt32Type>(fi, i, "furthest_ids", &path)?,
+                furthest_d2: list_values::<Float64Type>(fd, i, "furthest_d2", &path)?,
             });
         }
     }
     Ok(Some(out))
+}
+
+/// Row `i` of a list column as a vector of its primitive values.
+fn list_values<T: arrow_array::ArrowPrimitiveType>(
+    l: &arrow_array::ListArray,
+    i: usize,
+    name: &str,
+    path: &Path,
+) -> Result<Vec<T::Native>> {
+    let v = l.value(i);
+    let a = v
+        .as_any()
+        .downcast_ref::<arrow_array::PrimitiveArray<T>>()
+        .ok_or_else(|| DatasetError::Schema {
+            path: path.to_path_buf(),
+            problem: format!("column `{name}` does not hold {} lists", T::DATA_TYPE),
+        })?;
+    Ok(a.values().to_vec())
 }

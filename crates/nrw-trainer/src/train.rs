@@ -200,13 +200,12 @@ pub fn appearance_labels(ds: &Dataset) -> Option<HashMap<u32, String>> {
             ))
         })
         .collect();
+    // Names from the scene table: decoding every view's row for its name would read every photo.
+    let names = nrw_dataset::scene::read_verdicts(&ds.dir).ok()?;
     let mut out = HashMap::new();
-    for (split, _) in ds.splits() {
-        for id in ds.ids(&split).ok()? {
-            let name = ds.get(*id).ok()?.name.clone();
-            if let Some(l) = by_name.get(&name) {
-                out.insert(*id, l.clone());
-            }
+    for (id, name, verdict) in names {
+        if let (true, Some(l)) = (verdict == "kept", by_name.get(&name)) {
+            out.insert(id, l.clone());
         }
     }
     Some(out)

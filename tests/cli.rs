@@ -262,6 +262,23 @@ fn ingest_without_photos_says_where_it_looked() {
         !out.join("manifest.json").exists(),
         "nothing written for a failed ingest"
     );
+    // Out-of-range render parameters are refused by name before any work.
+    for (flag, value, says) in [
+        ("--radius", "40", "--radius 40 is outside 0..=32"),
+        ("--radius=-1", "", "--radius -1 is outside"),
+        ("--max-empty", "1.5", "--max-empty 1.5 is not a fraction"),
+    ] {
+        let mut args = vec![
+            "ingest",
+            tmp.path().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            flag,
+        ];
+        args.extend([value].iter().filter(|v| !v.is_empty()));
+        let err = fails(&args);
+        assert!(err.contains(says), "{flag} {value}: {err}");
+    }
 }
 
 #[test]

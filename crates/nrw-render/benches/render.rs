@@ -295,6 +295,7 @@ fn speed(quick: bool) {
             )
         })
         .collect();
+    let (mut met, mut measured) = ([0usize; 2], 0usize);
     for (label, d0, d1) in [("whole", 12.0, 40.0), ("close-up", 5.0, 8.0)] {
         let mut cam_spec = spec.cameras.clone();
         cam_spec.model = "PINHOLE".into();
@@ -399,6 +400,11 @@ fn speed(quick: bool) {
                 o0 * 1e3,
                 o1 * 1e3
             );
+            if let Some(t3) = o3d {
+                met[0] += (t3 / o0 >= 10.0) as usize;
+                met[1] += (t3 / o1 >= 10.0) as usize;
+                measured += 1;
+            }
             let row = match o3d {
                 Some(t3) => format!(
                     "{head} {:.2} | **{:.1}×** | **{:.1}×** | {:.2e} | {:.0} |\n",
@@ -418,12 +424,14 @@ fn speed(quick: bool) {
             md.push_str(&row);
         }
     }
-    md.push_str(
+    let _ = writeln!(
+        md,
         "\nReading it: at the same footprint (r = 0) we are several times faster than Open3D's depth-only \
-         projection while also producing colour; the paper's r = 1 costs about twice r = 0. Close-up views \
-         visit a fraction of the chunks, so their cost grows sub-linearly with the cloud while Open3D's \
-         grows linearly. Issue 4's target (≥ 10× Open3D for colour + depth) is judged by the last ratio \
-         columns; in the run recorded here it is not reached.\n",
+         projection while also producing colour; the paper's r = 1 costs about twice r = 0 (up to 9 pixel \
+         updates per point). Close-up views visit a fraction of the chunks, so their cost grows \
+         sub-linearly with the cloud while Open3D's grows linearly. Issue 4's target (≥ 10× Open3D for \
+         colour + depth) held in this run for {} of {measured} rows at r = 0 and {} of {measured} at r = 1.",
+        met[0], met[1]
     );
     std::fs::create_dir_all(root().join("docs/bench")).unwrap();
     std::fs::write(root().join("docs/bench/render_speed.md"), md).unwrap();

@@ -13,6 +13,17 @@ pub fn render_size(width: u64, height: u64, min_dim: u32) -> (u32, u32) {
     )
 }
 
+/// Pixel of a camera-space point in front of an undistorted lens `k` = (fx, fy, cx, cy).
+///
+/// Precision is given up here: f32 rather than COLMAP's f64, so a chunk of points projects
+/// in SIMD lanes. The pixel error (≤ 2.5·10⁻⁴ px at 4,000 px) is below what the f32 local
+/// positions already carry (≈ 2·10⁻³ px for a 100 m scene seen from 10 m at f = 3,000).
+#[inline(always)]
+pub fn pinhole_pixel(k: [f32; 4], c: Vec3) -> (f32, f32) {
+    let iz = 1.0 / c.z;
+    (k[0] * (c.x * iz) + k[2], k[1] * (c.y * iz) + k[3])
+}
+
 /// One photo's view: scaled camera, local pose in f32, lens fold and frustum bounds.
 #[derive(Debug, Clone)]
 pub struct View {
@@ -33,6 +44,8 @@ pub struct View {
     /// Normalised-coordinate bounds (x_min, x_max, y_min, y_max) of what the image can see,
     /// padded for splats; `None` when the lens sees to 90° or beyond (then only z culls).
     pub bounds: Option<[f32; 4]>,
+    /// (fx, fy, cx, cy) in f32 for lenses without distortion, which project in f32.
+    pub pinhole: Option<[f32; 4]>,
 }
 
 impl View {
@@ -97,6 +110,10 @@ impl View {
                 (b[3] + pad) as f32,
             ]
         });
+        let pinhole = (!cam.model.has_distortion()).then(|| {
+            let (f, c) = (cam.focal(), cam.principal_point());
+            [f.x as f32, f.y as f32, c.x as f32, c.y as f32]
+        });
         View {
             image_id: image.id,
             camera: cam,
@@ -108,6 +125,7 @@ impl View {
             fold,
             check_fold,
             bounds,
+            pinhole,
         }
     }
 
@@ -117,6 +135,10 @@ impl View {
         let c = self.rotation * local + self.translation;
         if c.z <= near {
             return None;
+        }
+        if let Some(k) = self.pinhole {
+            let (x, y) = pinhole_pixel(k, c);
+            return Some(DVec2::new(x as f64, y as f64));
         }
         let cd = DVec3::new(c.x as f64, c.y as f64, c.z as f64);
         if self.check_fold && self.camera.normalized_radius(cd) > self.fold {

@@ -269,6 +269,78 @@ fn one_point_covers_its_splat_and_an_empty_cloud_covers_nothing() {
     assert_eq!((buf.covered, buf.empty_ratio()), (0, 1.0));
 }
 
+/// The winner at every pixel by the definition: among points whose projection (by
+/// `View::project`, the splatter's own arithmetic) is within r of the pixel centre (r = 0: in
+/// the pixel), the nearest, then the lowest index; `None` where no point covers the pixel.
+fn reference_winners(view: &View, cloud: &RenderCloud, r: f64) -> Vec<Option<usize>> {
+    let (w, h) = (view.width as usize, view.height as usize);
+    let mut best: Vec<Option<(u32, usize)>> = vec![None; w * h];
+    for (i, p) in cloud.positions.iter().enumerate() {
+        let Some(px) = view.project(*p, cloud.near) else {
+            continue;
+        };
+        let z = (view.rotation * *p + view.translation).z;
+        for y in 0..h {
+            for x in 0..w {
+                let (dx, dy) = (x as f64 + 0.5 - px.x, y as f64 + 0.5 - px.y);
+                let inside = if r == 0.0 {
+                    px.x.floor() as usize == x
+                        && px.y.floor() as usize == y
+                        && px.x >= 0.0
+                        && px.y >= 0.0
+                } else {
+                    dx * dx + dy * dy <= r * r
+                };
+                let cand = (z.to_bits(), i);
+                if inside && best[y * w + x].is_none_or(|b| cand < b) {
+                    best[y * w + x] = Some(cand);
+                }
+            }
+        }
+    }
+    best.into_iter().map(|b| b.map(|(_, i)| i)).collect()
+}
+
+#[test]
+fn splats_match_their_definition_at_the_border_and_for_wide_radii() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    // Projections over the image and 10 px beyond every border; a few share a pixel.
+    let pts: Vec<DVec3> = (0..300)
+        .map(|_| {
+            let z = rng.random_range(1.0..4.0);
+            let (u, v) = (rng.random_range(-10.0..74.0), rng.random_range(-10.0..58.0));
+            DVec3::new((u - 32.0) / 50.0 * z, (v - 24.0) / 50.0 * z, z)
+        })
+        .collect();
+    // Colour = point index, so the winner can be read back.
+    let colors: Vec<[u8; 3]> = (0..pts.len())
+        .map(|i| [i as u8, (i >> 8) as u8, 0])
+        .collect();
+    let mut cloud = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), None);
+    cloud.near = 1e-4;
+    let (view, _) = test_view(CameraModel::Pinhole, vec![50.0, 50.0, 32.0, 24.0]);
+    // 0: own pixel; 0.5–2.7: margins of 2–6 px; 6: no margin, clipped loop.
+    for r in [0.0f32, 0.5, 1.0, 1.5, 2.7, 6.0] {
+        let buf = render(&view, &cloud, r);
+        let want = reference_winners(&view, &cloud, r as f64);
+        let color = buf.color.as_ref().unwrap();
+        for (px, w) in want.iter().enumerate() {
+            let got = (buf.depth[px] > 0.0).then(|| {
+                let c = color[px];
+                // Colours were permuted with the points by the Morton sort: map back.
+                c[0] as usize | (c[1] as usize) << 8
+            });
+            let want = w.map(|i| {
+                let c = cloud.colors.as_ref().unwrap()[i];
+                c[0] as usize | (c[1] as usize) << 8
+            });
+            assert_eq!(got, want, "r = {r}, pixel ({}, {})", px % 64, px / 64);
+        }
+        assert_eq!(buf.covered, want.iter().flatten().count(), "r = {r}");
+    }
+}
+
 #[test]
 fn nearest_point_wins_and_ties_go_to_the_lower_index() {
     let (view, _) = test_view(CameraModel::Pinhole, vec![50.0, 50.0, 32.0, 24.0]);

@@ -384,6 +384,10 @@ pub struct IngestSummary {
 }
 
 /// Run `ingest`; returns the summary (the caller maps "nothing kept" to its exit code).
+/// Largest splat radius accepted: wider splats smear a render into a few blobs, and each
+/// point would touch thousands of pixels.
+pub const MAX_RADIUS: f32 = 32.0;
+
 pub fn run(args: &IngestArgs) -> Result<IngestSummary> {
     super::qa::timed(Some(args.out.as_path()), "ingest", || run_stage(args))
 }
@@ -394,6 +398,18 @@ fn run_stage(args: &IngestArgs) -> Result<IngestSummary> {
         return Err(EtlError::Usage(
             "--rows-per-shard must be at least 1".into(),
         ));
+    }
+    if !(0.0..=MAX_RADIUS).contains(&args.radius) {
+        return Err(EtlError::Usage(format!(
+            "--radius {} is outside 0..={MAX_RADIUS} render pixels (the paper uses 1)",
+            args.radius
+        )));
+    }
+    if !(0.0..=1.0).contains(&args.max_empty) {
+        return Err(EtlError::Usage(format!(
+            "--max-empty {} is not a fraction in 0..=1 (the paper drops views above 0.85)",
+            args.max_empty
+        )));
     }
     let (model_dir, rec) = load_model(&args.scene, args.format)?;
     let photos_dir = images_dir(args, &model_dir)?;

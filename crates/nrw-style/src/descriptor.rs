@@ -9,7 +9,7 @@
 use image::RgbImage;
 
 use crate::preprocess::{to_input, Preprocess};
-use crate::vgg::{gram, Arch, Vgg, STYLE_LAYERS};
+use crate::vgg::{Arch, Vgg, STYLE_LAYERS};
 use crate::Parallelism;
 
 /// A way of describing a photo's style, from the reference (VGG16, 512², five layers) down
@@ -169,9 +169,9 @@ pub fn describe(
             let upto = layers.iter().max().map_or(0, |l| l + 1);
             let feats = net.style_features_upto(&to_input(&img, pre), h, w, upto, par);
             let mut out = Vec::new();
-            for (k, (c, fh, fw, f)) in feats.iter().enumerate() {
+            for (k, a) in feats.iter().enumerate() {
                 if layers.contains(&k) {
-                    pack_symmetric(*c, &gram(*c, *fh, *fw, f, par), &mut out);
+                    pack_symmetric(a.c, &a.gram(par), &mut out);
                 }
             }
             debug_assert!(feats.len() <= STYLE_LAYERS.len());

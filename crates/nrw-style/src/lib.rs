@@ -11,7 +11,7 @@ pub use descriptor::{describe, distance2, Tier};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};
-pub use vgg::{gram, Arch, Vgg, STYLE_LAYERS};
+pub use vgg::{gram, Activation, Arch, Vgg, STYLE_LAYERS};
 
 /// The five Gram matrices (relu1_2 … relu5_2) of a preprocessed CHW input, f64, row-major.
 pub fn grams(
@@ -22,8 +22,8 @@ pub fn grams(
     par: Parallelism,
 ) -> Vec<(usize, Vec<f64>)> {
     net.style_features(input, h, w, par)
-        .into_iter()
-        .map(|(c, fh, fw, f)| (c, gram(c, fh, fw, &f, par)))
+        .iter()
+        .map(|a| (a.c, a.gram(par)))
         .collect()
 }
 

@@ -1,5 +1,5 @@
-//! VGG16's (or VGG19's) convolutional trunk up to relu5_2, on the CPU: 3×3 convolutions as banded
-//! im2col + GEMM (the `gemm` crate), ReLU, 2×2 max pooling. Weights come from a user's
+//! VGG16's (or VGG19's) convolutional trunk up to relu5_2, on the CPU: 3×3 convolutions as
+//! GEMMs (the `gemm` crate) over padded channels-last activations, ReLU, 2×2 max pooling. Weights come from a user's
 //! safetensors file with torchvision names (`features.N.weight` OIHW f32, `features.N.bias`);
 //! nothing is downloaded.
 
@@ -58,13 +58,89 @@ impl Arch {
 /// The ReLU outputs the paper's published code used for the style loss.
 pub const STYLE_LAYERS: [&str; 5] = ["relu1_2", "relu2_2", "relu3_2", "relu4_2", "relu5_2"];
 
-/// One convolution: weights as an O × (I·9) matrix and a bias per output channel.
+/// One convolution: torchvision's O × I × 3 × 3 weights, rearranged for channels-last
+/// GEMMs, and a bias per output channel.
 #[derive(Debug, Clone)]
 pub struct Conv {
     pub out_ch: usize,
     pub in_ch: usize,
-    pub weight: Vec<f32>,
+    /// Per kernel row ky, a (3·I) × O row-major matrix: row kx·I + i, column o holds
+    /// weight[o, i, ky, kx] (the order in which a channels-last input row lists the 3 × I
+    /// values a kernel row sees).
+    pub rows: [Vec<f32>; 3],
     pub bias: Vec<f32>,
+}
+
+impl Conv {
+    /// From torchvision's OIHW layout.
+    pub fn from_oihw(out_ch: usize, in_ch: usize, weight: &[f32], bias: Vec<f32>) -> Conv {
+        let rows = std::array::from_fn(|ky| {
+            let mut m = vec![0f32; 3 * in_ch * out_ch];
+            for o in 0..out_ch {
+                for i in 0..in_ch {
+                    for kx in 0..3 {
+                        m[(kx * in_ch + i) * out_ch + o] =
+                            weight[((o * in_ch + i) * 3 + ky) * 3 + kx];
+                    }
+                }
+            }
+            m
+        });
+        Conv {
+            out_ch,
+            in_ch,
+            rows,
+            bias,
+        }
+    }
+}
+
+/// An activation in channels-last layout with a one-pixel zero border: pixel (y, x) of the
+/// image is at padded (y + 1, x + 1), its c values contiguous. The border lets a 3×3
+/// convolution read its input as strided matrices (no im2col copy) and adds nothing to Grams.
+#[derive(Debug, Clone)]
+pub struct Activation {
+    pub c: usize,
+    pub h: usize,
+    pub w: usize,
+    /// (h + 2) × (w + 2) × c values.
+    pub data: Vec<f32>,
+}
+
+impl Activation {
+    /// From a planar CHW input (the preprocessed photo).
+    pub fn from_chw(x: &[f32], c: usize, h: usize, w: usize) -> Activation {
+        let pw = w + 2;
+        let mut data = vec![0f32; (h + 2) * pw * c];
+        for ch in 0..c {
+            for y in 0..h {
+                for xx in 0..w {
+                    data[((y + 1) * pw + xx + 1) * c + ch] = x[(ch * h + y) * w + xx];
+                }
+            }
+        }
+        Activation { c, h, w, data }
+    }
+
+    /// Planar CHW copy (torch's layout, for comparisons).
+    pub fn to_chw(&self) -> Vec<f32> {
+        let (c, h, w, pw) = (self.c, self.h, self.w, self.w + 2);
+        let mut out = vec![0f32; c * h * w];
+        for y in 0..h {
+            for xx in 0..w {
+                let px = &self.data[((y + 1) * pw + xx + 1) * c..][..c];
+                for (ch, v) in px.iter().enumerate() {
+                    out[(ch * h + y) * w + xx] = *v;
+                }
+            }
+        }
+        out
+    }
+
+    /// Its Gram matrix, f64 (see [`gram`]); the zero border adds nothing.
+    pub fn gram(&self, par: Parallelism) -> Vec<f64> {
+        gram(self.c, self.h * self.w, &self.data, par)
+    }
 }
 
 /// A VGG's convolutions up to conv5_2 (the last one relu5_2 needs).
@@ -127,12 +203,7 @@ impl Vgg {
             };
             let weight = get(&format!("features.{idx}.weight"), &[out_ch, in_ch, 3, 3])?;
             let bias = get(&format!("features.{idx}.bias"), &[out_ch])?;
-            convs.push(Conv {
-                out_ch,
-                in_ch,
-                weight,
-                bias,
-            });
+            convs.push(Conv::from_oihw(out_ch, in_ch, &weight, bias));
             in_ch = out_ch;
         }
         Ok(Vgg {
@@ -143,14 +214,14 @@ impl Vgg {
         })
     }
 
-    /// The five style layers' activations (C, H, W, data CHW) for a preprocessed CHW input.
+    /// The five style layers' activations for a preprocessed CHW input.
     pub fn style_features(
         &self,
         input: &[f32],
         h: usize,
         w: usize,
         par: Parallelism,
-    ) -> Vec<(usize, usize, usize, Vec<f32>)> {
+    ) -> Vec<Activation> {
         self.style_features_upto(input, h, w, 5, par)
     }
 
@@ -163,11 +234,10 @@ impl Vgg {
         w: usize,
         layers: usize,
         par: Parallelism,
-    ) -> Vec<(usize, usize, usize, Vec<f32>)> {
+    ) -> Vec<Activation> {
         // Blocks of VGG16: convs per block; a pool precedes every block but the first.
         let blocks = self.arch.blocks();
-        let mut x = input.to_vec();
-        let (mut c, mut h, mut w) = (3usize, h, w);
+        let mut x = Activation::from_chw(input, 3, h, w);
         let mut out = Vec::with_capacity(5);
         let mut k = 0;
         for (b, &n) in blocks.iter().enumerate() {
@@ -175,17 +245,16 @@ impl Vgg {
                 break;
             }
             if b > 0 {
-                (x, h, w) = maxpool2(&x, c, h, w);
+                x = maxpool2(&x);
             }
             for j in 0..n {
                 if k == self.convs.len() {
                     break;
                 }
-                x = conv3x3_relu(&self.convs[k], &x, h, w, par);
-                c = self.convs[k].out_ch;
+                x = conv3x3_relu(&self.convs[k], &x, par);
                 k += 1;
                 if j == 1 {
-                    out.push((c, h, w, x.clone())); // reluB_2
+                    out.push(x.clone()); // reluB_2
                     if out.len() >= layers {
                         break;
                     }
@@ -196,78 +265,54 @@ impl Vgg {
     }
 }
 
-/// 3×3 convolution, stride 1, padding 1, then ReLU. Banded im2col bounds the scratch memory
-/// to about 16 MB whatever the image size. (Running bands in parallel, each with a
-/// single-threaded GEMM, measured no faster than one band at a time with a parallel GEMM.)
-pub fn conv3x3_relu(conv: &Conv, x: &[f32], h: usize, w: usize, par: Parallelism) -> Vec<f32> {
-    let (ci, co) = (conv.in_ch, conv.out_ch);
-    let k = ci * 9;
-    let mut out = vec![0f32; co * h * w];
-    let band_rows = ((4 << 20) / (k * w).max(1)).clamp(1, h.max(1));
-    let bands: Vec<(usize, usize)> = (0..h)
-        .step_by(band_rows)
-        .map(|y0| (y0, band_rows.min(h - y0)))
-        .collect();
-    let mut scratch = vec![0f32; k * band_rows * w];
-    for &(y0, rows) in &bands {
-        let n = rows * w;
-        let cols = &mut scratch[..k * n];
-        // One channel's 9 shifted copies are contiguous (rows c·9 … c·9 + 8): with a parallel
-        // GEMM the copies run in parallel too, or they would serialise a third of the time.
-        let fill = |(c, chunk): (usize, &mut [f32])| {
-            let plane = &x[c * h * w..(c + 1) * h * w];
+/// 3×3 convolution, stride 1, padding 1, then ReLU, as three GEMMs (one per kernel row) that
+/// read the padded channels-last input in place: output pixel p (on the padded grid) sees
+/// the 3·I values starting at input pixel p − (w + 3) + ky·(w + 2), so a kernel row's input
+/// is a matrix with row stride I over the buffer itself. No im2col copy and no scratch memory
+/// (the planar im2col version copied every input 9× and ran the first layers at 105–145
+/// GFLOPS). The two pixels per row that straddle the border are computed, then zeroed.
+pub fn conv3x3_relu(conv: &Conv, x: &Activation, par: Parallelism) -> Activation {
+    let (ci, co, h, w) = (conv.in_ch, conv.out_ch, x.h, x.w);
+    assert_eq!(x.c, ci, "input channels");
+    let pw = w + 2;
+    let mut out = vec![0f32; (h + 2) * pw * co];
+    // Output rows: the h·pw − 2 consecutive padded pixels from (1, 1) to (h, w).
+    let m = h * pw - 2;
+    if ci < 16 {
+        // Few input channels (the photo's 3): K = 3·I would starve the GEMM, so gather the
+        // three kernel rows into one im2col matrix (m × 9·I, 108 bytes per pixel for RGB)
+        // and run a single GEMM against the stacked kernel rows.
+        let k = 9 * ci;
+        let mut cols = vec![0f32; m * k];
+        let gather = |(q, row): (usize, &mut [f32])| {
             for ky in 0..3 {
-                for kx in 0..3 {
-                    let row = &mut chunk[(ky * 3 + kx) * n..(ky * 3 + kx + 1) * n];
-                    for yy in 0..rows {
-                        let sy = (y0 + yy + ky) as isize - 1;
-                        let dst = &mut row[yy * w..(yy + 1) * w];
-                        if sy < 0 || sy >= h as isize {
-                            dst.fill(0.0);
-                            continue;
-                        }
-                        let src = &plane[sy as usize * w..(sy as usize + 1) * w];
-                        // dst[x] = src[x + kx - 1], zero outside.
-                        match kx {
-                            0 => {
-                                dst[0] = 0.0;
-                                dst[1..].copy_from_slice(&src[..w - 1]);
-                            }
-                            1 => dst.copy_from_slice(src),
-                            _ => {
-                                dst[..w - 1].copy_from_slice(&src[1..]);
-                                dst[w - 1] = 0.0;
-                            }
-                        }
-                    }
-                }
+                let at = (q + ky * pw) * ci;
+                row[ky * 3 * ci..(ky + 1) * 3 * ci].copy_from_slice(&x.data[at..at + 3 * ci]);
             }
         };
         if matches!(par, Parallelism::None) {
-            cols.chunks_mut(9 * n).enumerate().for_each(fill);
+            cols.chunks_mut(k).enumerate().for_each(gather);
         } else {
-            cols.par_chunks_mut(9 * n).enumerate().for_each(fill);
+            cols.par_chunks_mut(k).enumerate().for_each(gather);
         }
-        // out[o, y0.., :] (O × n, row stride h·w) = W (O × k) · cols (k × n)
-        // SAFETY: dimensions and strides describe exactly the slices passed: dst has co rows
-        // of h·w with n ≤ h·w − y0·w columns available from offset y0·w; lhs is co × k
-        // row-major; rhs is k × n row-major.
+        let weights = conv.rows.concat();
+        // SAFETY: dst as below; lhs is m × k row-major; rhs is k × co row-major.
         unsafe {
             gemm::gemm(
+                m,
                 co,
-                n,
                 k,
-                out.as_mut_ptr().add(y0 * w),
+                out.as_mut_ptr().add((pw + 1) * co),
                 1,
-                (h * w) as isize,
+                co as isize,
                 false,
-                conv.weight.as_ptr(),
-                1,
-                k as isize,
                 cols.as_ptr(),
                 1,
-                n as isize,
-                0.0,
+                k as isize,
+                weights.as_ptr(),
+                1,
+                co as isize,
+                1.0,
                 1.0,
                 false,
                 false,
@@ -275,83 +320,139 @@ pub fn conv3x3_relu(conv: &Conv, x: &[f32], h: usize, w: usize, par: Parallelism
                 par,
             );
         }
+    } else {
+        let k = 3 * ci;
+        for (ky, wk) in conv.rows.iter().enumerate() {
+            // SAFETY: dst is m × co (row stride co) from pixel pw + 1, its last row at pixel
+            // (h + 1)·pw − 2 < (h + 2)·pw; lhs is m × k with row stride ci from pixel ky·pw,
+            // its last element at (ky·pw + m − 1)·ci + 3·ci − 1, which for ky = 2 is the
+            // buffer's last, (h + 2)·pw·ci − 1; rhs is k × co row-major.
+            unsafe {
+                gemm::gemm(
+                    m,
+                    co,
+                    k,
+                    out.as_mut_ptr().add((pw + 1) * co),
+                    1,
+                    co as isize,
+                    ky > 0,
+                    x.data.as_ptr().add(ky * pw * ci),
+                    1,
+                    ci as isize,
+                    wk.as_ptr(),
+                    1,
+                    co as isize,
+                    1.0,
+                    1.0,
+                    false,
+                    false,
+                    false,
+                    par,
+                );
+            }
+        }
     }
-    let bias_relu = |(o, plane): (usize, &mut [f32])| {
-        let b = conv.bias[o];
-        for v in plane {
-            *v = (*v + b).max(0.0);
+    // Bias and ReLU on image pixels; the border columns (written by the straddling pixels)
+    // back to zero.
+    let bias_relu = |(y, row): (usize, &mut [f32])| {
+        if y == 0 || y == h + 1 {
+            return;
+        }
+        row[..co].fill(0.0);
+        row[(pw - 1) * co..].fill(0.0);
+        for px in row[co..(pw - 1) * co].chunks_exact_mut(co) {
+            for (v, b) in px.iter_mut().zip(&conv.bias) {
+                *v = (*v + b).max(0.0);
+            }
         }
     };
     if matches!(par, Parallelism::None) {
-        out.chunks_mut(h * w).enumerate().for_each(bias_relu);
+        out.chunks_mut(pw * co).enumerate().for_each(bias_relu);
     } else {
-        out.par_chunks_mut(h * w).enumerate().for_each(bias_relu);
+        out.par_chunks_mut(pw * co).enumerate().for_each(bias_relu);
     }
-    out
+    Activation {
+        c: co,
+        h,
+        w,
+        data: out,
+    }
 }
 
-/// 2×2 max pooling, stride 2, floor mode (PyTorch's default); channels in parallel.
-pub fn maxpool2(x: &[f32], c: usize, h: usize, w: usize) -> (Vec<f32>, usize, usize) {
-    let (oh, ow) = (h / 2, w / 2);
-    let mut out = vec![0f32; c * oh * ow];
-    if oh * ow == 0 {
-        return (out, oh, ow);
-    }
-    out.par_chunks_mut(oh * ow).enumerate().for_each(|(ch, o)| {
-        let p = &x[ch * h * w..];
-        for y in 0..oh {
-            for xx in 0..ow {
-                let i = (2 * y) * w + 2 * xx;
-                o[y * ow + xx] = p[i].max(p[i + 1]).max(p[i + w]).max(p[i + w + 1]);
+/// 2×2 max pooling, stride 2, floor mode (PyTorch's default); rows in parallel.
+pub fn maxpool2(x: &Activation) -> Activation {
+    let (c, oh, ow) = (x.c, x.h / 2, x.w / 2);
+    let (pw, opw) = (x.w + 2, ow + 2);
+    let mut out = vec![0f32; (oh + 2) * opw * c];
+    out.par_chunks_mut(opw * c)
+        .enumerate()
+        .for_each(|(oy, row)| {
+            if oy == 0 || oy > oh {
+                return;
             }
-        }
-    });
-    (out, oh, ow)
+            let y = 2 * oy - 1; // padded input row of the window's top
+            let px = |yy: usize, xx: usize| &x.data[(yy * pw + xx) * c..][..c];
+            for ox in 0..ow {
+                let (a, b) = (px(y, 2 * ox + 1), px(y, 2 * ox + 2));
+                let (d, e) = (px(y + 1, 2 * ox + 1), px(y + 1, 2 * ox + 2));
+                let o = &mut row[(ox + 1) * c..(ox + 2) * c];
+                for ch in 0..c {
+                    o[ch] = a[ch].max(b[ch]).max(d[ch]).max(e[ch]);
+                }
+            }
+        });
+    Activation {
+        c,
+        h: oh,
+        w: ow,
+        data: out,
+    }
 }
 
-/// Gram matrix G = F Fᵀ / (C·H·W) of a C × (H·W) activation, accumulated in f64.
+/// Gram matrix G = F Fᵀ / (C·n) of n pixels with C channels each, given channels-last
+/// (`f` may hold more C-long pixels than n, all zero, such as a border: they add nothing).
 ///
-/// F is converted to f64 a block of columns at a time (2 MB, not a copy of the whole
-/// activation) and the partial Grams are summed. Blocks are dealt to `GRAM_GROUPS` fixed
-/// groups whose sums are added in a fixed order, so the result does not depend on the thread
-/// count. A single c × c × (H·W) GEMM was 4× slower: a 64 × 64 output with a 262,144-long inner
-/// dimension gives the GEMM nothing to parallelise or block on.
-pub fn gram(c: usize, h: usize, w: usize, f: &[f32], par: Parallelism) -> Vec<f64> {
+/// Precision is given up here, a little: each block of 4,096 pixels is one f32 GEMM read in
+/// place, and the blocks' partial Grams are summed in f64. Post-ReLU activations are ≥ 0, so
+/// every product is ≥ 0 and a block's rounding error is at most γ₄₀₉₆ ≈ 2.4·10⁻⁴ of the entry
+/// itself (typically ~10⁻⁶, the size of the f32 activations' own error; the parity tests hold
+/// 1e-4 of the largest entry against PyTorch's float64). An f64 Gram cost 16% of a forward
+/// pass. Blocks are dealt to `GRAM_GROUPS` fixed groups whose sums are added in a fixed
+/// order, so the result does not depend on the thread count. A single C × C × n GEMM was 4×
+/// slower: a 64 × 64 output with a 262,144-long inner dimension gives the GEMM nothing to
+/// parallelise or block on.
+pub fn gram(c: usize, n: usize, f: &[f32], par: Parallelism) -> Vec<f64> {
     const BLOCK: usize = 4096;
     const GRAM_GROUPS: usize = 8;
-    let n = h * w;
-    let blocks = n.div_ceil(BLOCK);
-    // Deep layers have one block (n ≤ 4096) but a large c: there the GEMM itself is parallel.
+    let pixels = f.len() / c;
+    let blocks = pixels.div_ceil(BLOCK);
+    // Deep layers have one block but a large c: there the GEMM itself is parallel.
     let inner = if blocks == 1 { par } else { Parallelism::None };
     let group = |gi: usize| -> Vec<f64> {
         let mut g = vec![0f64; c * c];
-        let mut buf = Vec::new();
+        let mut part = vec![0f32; c * c];
         for bi in (gi..blocks).step_by(GRAM_GROUPS) {
-            let (j0, j1) = (bi * BLOCK, ((bi + 1) * BLOCK).min(n));
-            let m = j1 - j0;
-            buf.clear();
-            for row in 0..c {
-                buf.extend(f[row * n + j0..row * n + j1].iter().map(|&v| v as f64));
-            }
-            // g += B Bᵀ with B = F[:, j0..j1] (c × m, row-major in buf).
-            // SAFETY: g is c × c row-major; lhs is B (c × m, row stride m); rhs is Bᵀ
-            // (m × c): element (k, j) at j·m + k, row stride 1, column stride m.
+            let (p0, p1) = (bi * BLOCK, ((bi + 1) * BLOCK).min(pixels));
+            let b = &f[p0 * c..p1 * c];
+            // part = Bᵀ B with B = the block's pixels (m × c, row-major).
+            // SAFETY: part is c × c row-major; lhs is Bᵀ (c × m): element (i, k) at k·c + i,
+            // row stride 1, column stride c; rhs is B (m × c) row-major.
             unsafe {
                 gemm::gemm(
                     c,
                     c,
-                    m,
-                    g.as_mut_ptr(),
+                    p1 - p0,
+                    part.as_mut_ptr(),
                     1,
                     c as isize,
-                    true,
-                    buf.as_ptr(),
+                    false,
+                    b.as_ptr(),
+                    c as isize,
                     1,
-                    m as isize,
-                    buf.as_ptr(),
-                    m as isize,
+                    b.as_ptr(),
                     1,
-                    1.0,
+                    c as isize,
+                    0.0,
                     1.0,
                     false,
                     false,
@@ -359,6 +460,7 @@ pub fn gram(c: usize, h: usize, w: usize, f: &[f32], par: Parallelism) -> Vec<f6
                     inner,
                 );
             }
+            g.iter_mut().zip(&part).for_each(|(a, v)| *a += *v as f64);
         }
         g
     };
@@ -379,6 +481,88 @@ pub fn gram(c: usize, h: usize, w: usize, f: &[f32], par: Parallelism) -> Vec<f6
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Naive planar 3×3 convolution (padding 1) + ReLU, in f64.
+    fn conv_naive(x: &[f32], ci: usize, h: usize, w: usize, wt: &[f32], b: &[f32]) -> Vec<f64> {
+        let co = b.len();
+        let mut out = vec![0f64; co * h * w];
+        for o in 0..co {
+            for y in 0..h {
+                for xx in 0..w {
+                    let mut acc = b[o] as f64;
+                    for i in 0..ci {
+                        for ky in 0..3 {
+                            for kx in 0..3 {
+                                let (sy, sx) =
+                                    (y as isize + ky as isize - 1, xx as isize + kx as isize - 1);
+                                if sy >= 0 && sx >= 0 && (sy as usize) < h && (sx as usize) < w {
+                                    acc += wt[((o * ci + i) * 3 + ky) * 3 + kx] as f64
+                                        * x[(i * h + sy as usize) * w + sx as usize] as f64;
+                                }
+                            }
+                        }
+                    }
+                    out[(o * h + y) * w + xx] = acc.max(0.0);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn channels_last_convolution_and_pooling_equal_the_planar_definition() {
+        // Odd sizes (pooling floors), both convolution paths (im2col below 16 input
+        // channels, in-place kernel rows above), every border pixel.
+        let mut seed = 1u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 33) as f32 / (1u64 << 31) as f32) - 0.5
+        };
+        for (ci, co, h, w) in [(3, 8, 7, 5), (17, 6, 5, 9)] {
+            let x: Vec<f32> = (0..ci * h * w).map(|_| rnd()).collect();
+            let wt: Vec<f32> = (0..co * ci * 9).map(|_| rnd()).collect();
+            let b: Vec<f32> = (0..co).map(|_| rnd() * 0.1).collect();
+            let conv = Conv::from_oihw(co, ci, &wt, b.clone());
+            let got = conv3x3_relu(
+                &conv,
+                &Activation::from_chw(&x, ci, h, w),
+                Parallelism::None,
+            );
+            let want = conv_naive(&x, ci, h, w, &wt, &b);
+            let planar = got.to_chw();
+            for (g, e) in planar.iter().zip(&want) {
+                assert!(
+                    (*g as f64 - e).abs() < 1e-5,
+                    "{ci}→{co} {h}×{w}: {g} vs {e}"
+                );
+            }
+            // The border stays zero: a Gram of the padded buffer is the Gram of the image.
+            let pw = w + 2;
+            for y in 0..h + 2 {
+                for xx in [0, pw - 1] {
+                    assert!(got.data[(y * pw + xx) * co..][..co]
+                        .iter()
+                        .all(|v| *v == 0.0));
+                }
+            }
+            let pooled = maxpool2(&got).to_chw();
+            let (oh, ow) = (h / 2, w / 2);
+            for o in 0..co {
+                for y in 0..oh {
+                    for xx in 0..ow {
+                        let at = |yy: usize, xw: usize| planar[(o * h + yy) * w + xw];
+                        let m = at(2 * y, 2 * xx)
+                            .max(at(2 * y, 2 * xx + 1))
+                            .max(at(2 * y + 1, 2 * xx))
+                            .max(at(2 * y + 1, 2 * xx + 1));
+                        assert_eq!(pooled[(o * oh + y) * ow + xx], m);
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn torchvision_indices_of_both_architectures() {

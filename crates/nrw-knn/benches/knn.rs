@@ -260,11 +260,28 @@ fn paper(md: &mut String, quick: bool, tmp: &Path) {
                 tp / pairs * 1e6,
                 tp / tx
             );
+            // Ours at a size where the f32 path, symmetry and the pair cache apply (the
+            // Python loop's cost per pair does not depend on N; ours falls with N).
+            let big = if quick { 600 } else { 1000 };
+            let rows_big = descriptors_of(big, dim, 11);
+            let t = Instant::now();
+            let _ = std::hint::black_box(exact(&rows_big, K).unwrap());
+            let tb = t.elapsed().as_secs_f64();
+            let pairs_big = (big * (big - 1) / 2) as f64;
             let _ = writeln!(
                 md,
-                "\nAt the paper's 7,711 photos the Python loop's {:.1} ms per pair comes to {:.0} hours (extrapolated, not run).",
+                "| ours, exact path on {big} descriptors of the same size (f32 GEMMs in 4,096-term chunks, each pair once) | {tb:.2} s | {:.1} µs | **{:.0}×** faster than the Python loop per pair |",
+                tb / pairs_big * 1e6,
+                (tp / pairs) / (tb / pairs_big)
+            );
+            let _ = writeln!(
+                md,
+                "\nAt the paper's 7,711 photos the Python loop's {:.1} ms per pair comes to {:.0} hours (extrapolated, not run); \
+                 ours at the {big}-photo rate, {:.1} hours (its 476 MB dot-product matrix still fits the \
+                 symmetric scheme's 512 MiB; the descriptors themselves take 9.4 GB).",
                 tp / pairs * 1e3,
-                tp / pairs * (7711.0 * 7710.0 / 2.0) / 3600.0
+                tp / pairs * (7711.0 * 7710.0 / 2.0) / 3600.0,
+                tb / pairs_big * (7711.0 * 7710.0 / 2.0) / 3600.0
             );
             eprintln!("paper's python loop {tp:.2} s vs ours {tx:.3} s");
         }

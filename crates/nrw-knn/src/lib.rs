@@ -4,14 +4,18 @@
 //! All-pairs distances come from the GEMM identity ‖a−b‖² = ‖a‖² + ‖b‖² − 2a·b in f32 (or
 //! f64 for small N), blocked over anchors so memory stays O(block · N), never N × N. That
 //! identity loses digits when two descriptors are close, so it only *selects* candidates: with
-//! the standard bound |fl(a·b) − a·b| ≤ γ_D ‖a‖‖b‖ (γ_D = D·u / (1 − D·u), u = 2⁻²⁴ or 2⁻⁵³)
-//! every pair gets an interval that must contain its true distance; any point that could be
+//! the standard bound |fl(a·b) − a·b| ≤ γ_K ‖a‖‖b‖ (γ_K = K·u / (1 − K·u), u = 2⁻²⁴ or 2⁻⁵³;
+//! dot products are summed in f64 from GEMMs over K ≤ 4,096 terms, so K is not the full
+//! dimension) every pair gets an interval that must contain its true distance; any point that could be
 //! among the true k nearest (furthest) is kept, and the candidates are re-ranked with Σ(a−b)²
 //! summed in f64 unless their intervals already prove the order and seven digits. The result
 //! equals a naive f64 double loop: same ids, same order, distances to 1e-7 relative. Ties are
 //! broken by the lower index, so tables are deterministic.
 
 pub mod approx;
+
+use std::collections::HashMap;
+use std::sync::Mutex;
 
 use gemm::Parallelism;
 use rayon::prelude::*;
@@ -92,30 +96,59 @@ impl Smallest {
 /// Check descriptors: one dimension, all finite; returns the dimension.
 pub fn validate(rows: &[Vec<f32>]) -> Result<usize, KnnError> {
     let dim = rows.first().map_or(0, |r| r.len());
-    for (row, r) in rows.iter().enumerate() {
+    // Rows in parallel (reference-tier descriptors are 10⁸–10⁹ values); the error reported
+    // is the first offending row's, as a sequential scan would find it.
+    let bad = rows.par_iter().enumerate().find_map_first(|(row, r)| {
         if r.len() != dim {
-            return Err(KnnError::Dimension {
+            return Some(KnnError::Dimension {
                 row,
                 len: r.len(),
                 dim,
             });
         }
-        if let Some((index, value)) = r.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(KnnError::NotFinite {
+        r.iter()
+            .enumerate()
+            .find(|(_, v)| !v.is_finite())
+            .map(|(index, value)| KnnError::NotFinite {
                 row,
                 index,
                 value: *value,
-            });
-        }
+            })
+    });
+    match bad {
+        Some(e) => Err(e),
+        None => Ok(dim),
     }
-    Ok(dim)
 }
 
-/// Anchors per GEMM block: memory is BLOCK × N f32 for the dot products.
+/// Anchors per GEMM block: memory is BLOCK × N f64 (+ the element type) for the dot products.
 const BLOCK: usize = 256;
+
+/// Below this dimension a re-ranked distance is cheaper than the cache's lock and lookup
+/// (with PCA-reduced 16-value vectors the cache made the approximate path 3× slower).
+const CACHE_MIN_DIM: usize = 4096;
+
+/// Largest N × N f64 dot-product matrix kept whole to compute each pair once (N ≤ 8,192).
+const SYM_MAX_BYTES: usize = 512 << 20;
+
+/// Terms per GEMM in a dot product; the partial dots are added in f64, which keeps the
+/// rounding bound at γ_KCHUNK whatever the dimension. The extra additions cost
+/// BLOCK·N per chunk against BLOCK·N·KCHUNK multiply-adds.
+const KCHUNK: usize = 4096;
 
 /// Exact k nearest and k furthest of every row among the others (self excluded).
 pub fn exact(rows: &[Vec<f32>], k: usize) -> Result<Vec<Neighbours>, KnnError> {
+    exact_with_matrix_limit(rows, k, SYM_MAX_BYTES)
+}
+
+/// [`exact`] with the symmetric scheme's N × N matrix limited to `max_bytes` (0: never
+/// symmetric), so tests reach the blocked path without 8,192 rows.
+#[doc(hidden)]
+pub fn exact_with_matrix_limit(
+    rows: &[Vec<f32>],
+    k: usize,
+    max_bytes: usize,
+) -> Result<Vec<Neighbours>, KnnError> {
     let n = rows.len();
     let dim = validate(rows)?;
     if k == 0 || k + 1 > n {
@@ -126,9 +159,9 @@ pub fn exact(rows: &[Vec<f32>], k: usize) -> Result<Vec<Neighbours>, KnnError> {
     // measured here ≈ 36 GEMM dot products; see docs/triplets.md) and the f64 copy stays
     // under 1 GiB. f64 intervals are so narrow that re-ranking is rarely needed at all.
     if n < 64 * k && n * dim * 8 <= 1 << 30 {
-        exact_with::<f64>(rows, k, dim)
+        exact_with::<f64>(rows, k, dim, max_bytes)
     } else {
-        exact_with::<f32>(rows, k, dim)
+        exact_with::<f32>(rows, k, dim, max_bytes)
     }
 }
 
@@ -163,51 +196,112 @@ fn exact_with<T: Dot>(
     rows: &[Vec<f32>],
     k: usize,
     dim: usize,
+    max_bytes: usize,
 ) -> Result<Vec<Neighbours>, KnnError> {
     let n = rows.len();
-    let flat: Vec<T> = rows
-        .iter()
-        .flat_map(|r| r.iter().map(|v| T::from_f32(*v)))
-        .collect();
+    let mut flat: Vec<T> = vec![T::ZERO; n * dim];
+    flat.par_chunks_mut(dim.max(1))
+        .zip(rows.par_iter())
+        .for_each(|(dst, r)| {
+            dst.iter_mut()
+                .zip(r)
+                .for_each(|(d, v)| *d = T::from_f32(*v))
+        });
     let norm2: Vec<f64> = rows
-        .iter()
+        .par_iter()
         .map(|r| r.iter().map(|v| (*v as f64) * (*v as f64)).sum())
         .collect();
     let norm: Vec<f64> = norm2.iter().map(|v| v.sqrt()).collect();
     let eps4: Vec<f64> = norm2.iter().map(|v| 4.0 * f64::EPSILON * v).collect();
     let u = T::U;
-    let gamma = (dim as f64 * u) / (1.0 - dim as f64 * u);
+    // Each dot product is a sum of f64-added partial dots over ≤ KCHUNK terms, so the f32
+    // bound is γ_KCHUNK Σ‖a_c‖‖b_c‖ ≤ γ_KCHUNK ‖a‖‖b‖ (Cauchy–Schwarz), not γ_D: for
+    // reference-tier Grams (D = 305,888) that is 2.4·10⁻⁴ instead of 1.8·10⁻², the
+    // difference between re-ranking a few candidates per anchor and re-ranking them all.
+    // (Adding the chunks in f64 contributes at most chunks·ε₆₄·‖a‖‖b‖ more.)
+    let terms = dim.min(KCHUNK) as f64;
+    let gamma = (terms * u) / (1.0 - terms * u) + dim.div_ceil(KCHUNK) as f64 * f64::EPSILON;
     let mut out = Vec::with_capacity(n);
-    let mut dots = vec![T::ZERO; BLOCK.min(n) * n];
+    // Exact distances already computed for another anchor: neighbour relations are often
+    // mutual, and at reference-tier size each distance streams 2.4 MB (long rows only). distance2_f64 is
+    // symmetric to the bit ((a−b)² = (b−a)²), so the cache changes no result.
+    let known: Mutex<HashMap<(u32, u32), f64>> = Mutex::new(HashMap::new());
+    let exact_distance = |i: usize, j: usize| -> f64 {
+        if dim < CACHE_MIN_DIM {
+            return distance2_f64(&rows[i], &rows[j]);
+        }
+        let key = (i.min(j) as u32, i.max(j) as u32);
+        if let Some(d) = known.lock().expect("no panic holds the lock").get(&key) {
+            return *d;
+        }
+        let d = distance2_f64(&rows[i], &rows[j]);
+        known
+            .lock()
+            .expect("no panic holds the lock")
+            .insert(key, d);
+        d
+    };
+    // Symmetry: while the whole N × N matrix fits in SYM_MAX_BYTES, each block computes only
+    // the columns from its own first row on and mirrors them, so every dot product is
+    // computed once, not twice; beyond that, blocks compute full rows and memory stays
+    // O(BLOCK · N).
+    let sym = n * n * 8 <= max_bytes;
+    let mut full = vec![0f64; if sym { n * n } else { BLOCK.min(n) * n }];
+    let mut part = vec![T::ZERO; BLOCK.min(n) * n];
     for start in (0..n).step_by(BLOCK) {
         let b = BLOCK.min(n - start);
-        let dots = &mut dots[..b * n];
-        // dots (b × n) = rows[start..start+b] (b × dim) · rowsᵀ (dim × n)
-        // SAFETY: dst is b × n row-major; lhs is b × dim row-major at the block's offset;
-        // rhs element (k, j) is flat[j·dim + k] (row stride 1, column stride dim).
-        unsafe {
-            gemm::gemm(
-                b,
-                n,
-                dim,
-                dots.as_mut_ptr(),
-                1,
-                n as isize,
-                false,
-                flat.as_ptr().add(start * dim),
-                1,
-                dim as isize,
-                flat.as_ptr(),
-                dim as isize,
-                1,
-                T::ZERO,
-                T::ONE,
-                false,
-                false,
-                false,
-                Parallelism::Rayon(0),
-            );
+        let c0 = if sym { start } else { 0 };
+        let width = n - c0;
+        // This block's rows in `full`: the whole matrix when symmetric, else b × n rows.
+        let base = if sym { start } else { 0 };
+        let part = &mut part[..b * width];
+        for r in 0..b {
+            full[(base + r) * n + c0..(base + r + 1) * n].fill(0.0);
         }
+        for k0 in (0..dim).step_by(KCHUNK) {
+            let kc = KCHUNK.min(dim - k0);
+            // part (b × width) = rows[start..start+b][k0..k0+kc] · (rows[c0..][k0..k0+kc])ᵀ
+            // SAFETY: dst is b × width row-major; lhs is b × kc with row stride dim at the
+            // block's offset plus k0; rhs element (k, j) is flat[(c0 + j)·dim + k0 + k] (row
+            // stride 1, column stride dim); every index stays below n·dim.
+            unsafe {
+                gemm::gemm(
+                    b,
+                    width,
+                    kc,
+                    part.as_mut_ptr(),
+                    1,
+                    width as isize,
+                    false,
+                    flat.as_ptr().add(start * dim + k0),
+                    1,
+                    dim as isize,
+                    flat.as_ptr().add(c0 * dim + k0),
+                    dim as isize,
+                    1,
+                    T::ZERO,
+                    T::ONE,
+                    false,
+                    false,
+                    false,
+                    Parallelism::Rayon(0),
+                );
+            }
+            for (r, src) in part.chunks_exact(width).enumerate() {
+                let dst = &mut full[(base + r) * n + c0..(base + r + 1) * n];
+                dst.iter_mut().zip(src).for_each(|(d, p)| *d += (*p).into());
+            }
+        }
+        // When symmetric, columns before c0 were mirrored in by earlier blocks; this block's
+        // columns beyond its own rows are mirrored into later rows.
+        if sym {
+            for r in 0..b {
+                for j in start + b..n {
+                    full[j * n + start + r] = full[(start + r) * n + j];
+                }
+            }
+        }
+        let dots = &full[base * n..(base + b) * n];
         let block: Vec<Neighbours> = (0..b)
             .into_par_iter()
             .map_init(
@@ -220,7 +314,7 @@ fn exact_with<T: Dot>(
                     // loop over arrays, so it vectorises.
                     let (gi, ei) = (2.0 * gamma * norm[i], 4.0 * f64::EPSILON * norm2[i]);
                     for j in 0..n {
-                        let d: f64 = row[j].into();
+                        let d: f64 = row[j];
                         let approx = norm2[i] + norm2[j] - 2.0 * d;
                         let bound = gi * norm[j] + ei + eps4[j] + 2.0 * u * d.abs();
                         lo[j] = approx - bound;
@@ -258,7 +352,7 @@ fn exact_with<T: Dot>(
                             js.into_iter()
                                 .map(|j| {
                                     if !hi[j].is_nan() {
-                                        lo[j] = distance2_f64(&rows[i], &rows[j]);
+                                        lo[j] = exact_distance(i, j);
                                         hi[j] = f64::NAN;
                                     }
                                     (j, lo[j])

@@ -35,16 +35,25 @@ fn same(a: &[nrw_knn::Neighbours], b: &[nrw_knn::Neighbours]) {
 
 #[test]
 fn random_descriptors_match_the_naive_loop_exactly() {
-    // N < 64k runs f64 dot products, N ≥ 64k f32 ones: both paths.
+    // N < 64k runs f64 dot products, N ≥ 64k f32 ones: both paths; 9,000 values are
+    // three GEMM chunks (4,096 + 4,096 + 808) summed in f64, in both.
     for (n, dim, k) in [
         (300, 64, 20),
+        (70, 9000, 1),
+        (40, 9000, 3),
         (600, 9, 20),
         (120, 2080, 5),
         (400, 300, 5),
         (700, 9, 3),
     ] {
         let rows = random(n, dim, n as u64);
-        same(&exact(&rows, k).unwrap(), &naive(&rows, k));
+        let want = naive(&rows, k);
+        same(&exact(&rows, k).unwrap(), &want);
+        // The blocked path that large N takes (each pair computed twice, no N × N matrix).
+        same(
+            &nrw_knn::exact_with_matrix_limit(&rows, k, 0).unwrap(),
+            &want,
+        );
     }
 }
 

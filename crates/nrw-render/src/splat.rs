@@ -82,6 +82,11 @@ struct Footprint {
 }
 
 impl Footprint {
+    fn of(radius: f32) -> Footprint {
+        let r = radius as f64;
+        Footprint { r, r2: r * r }
+    }
+
     /// Draw one point centred at pixel coordinates (px, py) with z-buffer `key`.
     #[inline(always)]
     fn draw(&self, z: &mut ZBuffer, px: f64, py: f64, key: u64) {
@@ -146,10 +151,7 @@ impl<'a> Splat<'a> {
     fn run<F: Fn(Vec3) -> Option<(f64, f64)>>(mut self, project: F) -> (usize, usize) {
         let v = self.view;
         let near = self.cloud.near;
-        let fp = Footprint {
-            r: self.radius as f64,
-            r2: (self.radius as f64).powi(2),
-        };
+        let fp = Footprint::of(self.radius);
         let cloud: &'a RenderCloud = self.cloud;
         for chunk in self.visible() {
             let pts = &cloud.positions[chunk.start as usize..chunk.end as usize];
@@ -171,10 +173,7 @@ impl<'a> Splat<'a> {
     fn run_pinhole(mut self, k: [f32; 4]) -> (usize, usize) {
         let v = self.view;
         let near = self.cloud.near;
-        let fp = Footprint {
-            r: self.radius as f64,
-            r2: (self.radius as f64).powi(2),
-        };
+        let fp = Footprint::of(self.radius);
         let (r, t) = (v.rotation, v.translation);
         let mut proj = vec![[0f32; 3]; CHUNK_POINTS];
         let cloud: &'a RenderCloud = self.cloud;

@@ -2,15 +2,16 @@
 //! `nrw-style` descriptors, is the style distance), for triplet mining.
 //!
 //! All-pairs distances come from the GEMM identity ‖a−b‖² = ‖a‖² + ‖b‖² − 2a·b in f32 (or
-//! f64 for small N), blocked over anchors so memory stays O(block · N), never N × N. That
-//! identity loses digits when two descriptors are close, so it only *selects* candidates: with
-//! the standard bound |fl(a·b) − a·b| ≤ γ_K ‖a‖‖b‖ (γ_K = K·u / (1 − K·u), u = 2⁻²⁴ or 2⁻⁵³;
-//! dot products are summed in f64 from GEMMs over K ≤ 4,096 terms, so K is not the full
-//! dimension) every pair gets an interval that must contain its true distance; any point that could be
-//! among the true k nearest (furthest) is kept, and the candidates are re-ranked with Σ(a−b)²
-//! summed in f64 unless their intervals already prove the order and seven digits. The result
-//! equals a naive f64 double loop: same ids, same order, distances to 1e-7 relative. Ties are
-//! broken by the lower index, so tables are deterministic.
+//! f64 for small N), in blocks of anchors; each pair is computed once while the N × N
+//! dot-product matrix fits 512 MiB (N ≤ 8,192), and memory stays O(block · N) beyond. That
+//! identity loses digits when two descriptors are close, so it only *selects* candidates:
+//! with the standard bound |fl(a·b) − a·b| ≤ γ_K ‖a‖‖b‖ (γ_K = K·u / (1 − K·u), u = 2⁻²⁴ or
+//! 2⁻⁵³; dot products are summed in f64 from GEMMs over K ≤ 4,096 terms, so K is not the full
+//! dimension) every pair gets an interval that must contain its true distance; any point
+//! that could be among the true k nearest (furthest) is kept, and the candidates are
+//! re-ranked with Σ(a−b)² summed in f64 unless their intervals already prove the order and
+//! seven digits. The result equals a naive f64 double loop: same ids, same order, distances
+//! to 1e-7 relative. Ties are broken by the lower index, so tables are deterministic.
 
 pub mod approx;
 
@@ -222,9 +223,9 @@ fn exact_with<T: Dot>(
     let terms = dim.min(KCHUNK) as f64;
     let gamma = (terms * u) / (1.0 - terms * u) + dim.div_ceil(KCHUNK) as f64 * f64::EPSILON;
     let mut out = Vec::with_capacity(n);
-    // Exact distances already computed for another anchor: neighbour relations are often
-    // mutual, and at reference-tier size each distance streams 2.4 MB (long rows only). distance2_f64 is
-    // symmetric to the bit ((a−b)² = (b−a)²), so the cache changes no result.
+    // Exact distances already computed for another anchor (long rows only): neighbour
+    // relations are often mutual, and at reference-tier size each distance streams 2.4 MB.
+    // distance2_f64 is symmetric to the bit ((a−b)² = (b−a)²), so the cache changes no result.
     let known: Mutex<HashMap<(u32, u32), f64>> = Mutex::new(HashMap::new());
     let exact_distance = |i: usize, j: usize| -> f64 {
         if dim < CACHE_MIN_DIM {

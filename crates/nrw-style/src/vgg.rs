@@ -1,7 +1,7 @@
 //! VGG16's (or VGG19's) convolutional trunk up to relu5_2, on the CPU: 3×3 convolutions as
-//! GEMMs (the `gemm` crate) over padded channels-last activations, ReLU, 2×2 max pooling. Weights come from a user's
-//! safetensors file with torchvision names (`features.N.weight` OIHW f32, `features.N.bias`);
-//! nothing is downloaded.
+//! GEMMs (the `gemm` crate) over padded channels-last activations, ReLU, 2×2 max pooling.
+//! Weights come from a user's safetensors file with torchvision names (`features.N.weight`
+//! OIHW f32, `features.N.bias`); nothing is downloaded.
 
 use std::path::{Path, PathBuf};
 

@@ -157,12 +157,59 @@ pub fn exact_with_matrix_limit(
     }
     // Dot products in f64 when re-ranking f32 candidates would cost more than the GEMM itself
     // (small N: each anchor re-ranks ~2k candidates, each a cache-missing pass over D values,
-    // measured here ≈ 36 GEMM dot products; see docs/triplets.md) and the f64 copy stays
-    // under 1 GiB. f64 intervals are so narrow that re-ranking is rarely needed at all.
-    if n < 64 * k && n * dim * 8 <= 1 << 30 {
+    // measured here ≈ 36 GEMM dot products; see docs/triplets.md) and, where the blocked path
+    // needs an f64 copy of the descriptors, that copy stays under 1 GiB. f64 intervals are so
+    // narrow that re-ranking is rarely needed at all.
+    if n < 64 * k && (n * n * 8 <= max_bytes || n * dim * 8 <= 1 << 30) {
         exact_with::<f64>(rows, k, dim, max_bytes)
     } else {
         exact_with::<f32>(rows, k, dim, max_bytes)
+    }
+}
+
+/// out (m × w, row-major) = A · Bᵀ, where A holds m rows of `kc` values `a_rs` apart and B
+/// holds w rows of `kc` values `b_rs` apart (rows of a descriptor matrix or of a gathered
+/// chunk). The slices' lengths are checked, so the GEMM cannot read outside them.
+#[allow(clippy::too_many_arguments)]
+fn gemm_abt<T: Dot>(
+    out: &mut [T],
+    m: usize,
+    w: usize,
+    kc: usize,
+    a: &[T],
+    a_rs: usize,
+    b: &[T],
+    b_rs: usize,
+) {
+    if m == 0 || w == 0 {
+        return;
+    }
+    assert!(out.len() >= m * w && kc <= a_rs && kc <= b_rs);
+    assert!(a.len() >= (m - 1) * a_rs + kc && b.len() >= (w - 1) * b_rs + kc);
+    // SAFETY: dst is m × w row-major inside `out`; lhs element (i, k) is a[i·a_rs + k] and
+    // rhs element (k, j) is b[j·b_rs + k], all inside the slices by the asserts above.
+    unsafe {
+        gemm::gemm(
+            m,
+            w,
+            kc,
+            out.as_mut_ptr(),
+            1,
+            w as isize,
+            false,
+            a.as_ptr(),
+            1,
+            a_rs as isize,
+            b.as_ptr(),
+            b_rs as isize,
+            1,
+            T::ZERO,
+            T::ONE,
+            false,
+            false,
+            false,
+            Parallelism::Rayon(0),
+        );
     }
 }
 
@@ -200,14 +247,6 @@ fn exact_with<T: Dot>(
     max_bytes: usize,
 ) -> Result<Vec<Neighbours>, KnnError> {
     let n = rows.len();
-    let mut flat: Vec<T> = vec![T::ZERO; n * dim];
-    flat.par_chunks_mut(dim.max(1))
-        .zip(rows.par_iter())
-        .for_each(|(dst, r)| {
-            dst.iter_mut()
-                .zip(r)
-                .for_each(|(d, v)| *d = T::from_f32(*v))
-        });
     let norm2: Vec<f64> = rows
         .par_iter()
         .map(|r| r.iter().map(|v| (*v as f64) * (*v as f64)).sum())
@@ -242,67 +281,85 @@ fn exact_with<T: Dot>(
             .insert(key, d);
         d
     };
-    // Symmetry: while the whole N × N matrix fits in SYM_MAX_BYTES, each block computes only
-    // the columns from its own first row on and mirrors them, so every dot product is
-    // computed once, not twice; beyond that, blocks compute full rows and memory stays
-    // O(BLOCK · N).
+    // Symmetry: while the whole N × N matrix fits in `max_bytes`, it is filled chunk by chunk
+    // (a K-chunk of every row gathered at a time, n × 4,096 values, never a second copy of the
+    // descriptors), each block computing only the columns from its own first row on, then
+    // mirrored: every dot product is computed once. Beyond that, blocks compute full rows from
+    // a contiguous copy and memory for dot products stays O(BLOCK · N).
     let sym = n * n * 8 <= max_bytes;
     let mut full = vec![0f64; if sym { n * n } else { BLOCK.min(n) * n }];
     let mut part = vec![T::ZERO; BLOCK.min(n) * n];
-    for start in (0..n).step_by(BLOCK) {
-        let b = BLOCK.min(n - start);
-        let c0 = if sym { start } else { 0 };
-        let width = n - c0;
-        // This block's rows in `full`: the whole matrix when symmetric, else b × n rows.
-        let base = if sym { start } else { 0 };
-        let part = &mut part[..b * width];
-        for r in 0..b {
-            full[(base + r) * n + c0..(base + r + 1) * n].fill(0.0);
-        }
+    if sym {
+        let mut buf = vec![T::ZERO; n * KCHUNK.min(dim)];
         for k0 in (0..dim).step_by(KCHUNK) {
             let kc = KCHUNK.min(dim - k0);
-            // part (b × width) = rows[start..start+b][k0..k0+kc] · (rows[c0..][k0..k0+kc])ᵀ
-            // SAFETY: dst is b × width row-major; lhs is b × kc with row stride dim at the
-            // block's offset plus k0; rhs element (k, j) is flat[(c0 + j)·dim + k0 + k] (row
-            // stride 1, column stride dim); every index stays below n·dim.
-            unsafe {
-                gemm::gemm(
-                    b,
-                    width,
-                    kc,
-                    part.as_mut_ptr(),
-                    1,
-                    width as isize,
-                    false,
-                    flat.as_ptr().add(start * dim + k0),
-                    1,
-                    dim as isize,
-                    flat.as_ptr().add(c0 * dim + k0),
-                    dim as isize,
-                    1,
-                    T::ZERO,
-                    T::ONE,
-                    false,
-                    false,
-                    false,
-                    Parallelism::Rayon(0),
-                );
-            }
-            for (r, src) in part.chunks_exact(width).enumerate() {
-                let dst = &mut full[(base + r) * n + c0..(base + r + 1) * n];
-                dst.iter_mut().zip(src).for_each(|(d, p)| *d += (*p).into());
-            }
-        }
-        // When symmetric, columns before c0 were mirrored in by earlier blocks; this block's
-        // columns beyond its own rows are mirrored into later rows.
-        if sym {
-            for r in 0..b {
-                for j in start + b..n {
-                    full[j * n + start + r] = full[(start + r) * n + j];
+            let buf = &mut buf[..n * kc];
+            buf.par_chunks_mut(kc)
+                .zip(rows.par_iter())
+                .for_each(|(d, r)| {
+                    d.iter_mut()
+                        .zip(&r[k0..k0 + kc])
+                        .for_each(|(d, v)| *d = T::from_f32(*v))
+                });
+            for start in (0..n).step_by(BLOCK) {
+                let (b, width) = (BLOCK.min(n - start), n - start);
+                let part = &mut part[..b * width];
+                let rest = &buf[start * kc..];
+                gemm_abt(part, b, width, kc, rest, kc, rest, kc);
+                for (r, src) in part.chunks_exact(width).enumerate() {
+                    let dst = &mut full[(start + r) * n + start..(start + r + 1) * n];
+                    dst.iter_mut().zip(src).for_each(|(d, p)| *d += (*p).into());
                 }
             }
         }
-        let dots = &full[base * n..(base + b) * n];
+        for start in (0..n).step_by(BLOCK) {
+            let b = BLOCK.min(n - start);
+            for r in start..start + b {
+                for j in start + b..n {
+                    full[j * n + r] = full[r * n + j];
+                }
+            }
+        }
+    }
+    let mut flat: Vec<T> = Vec::new();
+    if !sym {
+        flat = vec![T::ZERO; n * dim];
+        flat.par_chunks_mut(dim.max(1))
+            .zip(rows.par_iter())
+            .for_each(|(dst, r)| {
+                dst.iter_mut()
+                    .zip(r)
+                    .for_each(|(d, v)| *d = T::from_f32(*v))
+            });
+    }
+    for start in (0..n).step_by(BLOCK) {
+        let b = BLOCK.min(n - start);
+        if !sym {
+            full[..b * n].fill(0.0);
+            for k0 in (0..dim).step_by(KCHUNK) {
+                let kc = KCHUNK.min(dim - k0);
+                let part = &mut part[..b * n];
+                gemm_abt(
+                    part,
+                    b,
+                    n,
+                    kc,
+                    &flat[start * dim + k0..],
+                    dim,
+                    &flat[k0..],
+                    dim,
+                );
+                for (r, src) in part.chunks_exact(n).enumerate() {
+                    let dst = &mut full[r * n..(r + 1) * n];
+                    dst.iter_mut().zip(src).for_each(|(d, p)| *d += (*p).into());
+                }
+            }
+        }
+        let dots = if sym {
+            &full[start * n..(start + b) * n]
+        } else {
+            &full[..b * n]
+        };
         let block: Vec<Neighbours> = (0..b)
             .into_par_iter()
             .map_init(

@@ -296,60 +296,34 @@ pub fn conv3x3_relu(conv: &Conv, x: &Activation, par: Parallelism) -> Activation
             cols.par_chunks_mut(k).enumerate().for_each(gather);
         }
         let weights = conv.rows.concat();
-        // SAFETY: dst as below; lhs is m × k row-major; rhs is k × co row-major.
-        unsafe {
-            gemm::gemm(
-                m,
-                co,
-                k,
-                out.as_mut_ptr().add((pw + 1) * co),
-                1,
-                co as isize,
-                false,
-                cols.as_ptr(),
-                1,
-                k as isize,
-                weights.as_ptr(),
-                1,
-                co as isize,
-                1.0,
-                1.0,
-                false,
-                false,
-                false,
-                par,
-            );
-        }
+        dst_plus_lhs_rhs(
+            &mut out[(pw + 1) * co..],
+            m,
+            co,
+            k,
+            &cols,
+            k,
+            &weights,
+            false,
+            par,
+        );
     } else {
         let k = 3 * ci;
         for (ky, wk) in conv.rows.iter().enumerate() {
-            // SAFETY: dst is m × co (row stride co) from pixel pw + 1, its last row at pixel
-            // (h + 1)·pw − 2 < (h + 2)·pw; lhs is m × k with row stride ci from pixel ky·pw,
-            // its last element at (ky·pw + m − 1)·ci + 3·ci − 1, which for ky = 2 is the
-            // buffer's last, (h + 2)·pw·ci − 1; rhs is k × co row-major.
-            unsafe {
-                gemm::gemm(
-                    m,
-                    co,
-                    k,
-                    out.as_mut_ptr().add((pw + 1) * co),
-                    1,
-                    co as isize,
-                    ky > 0,
-                    x.data.as_ptr().add(ky * pw * ci),
-                    1,
-                    ci as isize,
-                    wk.as_ptr(),
-                    1,
-                    co as isize,
-                    1.0,
-                    1.0,
-                    false,
-                    false,
-                    false,
-                    par,
-                );
-            }
+            // Kernel row ky reads the input from pixel ky·pw with row stride ci; for ky = 2
+            // its last row ends exactly at the buffer's end.
+            let lhs = &x.data[ky * pw * ci..];
+            dst_plus_lhs_rhs(
+                &mut out[(pw + 1) * co..],
+                m,
+                co,
+                k,
+                lhs,
+                ci,
+                wk,
+                ky > 0,
+                par,
+            );
         }
     }
     // Bias and ReLU on image pixels; the border columns (written by the straddling pixels)
@@ -376,6 +350,53 @@ pub fn conv3x3_relu(conv: &Conv, x: &Activation, par: Parallelism) -> Activation
         h,
         w,
         data: out,
+    }
+}
+
+/// dst (m × n, row-major) = [dst +] lhs · rhs, where lhs holds m rows of k values `lhs_rs`
+/// apart (rows may overlap: a convolution's input read in place) and rhs is k × n row-major.
+/// Lengths are checked, so the GEMM cannot touch memory outside the slices.
+#[allow(clippy::too_many_arguments)]
+fn dst_plus_lhs_rhs(
+    dst: &mut [f32],
+    m: usize,
+    n: usize,
+    k: usize,
+    lhs: &[f32],
+    lhs_rs: usize,
+    rhs: &[f32],
+    accumulate: bool,
+    par: Parallelism,
+) {
+    if m == 0 {
+        return;
+    }
+    assert!(dst.len() >= m * n && rhs.len() >= k * n);
+    assert!(lhs.len() >= (m - 1) * lhs_rs + k);
+    // SAFETY: dst element (i, j) is dst[i·n + j], lhs element (i, t) is lhs[i·lhs_rs + t],
+    // rhs element (t, j) is rhs[t·n + j]: all inside the slices by the asserts above.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            n as isize,
+            accumulate,
+            lhs.as_ptr(),
+            1,
+            lhs_rs as isize,
+            rhs.as_ptr(),
+            1,
+            n as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            par,
+        );
     }
 }
 

@@ -320,7 +320,21 @@ fn splats_match_their_definition_at_the_border_and_for_wide_radii() {
     let mut cloud = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), None);
     cloud.near = 1e-4;
     let (view, _) = test_view(CameraModel::Pinhole, vec![50.0, 50.0, 32.0, 24.0]);
-    // 0: own pixel; 0.5–2.7: margins of 2–6 px; 6: no margin, clipped loop.
+    // The f32 pinhole projection stays within 6e-4 px of COLMAP's f64 one (stated in
+    // `view::pinhole_pixel`; here pixels are < 100, so far tighter).
+    for p in &cloud.positions {
+        let c = view.rotation * *p + view.translation;
+        let f32_px = view.project(*p, cloud.near).unwrap();
+        let f64_px = view
+            .camera
+            .img_from_cam(DVec3::new(c.x as f64, c.y as f64, c.z as f64))
+            .unwrap();
+        assert!(
+            (f32_px - f64_px).abs().max_element() < 6e-4,
+            "{f32_px} vs {f64_px}"
+        );
+    }
+    // 0: the point's own pixel; 0.5–2.7: reach 1–3; 6: reach 6, clipped at every border.
     for r in [0.0f32, 0.5, 1.0, 1.5, 2.7, 6.0] {
         let buf = render(&view, &cloud, r);
         let want = reference_winners(&view, &cloud, r as f64);

@@ -147,6 +147,7 @@ fn main() {
                         Preprocess::Imagenet,
                         Parallelism::None,
                     )
+                    .expect("tier photos are at least 16×16")
                 })
                 .collect();
             let ms = t.elapsed().as_secs_f64() * 1e3 / scene.photos.len() as f64

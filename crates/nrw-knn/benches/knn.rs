@@ -329,6 +329,7 @@ fn real_scenes(md: &mut String, root: &Path, quick: bool) {
                     nrw_style::Preprocess::Imagenet,
                     nrw_style::Parallelism::Rayon(0),
                 )
+                .unwrap()
             })
             .collect();
         let n = rows.len();

@@ -8,7 +8,8 @@
 
 use image::RgbImage;
 
-use crate::preprocess::{to_input, Preprocess};
+use crate::error::{Result, StyleError};
+use crate::preprocess::{to_input, Preprocess, MIN_SIDE};
 use crate::vgg::{Arch, Vgg, STYLE_LAYERS};
 use crate::Parallelism;
 
@@ -123,15 +124,26 @@ pub fn prepare(photo: &RgbImage, size: Option<u32>) -> RgbImage {
 }
 
 /// The descriptor of a photo under a tier (`net` is required for VGG tiers; `pre` is the
-/// network's input scaling and does not affect `color-stats`).
+/// network's input scaling and does not affect `color-stats`). A `-full` tier refuses photos
+/// under 16 × 16: pooling would leave no pixel for the deep Grams, whose normalisation would
+/// then divide by zero.
 pub fn describe(
     tier: &Tier,
     net: Option<&Vgg>,
     photo: &RgbImage,
     pre: Preprocess,
     par: Parallelism,
-) -> Vec<f32> {
-    match tier {
+) -> Result<Vec<f32>> {
+    if let Tier::Vgg { size: None, .. } = tier {
+        if photo.width().min(photo.height()) < MIN_SIDE {
+            return Err(StyleError::TooSmall {
+                width: photo.width(),
+                height: photo.height(),
+                tier: tier.name(),
+            });
+        }
+    }
+    Ok(match tier {
         Tier::ColorStats => {
             let n = (photo.width() * photo.height()) as f64;
             let mut mean = [0f64; 3];
@@ -177,7 +189,7 @@ pub fn describe(
             debug_assert!(feats.len() <= STYLE_LAYERS.len());
             out
         }
-    }
+    })
 }
 
 /// Squared L2 distance, accumulated in f64.
@@ -241,7 +253,8 @@ mod tests {
             &img,
             Preprocess::Imagenet,
             Parallelism::None,
-        );
+        )
+        .unwrap();
         assert_eq!(d.len(), 9);
         assert!((d[0] - 1.0).abs() < 1e-6 && d[1].abs() < 1e-6 && (d[2] - 0.2).abs() < 1e-6);
         assert!(d[3..].iter().all(|v| v.abs() < 1e-9));

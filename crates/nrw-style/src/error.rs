@@ -15,6 +15,12 @@ pub enum StyleError {
     Weights { path: PathBuf, problem: String },
     #[error("{}: {problem}", path.display())]
     Image { path: PathBuf, problem: String },
+    #[error("a {width}×{height} photo is too small for tier {tier}: the network needs at least 16×16 pixels (fixed-size tiers such as vgg16-256 crop and resize, so they take any photo)")]
+    TooSmall {
+        width: u32,
+        height: u32,
+        tier: String,
+    },
 }
 
 /// Result alias for this crate.

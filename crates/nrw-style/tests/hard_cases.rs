@@ -116,3 +116,31 @@ fn sizes_the_network_cannot_take_are_clear_errors() {
         "{e}"
     );
 }
+
+#[test]
+fn strips_are_described_through_tiers_or_refused_by_name() {
+    use nrw_style::{describe, Tier};
+    let net = net();
+    // A 1×300 strip: a fixed-size tier's centre crop is its middle pixel, resized to a
+    // constant square, so the descriptor equals that of a constant photo of that colour.
+    let strip = RgbImage::from_fn(1, 300, |_, y| Rgb([(y % 200) as u8, 90, 30]));
+    let middle = *strip.get_pixel(0, 149);
+    let tier = Tier::parse("vgg16-128").unwrap();
+    let d = |img: &RgbImage, t: &Tier| {
+        describe(t, Some(&net), img, Preprocess::Imagenet, Parallelism::None)
+    };
+    let got = d(&strip, &tier).unwrap();
+    assert!(got.iter().all(|v| v.is_finite()));
+    assert_eq!(
+        got,
+        d(&RgbImage::from_pixel(128, 128, middle), &tier).unwrap()
+    );
+    // The full-image tier cannot take it: a clear error, not NaN Grams.
+    let e = d(&strip, &Tier::parse("vgg16-full").unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("1×300") && e.contains("vgg16-full") && e.contains("16×16"),
+        "{e}"
+    );
+}

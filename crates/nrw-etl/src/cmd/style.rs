@@ -190,7 +190,10 @@ fn run_stage(args: &StyleArgs) -> Result<()> {
         let mut rows: Vec<DescriptorRow> = views
             .par_iter()
             .map(|v| {
-                let d = describe(&tier, net.as_ref(), &v.photo()?, pre, Parallelism::None);
+                let d = describe(&tier, net.as_ref(), &v.photo()?, pre, Parallelism::None)
+                    .map_err(|e| {
+                        EtlError::Usage(format!("photo {} (image {}): {e}", v.name, v.image_id))
+                    })?;
                 bar.inc(1);
                 Ok(DescriptorRow {
                     image_id: v.image_id,

@@ -55,7 +55,28 @@ thr = []
 for _ in range(max(1, reps // 2)):
     s = time.perf_counter(); style(x); thr.append((time.perf_counter() - s) / len(x))
 np.save(sys.argv[5], g[0][0].double().numpy())
-print(np.median(lat), np.median(thr))
+ort_lat = float("nan")
+try:  # the same graph through onnxruntime, when it is installed (another peer, never a dependency)
+    import io, warnings, onnxruntime as ort
+    warnings.filterwarnings("ignore")
+    class Style(torch.nn.Module):
+        def __init__(self):
+            super().__init__(); self.layers = torch.nn.ModuleList(layers)  # weights as parameters
+        def forward(self, x):
+            return tuple(style(x))
+    buf = io.BytesIO()
+    torch.onnx.export(Style(), x[:1], buf, dynamo=False, opset_version=17)
+    so = ort.SessionOptions(); so.intra_op_num_threads = int(sys.argv[3]); so.inter_op_num_threads = 1
+    sess = ort.InferenceSession(buf.getvalue(), so, providers=["CPUExecutionProvider"])
+    feed = {sess.get_inputs()[0].name: x[:1].numpy()}
+    sess.run(None, feed)
+    ol = []
+    for _ in range(reps):
+        s = time.perf_counter(); sess.run(None, feed); ol.append(time.perf_counter() - s)
+    ort_lat = float(np.median(ol))
+except Exception as e:
+    print("onnxruntime not measured:", e, file=sys.stderr)
+print(np.median(lat), np.median(thr), ort_lat)
 "#;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -71,16 +92,18 @@ fn main() {
     let threads = rayon::current_num_threads();
     let tmp = tempfile::tempdir().unwrap();
     let reps = if quick { 3 } else { 7 };
-    let mut md = String::from("# VGG16 style forward pass: ours against PyTorch\n\n");
+    let mut md =
+        String::from("# VGG16 style forward pass: ours against PyTorch and onnxruntime\n\n");
     let _ = writeln!(
         md,
         "Regenerate: `cargo bench -p nrw-style --bench vs_torch` (needs `pip install torch` for the peer; \
          it is never a dependency). Work: VGG16 to relu5_2 and the five Gram matrices of one RGB input, \
          same weights and input for both, {threads} threads each. Latency: one photo using all threads \
          (median of {reps}). Throughput: {threads} photos at once — ours one photo per core, PyTorch one batch \
-         — time per photo. Ratio > 1 means ours is faster.\n\n\
-         | input | ours latency | PyTorch latency | ratio | ours throughput | PyTorch throughput | ratio | relu1_2 Gram agreement |\n\
-         |---|---|---|---|---|---|---|---|"
+         — time per photo. Ratio > 1 means ours is faster. onnxruntime (if installed): the same PyTorch graph \
+         exported to ONNX, latency with the same thread count.\n\n\
+         | input | ours latency | PyTorch latency | ratio | onnxruntime latency | ratio | ours throughput | PyTorch throughput | ratio | relu1_2 Gram agreement |\n\
+         |---|---|---|---|---|---|---|---|---|---|"
     );
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     for size in [256usize, 512] {
@@ -126,12 +149,15 @@ fn main() {
             .arg(reps.to_string())
             .arg(&g)
             .output();
-        let (tl, tt, agree) = match out {
+        let (tl, tt, ol, agree) = match out {
             Ok(o) if o.status.success() => {
                 let v: Vec<f64> = String::from_utf8_lossy(&o.stdout)
                     .split_whitespace()
                     .map(|t| t.parse().unwrap())
                     .collect();
+                if v.get(2).is_none_or(|t| t.is_nan()) {
+                    eprintln!("{}", String::from_utf8_lossy(&o.stderr).trim());
+                }
                 let theirs = npy::read_npy_f64(&g);
                 let ours = &g0[0].1;
                 let big = ours.iter().fold(0f64, |m, v| m.max(v.abs()));
@@ -139,7 +165,12 @@ fn main() {
                     .iter()
                     .zip(&theirs)
                     .fold(0f64, |m, (a, b)| m.max((a - b).abs()));
-                (v[0], v[1], worst / big)
+                (
+                    v[0],
+                    v[1],
+                    v.get(2).copied().unwrap_or(f64::NAN),
+                    worst / big,
+                )
             }
             Ok(o) => {
                 eprintln!("torch failed: {}", String::from_utf8_lossy(&o.stderr));
@@ -150,10 +181,15 @@ fn main() {
                 continue;
             }
         };
-        eprintln!("{size}²: torch latency {tl:.3} s, throughput {tt:.3} s/photo");
+        eprintln!("{size}²: torch latency {tl:.3} s, throughput {tt:.3} s/photo; onnxruntime latency {ol:.3} s");
+        let ort = if ol.is_nan() {
+            "not measured | —".to_string()
+        } else {
+            format!("{ol:.3} s | **{:.2}×**", ol / lat)
+        };
         let _ = writeln!(
             md,
-            "| {size}² | {lat:.3} s | {tl:.3} s | **{:.2}×** | {thr:.3} s | {tt:.3} s | **{:.2}×** | {agree:.1e} of the largest entry |",
+            "| {size}² | {lat:.3} s | {tl:.3} s | **{:.2}×** | {ort} | {thr:.3} s | {tt:.3} s | **{:.2}×** | {agree:.1e} of the largest entry |",
             tl / lat,
             tt / thr
         );

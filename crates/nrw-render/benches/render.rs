@@ -6,6 +6,7 @@
 //! speed: the same cloud and PINHOLE cameras rendered by us (colour + depth) and by Open3D's
 //!   `project_to_depth_image` (depth only) in the same run, at 10⁵, 10⁶ and 10⁷ points;
 //!   ratio, points/s, views/s. Writes docs/bench/render_speed.md. Needs `pip install open3d`.
+//!   `--ours-only` times only ours and writes nothing (for trying changes).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -260,7 +261,7 @@ for v in views:
 print(statistics.median(ts))
 "#;
 
-fn speed(quick: bool) {
+fn speed(quick: bool, ours_only: bool) {
     let spec = SceneSpec::demo();
     let landmark = Landmark::new(&spec.geometry);
     let sizes: &[usize] = if quick {
@@ -372,13 +373,17 @@ fn speed(quick: bool) {
                 .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
                 .collect();
             write_npy(&tmp.path().join("pts.npy"), &flat, 3);
-            let out = Command::new("python3")
-                .env("OMP_NUM_THREADS", "1")
-                .args(["-c", OPEN3D])
-                .arg(tmp.path().join("pts.npy"))
-                .arg(tmp.path().join("views.json"))
-                .arg(runs.to_string())
-                .output();
+            let out = if ours_only {
+                Err(std::io::Error::other("--ours-only"))
+            } else {
+                Command::new("python3")
+                    .env("OMP_NUM_THREADS", "1")
+                    .args(["-c", OPEN3D])
+                    .arg(tmp.path().join("pts.npy"))
+                    .arg(tmp.path().join("views.json"))
+                    .arg(runs.to_string())
+                    .output()
+            };
             let o3d = match out {
                 Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout)
                     .trim()
@@ -433,6 +438,10 @@ fn speed(quick: bool) {
          colour + depth) held in this run for {} of {measured} rows at r = 0 and {} of {measured} at r = 1.",
         met[0], met[1]
     );
+    if ours_only {
+        eprintln!("--ours-only: docs/bench/render_speed.md left as it was");
+        return;
+    }
     std::fs::create_dir_all(root().join("docs/bench")).unwrap();
     std::fs::write(root().join("docs/bench/render_speed.md"), md).unwrap();
     eprintln!("wrote docs/bench/render_speed.md");
@@ -448,6 +457,6 @@ fn main() {
         accuracy(quick);
     }
     if want("speed") {
-        speed(quick);
+        speed(quick, args.iter().any(|a| a == "--ours-only"));
     }
 }

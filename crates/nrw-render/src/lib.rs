@@ -4,11 +4,12 @@
 //! view are skipped, and lenses without distortion run no distortion code.
 
 pub mod cloud;
+mod simd;
 pub mod splat;
 pub mod verdict;
 pub mod view;
 
 pub use cloud::{Chunk, RenderCloud, CHUNK_POINTS};
-pub use splat::{render, DeepBuffer};
+pub use splat::{render, render_with, DeepBuffer, Kernel};
 pub use verdict::{Filters, Verdict};
 pub use view::{render_size, View};

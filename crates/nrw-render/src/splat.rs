@@ -2,10 +2,11 @@
 //! within r pixels of its projection (r = 0: the pixel that contains it); the nearest point
 //! wins, and equal depths go to the lower point index, so renders are deterministic.
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Mat3, Vec3};
 use nrw_colmap::{Projection, ProjectionVisitor};
 
 use crate::cloud::{Chunk, RenderCloud, CHUNK_POINTS};
+use crate::simd;
 use crate::view::{pinhole_pixel, View};
 
 /// A render: per-pixel depth and, where the cloud has them, colour and normal.
@@ -46,87 +47,219 @@ fn floor_i(v: f64) -> i64 {
     t.saturating_sub(((t as f64) > v) as i64)
 }
 
+/// `floor(v)` for `v` that is an f32 (any, including ±∞ and NaN) widened to f64, clamped to
+/// ±2^30 (far outside any image, so still outside after clamping; NaN becomes -2^30).
+///
+/// One truncating conversion instead of `floor_i`'s fix-up: v + 2^30 is exact in f64 for
+/// |v| ≤ 2^30 with 24 significant bits, and non-negative, so truncation is the floor.
+#[inline(always)]
+pub(crate) fn floor_f32(v: f64) -> i64 {
+    const OFF: f64 = (1u64 << 30) as f64;
+    // Not `clamp`, which keeps NaN.
+    #[allow(clippy::manual_clamp)]
+    let c = v.max(-OFF).min(OFF);
+    // SAFETY: c + OFF is finite and in [0, 2^31], which i64 holds.
+    let t: i64 = unsafe { (c + OFF).to_int_unchecked() };
+    t - (1 << 30)
+}
+
+/// Which code draws the splats. The kernels give bit-identical renders (tested); the
+/// choice only exists so that tests and benchmarks can run the portable code on any CPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kernel {
+    /// AVX2 where the CPU has it (checked once per render), else portable.
+    Auto,
+    /// Baseline x86-64 (SSE2) or whatever the target offers without run-time detection.
+    Portable,
+}
+
+/// Camera-space depth and pixel of each point (see `pinhole_pixel`), written to `out`.
+#[inline(always)]
+pub(crate) fn project(out: &mut [[f32; 3]], pts: &[Vec3], r: Mat3, t: Vec3, k: [f32; 4]) {
+    for (out, p) in out.iter_mut().zip(pts) {
+        let c = r * *p + t;
+        let (x, y) = pinhole_pixel(k, c);
+        *out = [x, y, c.z];
+    }
+}
+
 struct Splat<'a> {
     view: &'a View,
     cloud: &'a RenderCloud,
     radius: f32,
     zbuf: &'a mut ZBuffer,
+    kernel: Kernel,
     chunks: usize,
     tested: usize,
 }
 
-/// Nearest-point keys, one per pixel, row-major.
-struct ZBuffer {
-    keys: Vec<u64>,
-    width: i64,
-    height: i64,
+/// Nearest-point keys, one per pixel, row-major, with a border of 2 × `reach` pixels on every
+/// side: a splat is drawn when its centre pixel is at most `reach` outside the image, so its
+/// square never needs clipping (the border is not part of the render).
+///
+/// A key is stored as the f64 whose bits it is: keys are below f32::INFINITY's bits shifted
+/// by 32, so as f64 they are positive, finite and normal, and f64 order is key order. That
+/// lets one `minsd` keep the nearest point without a branch (see `keep_nearest`).
+pub(crate) struct ZBuffer {
+    pub(crate) keys: Vec<f64>,
+    pub(crate) width: i64,
+    pub(crate) height: i64,
     /// Pixels a splat reaches from the pixel holding its centre: floor(r + 0.5).
-    reach: i64,
+    pub(crate) reach: i64,
+    /// Row length including the border.
+    pub(crate) stride: i64,
 }
+
+/// A pixel no point reached (every key is smaller).
+const EMPTY: f64 = f64::INFINITY;
+
+/// Keys allocated past the last row (see `ZBuffer::new`).
+pub(crate) const SLACK: usize = 3;
 
 impl ZBuffer {
     fn new(width: u32, height: u32, radius: f32) -> ZBuffer {
+        let reach = (radius as f64 + 0.5).floor() as i64;
+        let stride = width as i64 + 4 * reach;
         ZBuffer {
-            keys: vec![u64::MAX; width as usize * height as usize],
+            // (+ SLACK: the AVX2 kernel reads and writes back up to 3 keys past a square.)
+            keys: vec![EMPTY; (stride * (height as i64 + 4 * reach)) as usize + SLACK],
             width: width as i64,
             height: height as i64,
-            reach: (radius as f64 + 0.5).floor() as i64,
+            reach,
+            stride,
+        }
+    }
+
+    /// The keys of image row `y` (border excluded).
+    fn row(&self, y: i64) -> &[f64] {
+        let start = ((y + 2 * self.reach) * self.stride + 2 * self.reach) as usize;
+        &self.keys[start..start + self.width as usize]
+    }
+}
+
+/// `slot = min(slot, cand)` as one `minsd`, which returns `slot` when `cand` is NaN.
+///
+/// Written with SSE2 intrinsics on purpose: LLVM turns a plain `min` or `if` whose operand
+/// is a load into a conditional branch, and a z-test's outcome is close to a coin toss, so
+/// the mispredictions cost more than the rest of the splat (2.2× on r = 1, measured).
+#[inline(always)]
+pub(crate) fn keep_nearest(slot: &mut f64, cand: f64) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_cvtsd_f64, _mm_min_sd, _mm_set_sd};
+        // SAFETY: SSE2 is part of every x86_64 target; these touch registers only.
+        *slot = unsafe { _mm_cvtsd_f64(_mm_min_sd(_mm_set_sd(cand), _mm_set_sd(*slot))) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        if cand < *slot {
+            *slot = cand;
+        }
+    }
+}
+
+/// `key` when `d2 <= r2`, else NaN (which `keep_nearest` never keeps); without a branch.
+#[inline(always)]
+fn inside_or_nan(key: f64, d2: f64, r2: f64) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_cmpnle_sd, _mm_cvtsd_f64, _mm_or_pd, _mm_set_sd};
+        // SAFETY: SSE2 is part of every x86_64 target; these touch registers only.
+        unsafe {
+            _mm_cvtsd_f64(_mm_or_pd(
+                _mm_set_sd(key),
+                _mm_cmpnle_sd(_mm_set_sd(d2), _mm_set_sd(r2)),
+            ))
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        if d2 <= r2 {
+            key
+        } else {
+            f64::NAN
         }
     }
 }
 
 /// A splat's radius, as the footprint loop uses it.
 struct Footprint {
-    r: f64,
     r2: f64,
 }
 
 impl Footprint {
     fn of(radius: f32) -> Footprint {
         let r = radius as f64;
-        Footprint { r, r2: r * r }
+        Footprint { r2: r * r }
     }
 
-    /// Draw one point centred at pixel coordinates (px, py) with z-buffer `key`.
+    /// Draw one point centred at pixel coordinates (px, py), which lie in pixel (xc, yc)
+    /// (their floors), with z-buffer `key`. `R` is the buffer's reach when it is 0 or 1 (the
+    /// fixed square unrolls), `DYNAMIC` otherwise.
     #[inline(always)]
-    fn draw(&self, z: &mut ZBuffer, px: f64, py: f64, key: u64) {
-        let (w, h, reach) = (z.width, z.height, z.reach);
-        let (xc, yc) = (floor_i(px), floor_i(py));
-        // A splat whose centre pixel is more than `reach` outside touches no pixel.
-        if xc < -reach || yc < -reach || xc >= w + reach || yc >= h + reach {
+    fn draw<const R: i64>(
+        &self,
+        z: &mut ZBuffer,
+        (px, py): (f64, f64),
+        (xc, yc): (i64, i64),
+        key: f64,
+    ) {
+        let reach = if R == DYNAMIC { z.reach } else { R };
+        // A splat whose centre pixel is more than `reach` outside touches no pixel; any
+        // other lies within the border, so its square is drawn whole. As unsigned
+        // comparisons: -reach <= xc < w + reach (the same for y).
+        let (xs, ys) = ((xc + reach) as u64, (yc + reach) as u64);
+        if xs >= (z.width + 2 * reach) as u64 || ys >= (z.height + 2 * reach) as u64 {
             return;
         }
-        if self.r == 0.0 {
-            // reach 0: the pixel that contains the point, inside the image.
-            let slot = &mut z.keys[(yc * w + xc) as usize];
-            *slot = (*slot).min(key);
+        let stride = z.stride as usize;
+        // Index of the square's top-left pixel (xc - reach, yc - reach), shifted by the border.
+        let corner = ys as usize * stride + xs as usize;
+        // r = 0 is the pixel that contains the point (not a disc of radius 0).
+        if R == 0 || (R == DYNAMIC && self.r2 == 0.0) {
+            keep_nearest(&mut z.keys[corner], key);
             return;
         }
-        let (x0, x1) = ((xc - reach).max(0), (xc + reach).min(w - 1));
-        let (y0, y1) = ((yc - reach).max(0), (yc + reach).min(h - 1));
-        for y in y0..y1 + 1 {
-            let dy = y as f64 + 0.5 - py;
+        let side = (2 * reach + 1) as usize;
+        let square = &mut z.keys[corner..corner + (side - 1) * stride + side];
+        if R != DYNAMIC {
+            // Pinhole path (px, py are f32 values): the offsets from the pixel's corner are
+            // exact, so (i - R + 0.5) - fx rounds the same real number as the definition's
+            // (xc - R + i + 0.5) - px: bit-identical distances, fewer conversions.
+            let (fx, fy) = (px - xc as f64, py - yc as f64);
+            let d = |i: usize, f: f64| {
+                let t = (i as i64 - R) as f64 + 0.5 - f;
+                t * t
+            };
+            for j in 0..side {
+                let dy2 = d(j, fy);
+                let row = &mut square[j * stride..j * stride + side];
+                for (i, slot) in row.iter_mut().enumerate() {
+                    keep_nearest(slot, inside_or_nan(key, d(i, fx) + dy2, self.r2));
+                }
+            }
+            return;
+        }
+        for j in 0..side {
+            let dy = (yc - reach + j as i64) as f64 + 0.5 - py;
             let dy2 = dy * dy;
-            let row = y * w;
-            for x in x0..x1 + 1 {
-                let dx = x as f64 + 0.5 - px;
-                // Branch-free: a pixel outside the disc takes u64::MAX, which never wins.
-                let k = if dx * dx + dy2 <= self.r2 {
-                    key
-                } else {
-                    u64::MAX
-                };
-                let slot = &mut z.keys[(row + x) as usize];
-                *slot = (*slot).min(k);
+            let row = &mut square[j * stride..j * stride + side];
+            for (i, slot) in row.iter_mut().enumerate() {
+                let dx = (xc - reach + i as i64) as f64 + 0.5 - px;
+                keep_nearest(slot, inside_or_nan(key, dx * dx + dy2, self.r2));
             }
         }
     }
 }
 
+/// `Footprint::draw`'s reach parameter when the reach is only known at run time.
+const DYNAMIC: i64 = -1;
+
 /// Positive f32 bits order like the values: one u64 min = nearest, then lowest index.
 #[inline(always)]
-fn key(z: f32, index: usize) -> u64 {
-    (z.to_bits() as u64) << 32 | index as u64
+pub(crate) fn key(z: f32, index: usize) -> f64 {
+    // z > near > 0 and finite, so the bits are those of a positive normal f64 (`ZBuffer`).
+    f64::from_bits((z.to_bits() as u64) << 32 | index as u64)
 }
 
 impl<'a> Splat<'a> {
@@ -162,7 +295,8 @@ impl<'a> Splat<'a> {
                     continue;
                 }
                 let Some((px, py)) = project(c) else { continue };
-                fp.draw(self.zbuf, px, py, key(c.z, chunk.start as usize + k));
+                let at = (floor_i(px), floor_i(py));
+                fp.draw::<DYNAMIC>(self.zbuf, (px, py), at, key(c.z, chunk.start as usize + k));
             }
         }
         (self.chunks, self.tested)
@@ -170,27 +304,42 @@ impl<'a> Splat<'a> {
 
     /// Undistorted lenses: each chunk is transformed and projected in a branch-free pass
     /// that the compiler vectorises, then drawn (4× fewer instructions per point than `run`).
-    fn run_pinhole(mut self, k: [f32; 4]) -> (usize, usize) {
+    /// `R` as in `Footprint::draw`; with AVX2 the drawing is `simd::draw`.
+    fn run_pinhole<const R: i64>(mut self, k: [f32; 4]) -> (usize, usize) {
         let v = self.view;
         let near = self.cloud.near;
         let fp = Footprint::of(self.radius);
         let (r, t) = (v.rotation, v.translation);
         let mut proj = vec![[0f32; 3]; CHUNK_POINTS];
         let cloud: &'a RenderCloud = self.cloud;
+        let avx2 = self.kernel == Kernel::Auto && simd::has_avx2();
+        let simd_draw = avx2 && self.zbuf.reach <= simd::MAX_REACH;
         for chunk in self.visible() {
             let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
             // Chunks built by hand may be longer than CHUNK_POINTS: take them in pieces.
             for (piece, pts) in all.chunks(CHUNK_POINTS).enumerate() {
                 let first = chunk.start as usize + piece * CHUNK_POINTS;
-                for (out, p) in proj.iter_mut().zip(pts) {
-                    let c = r * *p + t;
-                    let (x, y) = pinhole_pixel(k, c);
-                    *out = [x, y, c.z];
+                let proj = &mut proj[..pts.len()];
+                if avx2 {
+                    // Same arithmetic 8 lanes wide, and a footprint row per vector.
+                    simd::project(proj, pts, r, t, k);
+                    if simd_draw {
+                        simd::draw(self.zbuf, proj, first, near, fp.r2);
+                        continue;
+                    }
+                } else {
+                    project(proj, pts, r, t, k);
                 }
-                for (i, &[x, y, z]) in proj[..pts.len()].iter().enumerate() {
+                for (i, &[x, y, z]) in proj.iter().enumerate() {
                     // On or behind the camera plane (z ≈ 0 included): never drawn.
                     if z > near {
-                        fp.draw(self.zbuf, x as f64, y as f64, key(z, first + i));
+                        let (px, py) = (x as f64, y as f64);
+                        fp.draw::<R>(
+                            self.zbuf,
+                            (px, py),
+                            (floor_f32(px), floor_f32(py)),
+                            key(z, first + i),
+                        );
                     }
                 }
             }
@@ -207,7 +356,11 @@ impl ProjectionVisitor for Splat<'_> {
         let camera = &v.camera;
         let (check_fold, fold) = (v.check_fold, v.fold);
         if let Some(k) = v.pinhole {
-            return self.run_pinhole(k);
+            return match (self.radius, self.zbuf.reach) {
+                (0.0, _) => self.run_pinhole::<0>(k),
+                (_, 1) => self.run_pinhole::<1>(k),
+                _ => self.run_pinhole::<DYNAMIC>(k),
+            };
         }
         self.run(|c: Vec3| {
             let cd = DVec3::new(c.x as f64, c.y as f64, c.z as f64);
@@ -221,6 +374,11 @@ impl ProjectionVisitor for Splat<'_> {
 
 /// Render `cloud` into `view` with splats of `radius` output pixels.
 pub fn render(view: &View, cloud: &RenderCloud, radius: f32) -> DeepBuffer {
+    render_with(view, cloud, radius, Kernel::Auto)
+}
+
+/// `render` with the splat code chosen by the caller (tests compare the kernels).
+pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel) -> DeepBuffer {
     let n = view.width as usize * view.height as usize;
     let radius = radius.max(0.0);
     let mut zbuf = ZBuffer::new(view.width, view.height, radius);
@@ -229,6 +387,7 @@ pub fn render(view: &View, cloud: &RenderCloud, radius: f32) -> DeepBuffer {
         cloud,
         radius,
         zbuf: &mut zbuf,
+        kernel,
         chunks: 0,
         tested: 0,
     };
@@ -237,35 +396,46 @@ pub fn render(view: &View, cloud: &RenderCloud, radius: f32) -> DeepBuffer {
     // colour and normal only run for channels the cloud has.
     let mut covered = 0;
     let mut depth = Vec::with_capacity(n);
-    for row in zbuf.keys.chunks(view.width as usize) {
-        covered += row.iter().filter(|&&k| k != u64::MAX).count();
+    let rows = || (0..view.height as i64).map(|y| zbuf.row(y));
+    for row in rows() {
+        covered += row.iter().filter(|&&k| k != EMPTY).count();
         depth.extend(row.iter().map(|&k| {
-            if k == u64::MAX {
+            if k == EMPTY {
                 0.0
             } else {
-                f32::from_bits((k >> 32) as u32)
+                f32::from_bits((k.to_bits() >> 32) as u32)
             }
         }));
     }
-    // Pixel index and point index of every drawn pixel.
-    let drawn = || {
-        zbuf.keys
-            .iter()
-            .enumerate()
-            .filter(|(_, k)| **k != u64::MAX)
-            .map(|(i, k)| (i, (k & 0xffff_ffff) as usize))
-    };
-    let color = cloud.colors.as_ref().map(|src| {
+    // The gathers run row by row over the z-buffer: a pixel's point index is its key's low
+    // bits. Colour is gathered for every pixel, empty ones from point 0 and then zeroed, so
+    // that the loads do not wait on a branch (the gather is bound by cache misses).
+    let width = view.width as usize;
+    let color = cloud.colors.as_deref().map(|src| {
         let mut out = vec![[0u8; 3]; n];
-        for (i, idx) in drawn() {
-            out[i] = src[idx];
+        // (An empty cloud drew nothing, and has no point 0 to read.)
+        let rows = out
+            .chunks_exact_mut(width)
+            .enumerate()
+            .filter(|_| !src.is_empty());
+        for (y, orow) in rows {
+            for (o, &k) in orow.iter_mut().zip(zbuf.row(y as i64)) {
+                let hit = k != EMPTY;
+                let c = src[(k.to_bits() as u32 as usize) * hit as usize];
+                let m = (hit as u8).wrapping_neg();
+                *o = [c[0] & m, c[1] & m, c[2] & m];
+            }
         }
         out
     });
-    let normal = cloud.normals.as_ref().map(|src| {
+    let normal = cloud.normals.as_deref().map(|src| {
         let mut out = vec![[0f32; 3]; n];
-        for (i, idx) in drawn() {
-            out[i] = (view.rotation * src[idx]).to_array();
+        for (y, orow) in out.chunks_exact_mut(width).enumerate() {
+            for (o, &k) in orow.iter_mut().zip(zbuf.row(y as i64)) {
+                if k != EMPTY {
+                    *o = (view.rotation * src[k.to_bits() as u32 as usize]).to_array();
+                }
+            }
         }
         out
     });

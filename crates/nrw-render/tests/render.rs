@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use glam::{DQuat, DVec2, DVec3, Vec3};
 use nrw_colmap::{read_model, read_ply, read_scene, Camera, CameraModel, Format, Image, Rigid3};
 use nrw_dataset::depth::read_exr;
-use nrw_render::{render, Chunk, RenderCloud, View};
+use nrw_render::{render, render_with, Chunk, Kernel, RenderCloud, View};
 use nrw_synth::{generate, SceneSpec};
 
 fn root() -> PathBuf {
@@ -267,6 +267,11 @@ fn one_point_covers_its_splat_and_an_empty_cloud_covers_nothing() {
     );
     let buf = render(&view, &cloud_of(&[]), 1.0);
     assert_eq!((buf.covered, buf.empty_ratio()), (0, 1.0));
+    // The cloud's channels are kept (black), so every row of a dataset has the same columns.
+    let black = buf
+        .color
+        .map(|c| c.len() == 64 * 48 && c.iter().all(|p| *p == [0, 0, 0]));
+    assert_eq!(black, Some(true));
 }
 
 /// The winner at every pixel by the definition: among points whose projection (by
@@ -334,24 +339,116 @@ fn splats_match_their_definition_at_the_border_and_for_wide_radii() {
             "{f32_px} vs {f64_px}"
         );
     }
-    // 0: the point's own pixel; 0.5–2.7: reach 1–3; 6: reach 6, clipped at every border.
-    for r in [0.0f32, 0.5, 1.0, 1.5, 2.7, 6.0] {
-        let buf = render(&view, &cloud, r);
-        let want = reference_winners(&view, &cloud, r as f64);
-        let color = buf.color.as_ref().unwrap();
-        for (px, w) in want.iter().enumerate() {
-            let got = (buf.depth[px] > 0.0).then(|| {
-                let c = color[px];
-                // Colours were permuted with the points by the Morton sort: map back.
-                c[0] as usize | (c[1] as usize) << 8
-            });
-            let want = w.map(|i| {
-                let c = cloud.colors.as_ref().unwrap()[i];
-                c[0] as usize | (c[1] as usize) << 8
-            });
-            assert_eq!(got, want, "r = {r}, pixel ({}, {})", px % 64, px / 64);
+    // 0: the point's own pixel; 0.3: reach 0 but a disc; 0.5–2.7: reach 1–3; 6: reach 6.
+    assert_definition(&view, &cloud, &[0.0, 0.3, 0.5, 1.0, 1.5, 2.7, 6.0]);
+}
+
+/// Every pixel's winner, for each radius and both kernels (Auto is AVX2 where the CPU has
+/// it), is the definition's (`reference_winners`). Colours must encode point indices.
+fn assert_definition(view: &View, cloud: &RenderCloud, radii: &[f32]) {
+    let (w, h) = (view.width as usize, view.height as usize);
+    for &r in radii {
+        let want = reference_winners(view, cloud, r as f64);
+        for kernel in [Kernel::Auto, Kernel::Portable] {
+            let buf = render_with(view, cloud, r, kernel);
+            let color = buf.color.as_ref().unwrap();
+            for (px, w_) in want.iter().enumerate() {
+                let got = (buf.depth[px] > 0.0).then(|| {
+                    let c = color[px];
+                    // Colours were permuted with the points by the Morton sort: map back.
+                    c[0] as usize | (c[1] as usize) << 8
+                });
+                let want = w_.map(|i| {
+                    let c = cloud.colors.as_ref().unwrap()[i];
+                    c[0] as usize | (c[1] as usize) << 8
+                });
+                let at = (px % w, px / w);
+                assert_eq!(got, want, "r = {r}, {kernel:?}, pixel {at:?}");
+            }
+            assert_eq!(buf.covered, want.iter().flatten().count(), "r = {r}");
+            assert_eq!(buf.depth.len(), w * h);
         }
-        assert_eq!(buf.covered, want.iter().flatten().count(), "r = {r}");
+    }
+}
+
+#[test]
+fn splats_on_exact_pixel_boundaries_follow_the_definition() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    // f = 128, c = (32, 24), depths powers of two: every projection is exactly a pixel
+    // corner, edge midpoint or centre, so pixel centres lie exactly at distance r (for r a
+    // multiple of 0.5) and points exactly on pixel edges: the ≤ and the floor are tested
+    // where a rounding slip would show.
+    let pts: Vec<DVec3> = (0..600)
+        .map(|_| {
+            let z = [0.5, 1.0, 2.0, 4.0][rng.random_range(0..4usize)];
+            let (m, n) = (rng.random_range(-72..=72), rng.random_range(-56..=56));
+            DVec3::new(m as f64 / 256.0 * z, n as f64 / 256.0 * z, z)
+        })
+        .collect();
+    let colors: Vec<[u8; 3]> = (0..pts.len())
+        .map(|i| [i as u8, (i >> 8) as u8, 0])
+        .collect();
+    let mut cloud = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), None);
+    cloud.near = 1e-4;
+    let (view, _) = test_view(CameraModel::Pinhole, vec![128.0, 128.0, 32.0, 24.0]);
+    for p in &cloud.positions {
+        let px = view.project(*p, cloud.near).unwrap();
+        assert_eq!(
+            (px * 2.0).round(),
+            px * 2.0,
+            "{px} is on the half-pixel lattice"
+        );
+    }
+    assert_definition(&view, &cloud, &[0.0, 0.5, 1.0, 1.5, 2.0, 2.5]);
+}
+
+#[test]
+fn the_kernels_render_bit_for_bit_alike() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    // A box around and behind a tilted camera: points off-image, at the border, on and
+    // behind the camera plane; every 50th point duplicated (equal depths, index decides).
+    let mut pts: Vec<DVec3> = (0..200_000)
+        .map(|_| {
+            DVec3::new(
+                rng.random_range(-4.0..4.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-1.0..9.0),
+            )
+        })
+        .collect();
+    let dups: Vec<DVec3> = pts.iter().step_by(50).copied().collect();
+    pts.extend(dups);
+    let colors: Vec<[u8; 3]> = (0..pts.len())
+        .map(|i| [i as u8, (i >> 8) as u8, 7])
+        .collect();
+    let normals: Vec<[f32; 3]> = (0..pts.len()).map(|i| [1.0, i as f32, 0.0]).collect();
+    let cloud = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), Some(&normals));
+    let cam = Camera {
+        id: 1,
+        model: CameraModel::Pinhole,
+        width: 320,
+        height: 240,
+        params: vec![260.0, 250.0, 161.3, 118.9],
+    };
+    let img = Image {
+        id: 1,
+        name: "t".into(),
+        camera_id: 1,
+        cam_from_world: Rigid3 {
+            rotation: DQuat::from_euler(glam::EulerRot::XYZ, 0.2, -0.3, 0.1),
+            translation: DVec3::new(0.3, -0.2, 0.5),
+        },
+        stored_quat_norm: 1.0,
+        points2d: vec![],
+    };
+    for r in [0.0f32, 0.3, 0.6, 1.0, 1.3, 2.0, 3.0, 7.5, 32.0] {
+        let view = View::new(&img, &cam, DVec3::ZERO, 320, 240, r);
+        let a = render_with(&view, &cloud, r, Kernel::Auto);
+        let b = render_with(&view, &cloud, r, Kernel::Portable);
+        assert!(a.covered > 1000, "r = {r}: the scene covers the view");
+        assert!(a == b, "r = {r}: kernels differ");
     }
 }
 

@@ -1,19 +1,34 @@
 //! The pinhole splat loop for CPUs with AVX2, chosen at run time (the build stays baseline
-//! x86-64). Same arithmetic as the portable code, so renders are bit-identical: projection
-//! runs 8 points per instruction, and each row of a splat's square is one 4-lane vector
-//! (distances, disc test and z-test together) instead of a scalar step per pixel. Measured
-//! on the 10⁷-point benchmark: r = 1 took 0.6× the time of the portable kernel.
+//! x86-64). Same arithmetic as the portable code, so renders are bit-identical (tested):
+//! projection, floors and bounds run 8 points per instruction, and each row of a splat's
+//! square is one 4-lane vector (distances, disc test and z-test together) instead of a
+//! scalar step per pixel. On the 10⁷-point benchmark, r = 1: 0.4× the time of the portable
+//! kernel (`cargo bench -p nrw-render --bench render -- speed`, docs/rendering.md).
 
 use glam::{Mat3, Vec3};
 
 use crate::splat::ZBuffer;
 
 /// Widest square the AVX2 kernel draws: reach 32 (`nrw-etl`'s largest radius), 65 columns.
-pub(crate) const MAX_REACH: i64 = 32;
+const MAX_REACH: i64 = 32;
 const MAX_VECTORS: usize = (2 * MAX_REACH as usize + 1).div_ceil(4);
 
+/// A projected point: pixel position and depth (as `splat::project`), and the top-left key
+/// of its square in the bordered z-buffer as (row, column), or `SKIP` when it draws nothing.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C)]
+pub(crate) struct Projected {
+    x: f32,
+    y: f32,
+    z: f32,
+    at: u32,
+}
+
+/// `Projected::at` of a point on or behind the camera plane, or whose square misses the image.
+const SKIP: u32 = u32::MAX;
+
 /// Whether this CPU runs the AVX2 kernel.
-pub(crate) fn has_avx2() -> bool {
+fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         is_x86_feature_detected!("avx2")
@@ -24,40 +39,41 @@ pub(crate) fn has_avx2() -> bool {
     }
 }
 
-/// `splat::project`, compiled for AVX2. Call only where `has_avx2()`.
-#[cfg(target_arch = "x86_64")]
-pub(crate) fn project(out: &mut [[f32; 3]], pts: &[Vec3], r: Mat3, t: Vec3, k: [f32; 4]) {
-    assert!(has_avx2());
-    // SAFETY: the CPU has AVX2 (asserted; `is_x86_feature_detected` caches its answer).
-    unsafe { x86::project(out, pts, r, t, k) }
+/// Whether `splat` can draw into `z`: AVX2, and a square position that fits `Projected::at`.
+pub(crate) fn fits(z: &ZBuffer) -> bool {
+    let span = |n: i64| n + 2 * z.reach < u16::MAX as i64;
+    has_avx2() && z.reach <= MAX_REACH && span(z.width) && span(z.height)
 }
 
-/// Draw projected points (from `splat::project`) as discs of squared radius `r2` within the
-/// z-buffer's reach, or as the pixel that holds them when `r2` is 0; point `i` has index
-/// `first + i`. Call only where `has_avx2()`.
-#[cfg(target_arch = "x86_64")]
-pub(crate) fn draw(z: &mut ZBuffer, proj: &[[f32; 3]], first: usize, near: f32, r2: f64) {
-    assert!(has_avx2() && (0..=MAX_REACH).contains(&z.reach));
-    // SAFETY: the CPU has AVX2 (asserted above).
+/// Project `pts` (point `i` has index `first + i`) through the undistorted lens `k` and draw
+/// them as discs of squared radius `r2`, or as the pixel that holds them when `r2` is 0.
+/// `scratch` holds the projections. Call only where `fits(z)`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn splat(
+    z: &mut ZBuffer,
+    pts: &[Vec3],
+    first: usize,
+    (r, t, k): (Mat3, Vec3, [f32; 4]),
+    near: f32,
+    r2: f64,
+    scratch: &mut Vec<Projected>,
+) {
+    assert!(fits(z));
+    scratch.resize(pts.len(), Projected::default());
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: the CPU has AVX2 (asserted; `is_x86_feature_detected` caches its answer).
     unsafe {
+        x86::project(scratch, pts, (r, t, k), near, z);
         if r2 == 0.0 {
-            x86::draw_pixel(z, proj, first, near)
+            x86::draw_pixel(z, scratch, first)
         } else if z.reach == 1 {
-            x86::draw::<true>(z, proj, first, near, r2)
+            x86::draw::<true>(z, scratch, first, r2)
         } else {
-            x86::draw::<false>(z, proj, first, near, r2)
+            x86::draw::<false>(z, scratch, first, r2)
         }
     }
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-pub(crate) fn project(_: &mut [[f32; 3]], _: &[Vec3], _: Mat3, _: Vec3, _: [f32; 4]) {
-    unreachable!("has_avx2() is false off x86_64")
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-pub(crate) fn draw(_: &mut ZBuffer, _: &[[f32; 3]], _: usize, _: f32, _: f64) {
-    unreachable!("has_avx2() is false off x86_64")
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!("fits() is false off x86_64: {first} {near} {r2} {r:?} {t:?} {k:?}");
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -66,33 +82,53 @@ mod x86 {
 
     use glam::{Mat3, Vec3};
 
-    use super::MAX_VECTORS;
-    use crate::splat::{floor_f32, keep_nearest, key, ZBuffer, SLACK};
+    use super::{Projected, MAX_VECTORS, SKIP};
+    use crate::splat::{keep_nearest, key, ZBuffer, SLACK};
 
-    /// r = 0: the pixel that holds the point (the portable loop, compiled for AVX2: it ran
-    /// in 0.75× the time, measured; the z-buffer has no border at reach 0).
+    /// `splat::project`, plus each square's position: floor(x) in f32 is exact and equals the
+    /// portable `floor_f32` (coordinates are clamped to ±2^20 first, far outside any image).
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw_pixel(z: &mut ZBuffer, proj: &[[f32; 3]], first: usize, near: f32) {
-        let stride = z.stride as usize;
-        let (xspan, yspan) = (z.width as u64, z.height as u64);
-        for (i, &[x, y, zz]) in proj.iter().enumerate() {
-            if zz <= near {
-                continue;
-            }
-            let (xs, ys) = (floor_f32(x as f64) as u64, floor_f32(y as f64) as u64);
-            if xs >= xspan || ys >= yspan {
-                continue;
-            }
-            keep_nearest(
-                &mut z.keys[ys as usize * stride + xs as usize],
-                key(zz, first + i),
-            );
+    pub(super) fn project(
+        out: &mut [Projected],
+        pts: &[Vec3],
+        (r, t, k): (Mat3, Vec3, [f32; 4]),
+        near: f32,
+        z: &ZBuffer,
+    ) {
+        const FAR: f32 = (1 << 20) as f32;
+        let reach = z.reach as i32;
+        let (xspan, yspan) = (
+            (z.width as i32 + 2 * reach) as u32,
+            (z.height as i32 + 2 * reach) as u32,
+        );
+        for (o, p) in out.iter_mut().zip(pts) {
+            let c = r * *p + t;
+            let (x, y) = crate::view::pinhole_pixel(k, c);
+            // Not `clamp`, which keeps NaN (this maps it to -FAR, outside).
+            #[allow(clippy::manual_clamp)]
+            let (fx, fy) = (x.max(-FAR).min(FAR).floor(), y.max(-FAR).min(FAR).floor());
+            // SAFETY: fx, fy are integers within ±2^20, which i32 holds (`as` would check
+            // each lane for NaN and overflow, and stop the loop from vectorising).
+            let (ix, iy): (i32, i32) = unsafe { (fx.to_int_unchecked(), fy.to_int_unchecked()) };
+            // -reach <= floor < span - reach, as one unsigned comparison per axis.
+            let (xs, ys) = ((ix + reach) as u32, (iy + reach) as u32);
+            // On or behind the camera plane (z ≈ 0 included): never drawn.
+            let drawn = c.z > near && xs < xspan && ys < yspan;
+            let at = if drawn { ys << 16 | xs } else { SKIP };
+            *o = Projected { x, y, z: c.z, at };
         }
     }
 
+    /// r = 0: the pixel that holds the point (the z-buffer has no border at reach 0).
     #[target_feature(enable = "avx2")]
-    pub(super) fn project(out: &mut [[f32; 3]], pts: &[Vec3], r: Mat3, t: Vec3, k: [f32; 4]) {
-        crate::splat::project(out, pts, r, t, k)
+    pub(super) fn draw_pixel(z: &mut ZBuffer, proj: &[Projected], first: usize) {
+        let stride = z.stride as usize;
+        for (i, p) in proj.iter().enumerate() {
+            if p.at != SKIP {
+                let slot = (p.at >> 16) as usize * stride + (p.at & 0xffff) as usize;
+                keep_nearest(&mut z.keys[slot], key(p.z, first + i));
+            }
+        }
     }
 
     /// `REACH1`: the z-buffer's reach is 1, so the 3×3 square unrolls.
@@ -105,17 +141,15 @@ mod x86 {
     #[target_feature(enable = "avx2")]
     pub(super) fn draw<const REACH1: bool>(
         z: &mut ZBuffer,
-        proj: &[[f32; 3]],
+        proj: &[Projected],
         first: usize,
-        near: f32,
         r2: f64,
     ) {
         let reach = if REACH1 { 1 } else { z.reach };
         let stride = z.stride as usize;
-        let (xspan, yspan) = ((z.width + 2 * reach) as u64, (z.height + 2 * reach) as u64);
         let side = (2 * reach + 1) as usize;
         let vectors = side.div_ceil(4);
-        assert!(vectors <= MAX_VECTORS);
+        assert!(vectors <= MAX_VECTORS && 4 * vectors - side <= SLACK);
         let mut offsets = [_mm256_setzero_pd(); MAX_VECTORS];
         for (v, o) in offsets[..vectors].iter_mut().enumerate() {
             let lane = |l: usize| {
@@ -134,29 +168,21 @@ mod x86 {
         let r2v = _mm256_set1_pd(r2);
         // The square's last key plus the lanes past it lie within the buffer (SLACK).
         let last = (side - 1) * stride + 4 * vectors - 1;
-        assert!(4 * vectors - side <= SLACK);
-        for (i, &[x, y, zz]) in proj.iter().enumerate() {
-            // On or behind the camera plane (z ≈ 0 included): never drawn.
-            if zz <= near {
+        for (i, p) in proj.iter().enumerate() {
+            if p.at == SKIP {
                 continue;
             }
-            let (px, py) = (x as f64, y as f64);
-            let (xc, yc) = (floor_f32(px), floor_f32(py));
-            // A splat whose centre pixel is more than `reach` outside touches no pixel:
-            // -reach <= xc < w + reach, as one unsigned comparison (and the same for y).
-            let (xs, ys) = ((xc + reach) as u64, (yc + reach) as u64);
-            if xs >= xspan || ys >= yspan {
-                continue;
-            }
+            let (xs, ys) = ((p.at & 0xffff) as i64, (p.at >> 16) as i64);
             let corner = ys as usize * stride + xs as usize;
             let square = &mut z.keys[corner..corner + last + 1];
-            let fx = _mm256_set1_pd(px - xc as f64);
+            // The square's top-left corner is floor(p) - reach (shifted by the border).
+            let fx = _mm256_set1_pd(p.x as f64 - (xs - reach) as f64);
             for (d, o) in dx2.iter_mut().zip(offsets) {
                 let dx = _mm256_sub_pd(*o, fx);
                 *d = _mm256_mul_pd(dx, dx);
             }
-            let kv = _mm256_set1_pd(key(zz, first + i));
-            let fy = py - yc as f64;
+            let kv = _mm256_set1_pd(key(p.z, first + i));
+            let fy = p.y as f64 - (ys - reach) as f64;
             for j in 0..side {
                 let dy = (j as i64 - reach) as f64 + 0.5 - fy;
                 let dy2 = _mm256_set1_pd(dy * dy);
@@ -166,9 +192,9 @@ mod x86 {
                     let cand = _mm256_or_pd(kv, _mm256_cmp_pd::<_CMP_NLE_UQ>(d2, r2v));
                     let at = j * stride + 4 * v;
                     let slots = &mut square[at..at + 4];
-                    let p = slots.as_mut_ptr();
+                    let s = slots.as_mut_ptr();
                     // SAFETY: `slots` holds the 4 keys read and written.
-                    unsafe { _mm256_storeu_pd(p, _mm256_min_pd(cand, _mm256_loadu_pd(p))) };
+                    unsafe { _mm256_storeu_pd(s, _mm256_min_pd(cand, _mm256_loadu_pd(s))) };
                 }
             }
         }

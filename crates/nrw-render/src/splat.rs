@@ -53,7 +53,7 @@ fn floor_i(v: f64) -> i64 {
 /// One truncating conversion instead of `floor_i`'s fix-up: v + 2^30 is exact in f64 for
 /// |v| ≤ 2^30 with 24 significant bits, and non-negative, so truncation is the floor.
 #[inline(always)]
-pub(crate) fn floor_f32(v: f64) -> i64 {
+fn floor_f32(v: f64) -> i64 {
     const OFF: f64 = (1u64 << 30) as f64;
     // Not `clamp`, which keeps NaN.
     #[allow(clippy::manual_clamp)]
@@ -75,7 +75,7 @@ pub enum Kernel {
 
 /// Camera-space depth and pixel of each point (see `pinhole_pixel`), written to `out`.
 #[inline(always)]
-pub(crate) fn project(out: &mut [[f32; 3]], pts: &[Vec3], r: Mat3, t: Vec3, k: [f32; 4]) {
+fn project(out: &mut [[f32; 3]], pts: &[Vec3], r: Mat3, t: Vec3, k: [f32; 4]) {
     for (out, p) in out.iter_mut().zip(pts) {
         let c = r * *p + t;
         let (x, y) = pinhole_pixel(k, c);
@@ -312,24 +312,20 @@ impl<'a> Splat<'a> {
         let (r, t) = (v.rotation, v.translation);
         let mut proj = vec![[0f32; 3]; CHUNK_POINTS];
         let cloud: &'a RenderCloud = self.cloud;
-        let avx2 = self.kernel == Kernel::Auto && simd::has_avx2();
-        let simd_draw = avx2 && self.zbuf.reach <= simd::MAX_REACH;
+        let avx2 = self.kernel == Kernel::Auto && simd::fits(self.zbuf);
+        let mut scratch = Vec::new();
         for chunk in self.visible() {
             let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
             // Chunks built by hand may be longer than CHUNK_POINTS: take them in pieces.
             for (piece, pts) in all.chunks(CHUNK_POINTS).enumerate() {
                 let first = chunk.start as usize + piece * CHUNK_POINTS;
-                let proj = &mut proj[..pts.len()];
                 if avx2 {
-                    // Same arithmetic 8 lanes wide, and a footprint row per vector.
-                    simd::project(proj, pts, r, t, k);
-                    if simd_draw {
-                        simd::draw(self.zbuf, proj, first, near, fp.r2);
-                        continue;
-                    }
-                } else {
-                    project(proj, pts, r, t, k);
+                    // The same arithmetic, 8 points or a footprint row per instruction.
+                    simd::splat(self.zbuf, pts, first, (r, t, k), near, fp.r2, &mut scratch);
+                    continue;
                 }
+                let proj = &mut proj[..pts.len()];
+                project(proj, pts, r, t, k);
                 for (i, &[x, y, z]) in proj.iter().enumerate() {
                     // On or behind the camera plane (z ≈ 0 included): never drawn.
                     if z > near {

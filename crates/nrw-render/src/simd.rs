@@ -1,9 +1,10 @@
-//! The pinhole splat loop for CPUs with AVX2, chosen at run time (the build stays baseline
-//! x86-64). Same arithmetic as the portable code, so renders are bit-identical (tested):
-//! projection, floors and bounds run 8 points per instruction, and each row of a splat's
-//! square is one 4-lane vector (distances, disc test and z-test together) instead of a
-//! scalar step per pixel. On the 10⁷-point benchmark, r = 1: 0.4× the time of the portable
-//! kernel (`cargo bench -p nrw-render --bench render -- speed`, docs/rendering.md).
+//! The splat loops for CPUs with AVX2, chosen at run time (the build stays baseline x86-64).
+//! Same arithmetic as the portable code, so renders are bit-identical (tested). Undistorted
+//! lenses project, floor and bounds-check 8 points per instruction; every lens draws each row
+//! of a splat's square as one 4-lane vector (distances, disc test and z-test together)
+//! instead of a scalar step per pixel. Lenses with distortion still project one point at a
+//! time through COLMAP's f64 formulas. Measured ratios to the portable kernel:
+//! docs/bench/render_speed.md (`cargo bench -p nrw-render --bench render -- speed`).
 
 use glam::{Mat3, Vec3};
 
@@ -26,6 +27,67 @@ pub(crate) struct Projected {
 
 /// `Projected::at` of a point on or behind the camera plane, or whose square misses the image.
 const SKIP: u32 = u32::MAX;
+
+/// A point projected through a lens with distortion (f64, by COLMAP's formulas), placed like
+/// a `Projected`: its pixel position, key, and square position (or `SKIP`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Placed {
+    pub(crate) px: f64,
+    pub(crate) py: f64,
+    pub(crate) key: f64,
+    pub(crate) at: u32,
+}
+
+impl Placed {
+    /// A point at pixel (px, py) in pixel (xc, yc) with `key`, for a z-buffer of `z`'s shape.
+    pub(crate) fn new(z: &ZBuffer, (px, py): (f64, f64), (xc, yc): (i64, i64), key: f64) -> Placed {
+        let (xs, ys) = ((xc + z.reach) as u64, (yc + z.reach) as u64);
+        let inside = xs < (z.width + 2 * z.reach) as u64 && ys < (z.height + 2 * z.reach) as u64;
+        let at = if inside { (ys << 16 | xs) as u32 } else { SKIP };
+        Placed { px, py, key, at }
+    }
+}
+
+/// What the draw loops read of a point; point `i` of a batch starting at index `first`.
+trait Splat {
+    /// The pixel position is an f32 value (so px - floor(px) is exact).
+    const F32: bool;
+    fn at(&self) -> u32;
+    fn pixel(&self) -> (f64, f64);
+    fn key(&self, first: usize, i: usize) -> f64;
+}
+
+impl Splat for Projected {
+    const F32: bool = true;
+    #[inline(always)]
+    fn at(&self) -> u32 {
+        self.at
+    }
+    #[inline(always)]
+    fn pixel(&self) -> (f64, f64) {
+        (self.x as f64, self.y as f64)
+    }
+    #[inline(always)]
+    fn key(&self, first: usize, i: usize) -> f64 {
+        crate::splat::key(self.z, first + i)
+    }
+}
+
+impl Splat for Placed {
+    const F32: bool = false;
+    #[inline(always)]
+    fn at(&self) -> u32 {
+        self.at
+    }
+    #[inline(always)]
+    fn pixel(&self) -> (f64, f64) {
+        (self.px, self.py)
+    }
+    #[inline(always)]
+    fn key(&self, _: usize, _: usize) -> f64 {
+        self.key
+    }
+}
 
 /// Whether this CPU runs the AVX2 kernel.
 fn has_avx2() -> bool {
@@ -67,13 +129,31 @@ pub(crate) fn splat(
         if r2 == 0.0 {
             x86::draw_pixel(z, scratch, first)
         } else if z.reach == 1 {
-            x86::draw::<true>(z, scratch, first, r2)
+            x86::draw::<true, _>(z, scratch, first, r2)
         } else {
-            x86::draw::<false>(z, scratch, first, r2)
+            x86::draw::<false, _>(z, scratch, first, r2)
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
     unreachable!("fits() is false off x86_64: {first} {near} {r2} {r:?} {t:?} {k:?}");
+}
+
+/// Draw points placed by `Placed::new` (any lens) as `splat` does. Call only where `fits(z)`.
+pub(crate) fn draw_placed(z: &mut ZBuffer, placed: &[Placed], r2: f64) {
+    assert!(fits(z));
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: the CPU has AVX2 (asserted; `is_x86_feature_detected` caches its answer).
+    unsafe {
+        if r2 == 0.0 {
+            x86::draw_pixel(z, placed, 0)
+        } else if z.reach == 1 {
+            x86::draw::<true, _>(z, placed, 0, r2)
+        } else {
+            x86::draw::<false, _>(z, placed, 0, r2)
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!("fits() is false off x86_64: {} {r2}", placed.len());
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -82,8 +162,8 @@ mod x86 {
 
     use glam::{Mat3, Vec3};
 
-    use super::{Projected, MAX_VECTORS, SKIP};
-    use crate::splat::{keep_nearest, key, ZBuffer, SLACK};
+    use super::{Projected, Splat, MAX_VECTORS, SKIP};
+    use crate::splat::{keep_nearest, ZBuffer, SLACK};
 
     /// `splat::project`, plus each square's position: floor(x) in f32 is exact and equals the
     /// portable `floor_f32` (coordinates are clamped to ±2^20 first, far outside any image).
@@ -121,27 +201,29 @@ mod x86 {
 
     /// r = 0: the pixel that holds the point (the z-buffer has no border at reach 0).
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw_pixel(z: &mut ZBuffer, proj: &[Projected], first: usize) {
+    pub(super) fn draw_pixel<P: Splat>(z: &mut ZBuffer, proj: &[P], first: usize) {
         let stride = z.stride as usize;
         for (i, p) in proj.iter().enumerate() {
-            if p.at != SKIP {
-                let slot = (p.at >> 16) as usize * stride + (p.at & 0xffff) as usize;
-                keep_nearest(&mut z.keys[slot], key(p.z, first + i));
+            let at = p.at();
+            if at != SKIP {
+                let slot = (at >> 16) as usize * stride + (at & 0xffff) as usize;
+                keep_nearest(&mut z.keys[slot], p.key(first, i));
             }
         }
     }
 
     /// `REACH1`: the z-buffer's reach is 1, so the 3×3 square unrolls.
     ///
-    /// Lane l of vector v covers column 4v + l of the square, at horizontal offset
-    /// (4v + l - reach) + 0.5 - fx from the point, where fx = px - floor(px) is exact (px is
-    /// an f32 value): the same rounding of the same real number as the portable
-    /// (x + 0.5) - px, so the disc test agrees bit for bit. Lanes past the square get an
-    /// offset of 10⁶, fail the disc test and write back the key they read.
+    /// Lane l of vector v covers column x = x0 + 4v + l of the square (x0 its first column),
+    /// at horizontal offset (x + 0.5) - px from the point, computed as (x0 + (4v + l + 0.5))
+    /// - px: the first sum is exact, so this is the portable (x + 0.5) - px rounded once, the
+    /// same, and the disc test agrees bit for bit (for f32 positions a form with one op
+    /// fewer, below). Lanes past the square get an offset of 10⁶, fail the disc test and
+    /// write back the key they read.
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw<const REACH1: bool>(
+    pub(super) fn draw<const REACH1: bool, P: Splat>(
         z: &mut ZBuffer,
-        proj: &[Projected],
+        proj: &[P],
         first: usize,
         r2: f64,
     ) {
@@ -155,7 +237,11 @@ mod x86 {
             let lane = |l: usize| {
                 let col = 4 * v + l;
                 if col < side {
-                    (col as i64 - reach) as f64 + 0.5
+                    if P::F32 {
+                        (col as i64 - reach) as f64 + 0.5
+                    } else {
+                        col as f64 + 0.5
+                    }
                 } else {
                     1e6
                 }
@@ -169,22 +255,35 @@ mod x86 {
         // The square's last key plus the lanes past it lie within the buffer (SLACK).
         let last = (side - 1) * stride + 4 * vectors - 1;
         for (i, p) in proj.iter().enumerate() {
-            if p.at == SKIP {
+            let at = p.at();
+            if at == SKIP {
                 continue;
             }
-            let (xs, ys) = ((p.at & 0xffff) as i64, (p.at >> 16) as i64);
+            let (xs, ys) = ((at & 0xffff) as i64, (at >> 16) as i64);
             let corner = ys as usize * stride + xs as usize;
             let square = &mut z.keys[corner..corner + last + 1];
-            // The square's top-left corner is floor(p) - reach (shifted by the border).
-            let fx = _mm256_set1_pd(p.x as f64 - (xs - reach) as f64);
-            for (d, o) in dx2.iter_mut().zip(offsets) {
-                let dx = _mm256_sub_pd(*o, fx);
-                *d = _mm256_mul_pd(dx, dx);
+            // The square's first column and row in the image: the point's pixel minus reach,
+            // which in the bordered buffer (2 × reach wide) is at xs, ys.
+            let (x0, y0) = ((xs - 2 * reach) as f64, (ys - 2 * reach) as f64);
+            let (px, py) = p.pixel();
+            if P::F32 {
+                // px - floor(px) is exact for an f32 px, so (col - reach + 0.5) - fx rounds
+                // the same real number once: one vector op fewer per point.
+                let fx = _mm256_set1_pd(px - (x0 + reach as f64));
+                for (d, o) in dx2.iter_mut().zip(offsets) {
+                    let dx = _mm256_sub_pd(*o, fx);
+                    *d = _mm256_mul_pd(dx, dx);
+                }
+            } else {
+                let (x0, pxv) = (_mm256_set1_pd(x0), _mm256_set1_pd(px));
+                for (d, o) in dx2.iter_mut().zip(offsets) {
+                    let dx = _mm256_sub_pd(_mm256_add_pd(x0, *o), pxv);
+                    *d = _mm256_mul_pd(dx, dx);
+                }
             }
-            let kv = _mm256_set1_pd(key(p.z, first + i));
-            let fy = p.y as f64 - (ys - reach) as f64;
+            let kv = _mm256_set1_pd(p.key(first, i));
             for j in 0..side {
-                let dy = (j as i64 - reach) as f64 + 0.5 - fy;
+                let dy = (y0 + j as f64) + 0.5 - py;
                 let dy2 = _mm256_set1_pd(dy * dy);
                 for (v, d) in dx2.iter().enumerate() {
                     let d2 = _mm256_add_pd(*d, dy2);

@@ -286,6 +286,8 @@ impl<'a> Splat<'a> {
         let near = self.cloud.near;
         let fp = Footprint::of(self.radius);
         let cloud: &'a RenderCloud = self.cloud;
+        let avx2 = self.kernel == Kernel::Auto && simd::fits(self.zbuf);
+        let mut placed = Vec::with_capacity(CHUNK_POINTS);
         for chunk in self.visible() {
             let pts = &cloud.positions[chunk.start as usize..chunk.end as usize];
             for (k, p) in pts.iter().enumerate() {
@@ -296,7 +298,17 @@ impl<'a> Splat<'a> {
                 }
                 let Some((px, py)) = project(c) else { continue };
                 let at = (floor_i(px), floor_i(py));
-                fp.draw::<DYNAMIC>(self.zbuf, (px, py), at, key(c.z, chunk.start as usize + k));
+                let key = key(c.z, chunk.start as usize + k);
+                if avx2 {
+                    placed.push(simd::Placed::new(self.zbuf, (px, py), at, key));
+                } else {
+                    fp.draw::<DYNAMIC>(self.zbuf, (px, py), at, key);
+                }
+            }
+            if avx2 {
+                // The projection stays scalar (COLMAP's f64 formulas); the drawing is vectors.
+                simd::draw_placed(self.zbuf, &placed, fp.r2);
+                placed.clear();
             }
         }
         (self.chunks, self.tested)

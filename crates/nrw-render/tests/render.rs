@@ -425,13 +425,20 @@ fn the_kernels_render_bit_for_bit_alike() {
         .collect();
     let normals: Vec<[f32; 3]> = (0..pts.len()).map(|i| [1.0, i as f32, 0.0]).collect();
     let cloud = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), Some(&normals));
-    let cam = Camera {
-        id: 1,
-        model: CameraModel::Pinhole,
-        width: 320,
-        height: 240,
-        params: vec![260.0, 250.0, 161.3, 118.9],
-    };
+    // Undistorted (f32 projection), and lenses with distortion (COLMAP's f64 projection),
+    // including a fisheye that sees beyond 90°.
+    let cams = [
+        (CameraModel::Pinhole, vec![260.0, 250.0, 161.3, 118.9]),
+        (CameraModel::SimpleRadial, vec![255.0, 161.3, 118.9, -0.12]),
+        (
+            CameraModel::OpenCv,
+            vec![260.0, 250.0, 161.3, 118.9, -0.1, 0.02, 0.001, -0.002],
+        ),
+        (
+            CameraModel::OpenCvFisheye,
+            vec![120.0, 118.0, 161.3, 118.9, 0.05, -0.01, 0.002, 0.0],
+        ),
+    ];
     let img = Image {
         id: 1,
         name: "t".into(),
@@ -443,12 +450,24 @@ fn the_kernels_render_bit_for_bit_alike() {
         stored_quat_norm: 1.0,
         points2d: vec![],
     };
-    for r in [0.0f32, 0.3, 0.6, 1.0, 1.3, 2.0, 3.0, 7.5, 32.0] {
-        let view = View::new(&img, &cam, DVec3::ZERO, 320, 240, r);
-        let a = render_with(&view, &cloud, r, Kernel::Auto);
-        let b = render_with(&view, &cloud, r, Kernel::Portable);
-        assert!(a.covered > 1000, "r = {r}: the scene covers the view");
-        assert!(a == b, "r = {r}: kernels differ");
+    for (model, params) in cams {
+        let cam = Camera {
+            id: 1,
+            model,
+            width: 320,
+            height: 240,
+            params,
+        };
+        for r in [0.0f32, 0.3, 0.6, 1.0, 1.3, 2.0, 3.0, 7.5, 32.0] {
+            let view = View::new(&img, &cam, DVec3::ZERO, 320, 240, r);
+            let a = render_with(&view, &cloud, r, Kernel::Auto);
+            let b = render_with(&view, &cloud, r, Kernel::Portable);
+            assert!(
+                a.covered > 1000,
+                "{model:?}, r = {r}: the scene covers the view"
+            );
+            assert!(a == b, "{model:?}, r = {r}: kernels differ");
+        }
     }
 }
 

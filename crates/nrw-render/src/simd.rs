@@ -215,10 +215,10 @@ mod x86 {
     /// `REACH1`: the z-buffer's reach is 1, so the 3×3 square unrolls.
     ///
     /// Lane l of vector v covers column x = x0 + 4v + l of the square (x0 its first column),
-    /// at horizontal offset (x + 0.5) - px from the point, computed as (x0 + (4v + l + 0.5))
-    /// - px: the first sum is exact, so this is the portable (x + 0.5) - px rounded once, the
-    /// same, and the disc test agrees bit for bit (for f32 positions a form with one op
-    /// fewer, below). Lanes past the square get an offset of 10⁶, fail the disc test and
+    /// at horizontal offset (x + 0.5) - px from the point, computed as the difference of
+    /// x0 + (4v + l + 0.5) and px: the sum is exact, so this is the portable (x + 0.5) - px
+    /// rounded once, and the disc test agrees bit for bit (for f32 positions a form with one
+    /// op fewer, below). Lanes past the square get an offset of 10⁶, fail the disc test and
     /// write back the key they read.
     #[target_feature(enable = "avx2")]
     pub(super) fn draw<const REACH1: bool, P: Splat>(

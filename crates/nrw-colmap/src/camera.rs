@@ -431,6 +431,25 @@ pub trait ProjectionVisitor {
 pub trait Projection {
     /// Camera-space point to pixel, exactly as COLMAP's `ImgFromCam`; `None` when undefined.
     fn project(params: &[f64], p: DVec3) -> Option<DVec2>;
+
+    /// Whether `pixel` is straight-line arithmetic (no branch, no libm call), so that a loop
+    /// over many points can run without per-point branches.
+    const STRAIGHT: bool = false;
+
+    /// `project`'s arithmetic without its checks: equal to `project`'s pixel wherever that is
+    /// `Some` (z ≥ f64::EPSILON and a finite result); anything elsewhere.
+    #[inline(always)]
+    fn pixel(params: &[f64], p: DVec3) -> DVec2 {
+        Self::project(params, p).unwrap_or(DVec2::NAN)
+    }
+}
+
+/// `project` from `pixel` for the straight-line models: the same arithmetic, then the checks.
+#[inline(always)]
+fn checked<P: Projection>(params: &[f64], p: DVec3) -> Option<DVec2> {
+    normalise(p)?;
+    let q = P::pixel(params, p);
+    finite(q.x, q.y)
 }
 
 /// Normalised image-plane coordinates, or `None` behind or on the camera plane.
@@ -502,23 +521,33 @@ impl Projection for PinholeP {
 }
 
 impl Projection for SimpleRadialP {
+    const STRAIGHT: bool = true;
     #[inline(always)]
     fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
-        let (u, v) = normalise(p)?;
+        checked::<Self>(p_, p)
+    }
+    #[inline(always)]
+    fn pixel(p_: &[f64], p: DVec3) -> DVec2 {
+        let (u, v) = (p.x / p.z, p.y / p.z);
         let radial = p_[3] * (u * u + v * v);
         let (x, y) = (u + u * radial, v + v * radial);
-        finite(p_[0] * x + p_[1], p_[0] * y + p_[2])
+        DVec2::new(p_[0] * x + p_[1], p_[0] * y + p_[2])
     }
 }
 
 impl Projection for RadialP {
+    const STRAIGHT: bool = true;
     #[inline(always)]
     fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
-        let (u, v) = normalise(p)?;
+        checked::<Self>(p_, p)
+    }
+    #[inline(always)]
+    fn pixel(p_: &[f64], p: DVec3) -> DVec2 {
+        let (u, v) = (p.x / p.z, p.y / p.z);
         let r2 = u * u + v * v;
         let radial = p_[3] * r2 + p_[4] * r2 * r2;
         let (x, y) = (u + u * radial, v + v * radial);
-        finite(p_[0] * x + p_[1], p_[0] * y + p_[2])
+        DVec2::new(p_[0] * x + p_[1], p_[0] * y + p_[2])
     }
 }
 
@@ -535,11 +564,16 @@ fn opencv_delta(k1: f64, k2: f64, p1: f64, p2: f64, u: f64, v: f64) -> (f64, f64
 }
 
 impl Projection for OpenCvP {
+    const STRAIGHT: bool = true;
     #[inline(always)]
     fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
-        let (u, v) = normalise(p)?;
+        checked::<Self>(p_, p)
+    }
+    #[inline(always)]
+    fn pixel(p_: &[f64], p: DVec3) -> DVec2 {
+        let (u, v) = (p.x / p.z, p.y / p.z);
         let (du, dv) = opencv_delta(p_[4], p_[5], p_[6], p_[7], u, v);
-        finite(p_[0] * (u + du) + p_[2], p_[1] * (v + dv) + p_[3])
+        DVec2::new(p_[0] * (u + du) + p_[2], p_[1] * (v + dv) + p_[3])
     }
 }
 

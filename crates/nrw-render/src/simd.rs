@@ -7,6 +7,7 @@
 //! docs/bench/render_speed.md (`cargo bench -p nrw-render --bench render -- speed`).
 
 use glam::{Mat3, Vec3};
+use nrw_colmap::Projection;
 
 use crate::splat::ZBuffer;
 
@@ -138,6 +139,40 @@ pub(crate) fn splat(
     unreachable!("fits() is false off x86_64: {first} {near} {r2} {r:?} {t:?} {k:?}");
 }
 
+/// For a lens `P` whose `pixel` is straight-line arithmetic: transform, project (COLMAP's
+/// f64 formulas), check and place points in one branch-free loop, as the one-at-a-time loop
+/// would (near plane, z ≥ f64::EPSILON, finite pixel, not beyond the lens's `fold` when
+/// given). The compiler does not vectorise it (yet); it saves the per-point `Option`s and
+/// branches: SIMPLE_RADIAL, 10⁶ points, r = 0: 6.2 → 4.6 ms/view. Point `i` has index
+/// `first + i`. Call only where `fits(z)`.
+pub(crate) fn place<P: Projection>(
+    z: &ZBuffer,
+    pts: &[Vec3],
+    first: usize,
+    (r, t, params): (Mat3, Vec3, &[f64]),
+    (near, fold): (f32, Option<f64>),
+    out: &mut Vec<Placed>,
+) {
+    assert!(fits(z) && P::STRAIGHT);
+    out.clear();
+    out.resize(
+        pts.len(),
+        Placed {
+            px: 0.0,
+            py: 0.0,
+            key: 0.0,
+            at: SKIP,
+        },
+    );
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: the CPU has AVX2 (asserted; `is_x86_feature_detected` caches its answer).
+    unsafe {
+        x86::place::<P>(z, pts, first, (r, t, params), (near, fold), out)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!("fits() is false off x86_64: {first} {near} {fold:?} {r:?} {t:?} {params:?}");
+}
+
 /// Draw points placed by `Placed::new` (any lens) as `splat` does. Call only where `fits(z)`.
 pub(crate) fn draw_placed(z: &mut ZBuffer, placed: &[Placed], r2: f64) {
     assert!(fits(z));
@@ -162,7 +197,10 @@ mod x86 {
 
     use glam::{Mat3, Vec3};
 
-    use super::{Projected, Splat, MAX_VECTORS, SKIP};
+    use glam::DVec3;
+    use nrw_colmap::Projection;
+
+    use super::{Placed, Projected, Splat, MAX_VECTORS, SKIP};
     use crate::splat::{keep_nearest, ZBuffer, SLACK};
 
     /// `splat::project`, plus each square's position: floor(x) in f32 is exact and equals the
@@ -196,6 +234,52 @@ mod x86 {
             let drawn = c.z > near && xs < xspan && ys < yspan;
             let at = if drawn { ys << 16 | xs } else { SKIP };
             *o = Projected { x, y, z: c.z, at };
+        }
+    }
+
+    /// See `super::place`. Floors are f64 `floor` after clamping to ±2^30 (outside any image;
+    /// NaN goes to -2^30), equal to the scalar loop's `floor_i` there.
+    #[target_feature(enable = "avx2")]
+    pub(super) fn place<P: Projection>(
+        z: &ZBuffer,
+        pts: &[Vec3],
+        first: usize,
+        (r, t, params): (Mat3, Vec3, &[f64]),
+        (near, fold): (f32, Option<f64>),
+        out: &mut [Placed],
+    ) {
+        const FAR: f64 = (1u64 << 30) as f64;
+        let reach = z.reach;
+        let (xspan, yspan) = ((z.width + 2 * reach) as u64, (z.height + 2 * reach) as u64);
+        let (check_fold, fold) = (fold.is_some(), fold.unwrap_or(f64::INFINITY));
+        // A fixed-size copy, so that the parameter reads need no bounds check in the loop
+        // (a possible panic there would keep it from vectorising).
+        let mut fixed = [0.0; 16];
+        fixed[..params.len()].copy_from_slice(params);
+        let params = &fixed[..];
+        for (i, (o, p)) in out.iter_mut().zip(pts).enumerate() {
+            let c = r * *p + t;
+            let cd = DVec3::new(c.x as f64, c.y as f64, c.z as f64);
+            let q = P::pixel(params, cd);
+            // `Camera::normalized_radius` of a lens that is not a fisheye.
+            let folded = check_fold & ((cd.x * cd.x + cd.y * cd.y).sqrt() / cd.z > fold);
+            let valid = (c.z > near) & (cd.z >= f64::EPSILON) & q.x.is_finite() & q.y.is_finite();
+            #[allow(clippy::manual_clamp)]
+            let (fx, fy) = (
+                q.x.max(-FAR).min(FAR).floor(),
+                q.y.max(-FAR).min(FAR).floor(),
+            );
+            // SAFETY: integers within ±2^30, which i64 holds (`as` would check each lane).
+            let (ix, iy): (i64, i64) = unsafe { (fx.to_int_unchecked(), fy.to_int_unchecked()) };
+            let (xs, ys) = ((ix + reach) as u64, (iy + reach) as u64);
+            let drawn = valid & !folded & (xs < xspan) & (ys < yspan);
+            let at = if drawn { (ys << 16 | xs) as u32 } else { SKIP };
+            *o = Placed {
+                px: q.x,
+                py: q.y,
+                key: crate::splat::key(c.z, first + i),
+                at,
+            };
         }
     }
 

@@ -314,6 +314,28 @@ impl<'a> Splat<'a> {
         (self.chunks, self.tested)
     }
 
+    /// Lenses with distortion whose projection is straight-line arithmetic (SIMPLE_RADIAL,
+    /// RADIAL, OPENCV), on AVX2: projection and placement in a branch-free loop, then the
+    /// vector footprints.
+    fn run_straight<P: Projection>(mut self, params: &[f64]) -> (usize, usize) {
+        let v = self.view;
+        let near = self.cloud.near;
+        let r2 = Footprint::of(self.radius).r2;
+        let fold = v.check_fold.then_some(v.fold);
+        let cloud: &'a RenderCloud = self.cloud;
+        let mut placed = Vec::with_capacity(CHUNK_POINTS);
+        for chunk in self.visible() {
+            let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
+            for (piece, pts) in all.chunks(CHUNK_POINTS).enumerate() {
+                let first = chunk.start as usize + piece * CHUNK_POINTS;
+                let lens = (v.rotation, v.translation, params);
+                simd::place::<P>(self.zbuf, pts, first, lens, (near, fold), &mut placed);
+                simd::draw_placed(self.zbuf, &placed, r2);
+            }
+        }
+        (self.chunks, self.tested)
+    }
+
     /// Undistorted lenses: each chunk is transformed and projected in a branch-free pass
     /// that the compiler vectorises, then drawn (4× fewer instructions per point than `run`).
     /// `R` as in `Footprint::draw`; with AVX2 the drawing is `simd::draw`.
@@ -363,6 +385,9 @@ impl ProjectionVisitor for Splat<'_> {
         let v = self.view;
         let camera = &v.camera;
         let (check_fold, fold) = (v.check_fold, v.fold);
+        if P::STRAIGHT && self.kernel == Kernel::Auto && simd::fits(self.zbuf) {
+            return self.run_straight::<P>(params);
+        }
         if let Some(k) = v.pinhole {
             return match (self.radius, self.zbuf.reach) {
                 (0.0, _) => self.run_pinhole::<0>(k),

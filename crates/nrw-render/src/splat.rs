@@ -427,11 +427,11 @@ pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel
     let (chunks_visited, points_tested) = view.camera.visit_projection(splat);
     // One pass per channel: the depth pass is branch-free and vectorises; the gathers of
     // colour and normal only run for channels the cloud has.
-    let mut covered = 0;
     let mut depth = Vec::with_capacity(n);
-    let rows = || (0..view.height as i64).map(|y| zbuf.row(y));
-    for row in rows() {
-        covered += row.iter().filter(|&&k| k != EMPTY).count();
+    // Pixels drawn per row: the gathers below skip empty rows.
+    let mut hits = Vec::with_capacity(view.height as usize);
+    for row in (0..view.height as i64).map(|y| zbuf.row(y)) {
+        hits.push(row.iter().filter(|&&k| k != EMPTY).count());
         depth.extend(row.iter().map(|&k| {
             if k == EMPTY {
                 0.0
@@ -441,8 +441,9 @@ pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel
         }));
     }
     // The gathers run row by row over the z-buffer: a pixel's point index is its key's low
-    // bits. Colour is gathered for every pixel, empty ones from point 0 and then zeroed, so
-    // that the loads do not wait on a branch (the gather is bound by cache misses).
+    // bits. Empty rows are skipped; in rows at least 1/8 drawn colour is gathered for every
+    // pixel, empty ones from point 0 and then zeroed, so that the loads do not wait on a
+    // branch (the gather is bound by cache misses); sparser rows branch.
     let width = view.width as usize;
     let color = cloud.colors.as_deref().map(|src| {
         let mut out = vec![[0u8; 3]; n];
@@ -450,9 +451,17 @@ pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel
         let rows = out
             .chunks_exact_mut(width)
             .enumerate()
-            .filter(|_| !src.is_empty());
+            .filter(|(y, _)| hits[*y] > 0 && !src.is_empty());
         for (y, orow) in rows {
-            for (o, &k) in orow.iter_mut().zip(zbuf.row(y as i64)) {
+            let keys = zbuf.row(y as i64);
+            if hits[y] < width / 8 {
+                // A sparse row: the branch is mostly "empty", and predicted.
+                for (o, &k) in orow.iter_mut().zip(keys).filter(|(_, k)| **k != EMPTY) {
+                    *o = src[k.to_bits() as u32 as usize];
+                }
+                continue;
+            }
+            for (o, &k) in orow.iter_mut().zip(keys) {
                 let hit = k != EMPTY;
                 let c = src[(k.to_bits() as u32 as usize) * hit as usize];
                 let m = (hit as u8).wrapping_neg();
@@ -463,7 +472,8 @@ pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel
     });
     let normal = cloud.normals.as_deref().map(|src| {
         let mut out = vec![[0f32; 3]; n];
-        for (y, orow) in out.chunks_exact_mut(width).enumerate() {
+        let rows = out.chunks_exact_mut(width).enumerate();
+        for (y, orow) in rows.filter(|(y, _)| hits[*y] > 0) {
             for (o, &k) in orow.iter_mut().zip(zbuf.row(y as i64)) {
                 if k != EMPTY {
                     *o = (view.rotation * src[k.to_bits() as u32 as usize]).to_array();
@@ -478,7 +488,7 @@ pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel
         depth,
         color,
         normal,
-        covered,
+        covered: hits.iter().sum(),
         chunks_visited,
         points_tested,
     }

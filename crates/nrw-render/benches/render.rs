@@ -289,6 +289,18 @@ fn open3d(dir: &Path, runs: usize, threads: usize) -> Option<f64> {
     }
 }
 
+/// The registered image a synthetic shot stands for.
+fn shot_image(s: &nrw_synth::cameras::Shot) -> nrw_colmap::Image {
+    nrw_colmap::Image {
+        id: s.image_id,
+        name: s.name.clone(),
+        camera_id: s.camera_id,
+        cam_from_world: s.pose,
+        stored_quat_norm: 1.0,
+        points2d: vec![],
+    }
+}
+
 fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     return is_x86_feature_detected!("avx2");
@@ -380,14 +392,7 @@ fn speed(quick: bool, ours_only: bool) {
             let mut visited = 0usize;
             let runs = if n >= 10_000_000 { 3 } else { 5 };
             for s in &shots {
-                let img = nrw_colmap::Image {
-                    id: s.image_id,
-                    name: s.name.clone(),
-                    camera_id: s.camera_id,
-                    cam_from_world: s.pose,
-                    stored_quat_norm: 1.0,
-                    points2d: vec![],
-                };
+                let img = shot_image(s);
                 for (k, r) in [0.0f32, 1.0].iter().enumerate() {
                     let v = View::new(
                         &img,
@@ -450,14 +455,7 @@ fn speed(quick: bool, ours_only: bool) {
                             params: vec![p[0], p[2], p[3], -0.05],
                             ..s.camera.clone()
                         };
-                        let img = nrw_colmap::Image {
-                            id: s.image_id,
-                            name: s.name.clone(),
-                            camera_id: s.camera_id,
-                            cam_from_world: s.pose,
-                            stored_quat_norm: 1.0,
-                            points2d: vec![],
-                        };
+                        let img = shot_image(s);
                         let (w, h) = (cam.width as u32, cam.height as u32);
                         let v = View::new(&img, &cam, DVec3::ZERO, w, h, r);
                         for (ki, kernel) in [Kernel::Auto, Kernel::Portable].into_iter().enumerate()

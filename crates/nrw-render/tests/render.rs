@@ -318,12 +318,7 @@ fn splats_match_their_definition_at_the_border_and_for_wide_radii() {
             DVec3::new((u - 32.0) / 50.0 * z, (v - 24.0) / 50.0 * z, z)
         })
         .collect();
-    // Colour = point index, so the winner can be read back.
-    let colors: Vec<[u8; 3]> = (0..pts.len())
-        .map(|i| [i as u8, (i >> 8) as u8, 0])
-        .collect();
-    let mut cloud = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), None);
-    cloud.near = 1e-4;
+    let cloud = indexed_cloud(&pts);
     let (view, _) = test_view(CameraModel::Pinhole, vec![50.0, 50.0, 32.0, 24.0]);
     // The f32 pinhole projection stays within 6e-4 px of COLMAP's f64 one (stated in
     // `view::pinhole_pixel`; here pixels are < 100, so far tighter).
@@ -341,6 +336,16 @@ fn splats_match_their_definition_at_the_border_and_for_wide_radii() {
     }
     // 0: the point's own pixel; 0.3: reach 0 but a disc; 0.5–2.7: reach 1–3; 6: reach 6.
     assert_definition(&view, &cloud, &[0.0, 0.3, 0.5, 1.0, 1.5, 2.7, 6.0]);
+}
+
+/// A cloud whose colour is the point's input index, so a render's winners can be read back.
+fn indexed_cloud(pts: &[DVec3]) -> RenderCloud {
+    let colors: Vec<[u8; 3]> = (0..pts.len())
+        .map(|i| [i as u8, (i >> 8) as u8, 0])
+        .collect();
+    let mut cloud = RenderCloud::new(DVec3::ZERO, pts, Some(&colors), None);
+    cloud.near = 1e-4;
+    cloud
 }
 
 /// Every pixel's winner, for each radius and both kernels (Auto is AVX2 where the CPU has
@@ -386,11 +391,7 @@ fn splats_on_exact_pixel_boundaries_follow_the_definition() {
             DVec3::new(m as f64 / 256.0 * z, n as f64 / 256.0 * z, z)
         })
         .collect();
-    let colors: Vec<[u8; 3]> = (0..pts.len())
-        .map(|i| [i as u8, (i >> 8) as u8, 0])
-        .collect();
-    let mut cloud = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), None);
-    cloud.near = 1e-4;
+    let cloud = indexed_cloud(&pts);
     let (view, _) = test_view(CameraModel::Pinhole, vec![128.0, 128.0, 32.0, 24.0]);
     for p in &cloud.positions {
         let px = view.project(*p, cloud.near).unwrap();

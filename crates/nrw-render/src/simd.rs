@@ -237,8 +237,8 @@ mod x86 {
         }
     }
 
-    /// See `super::place`. Floors are f64 `floor` after clamping to ±2^30 (outside any image;
-    /// NaN goes to -2^30), equal to the scalar loop's `floor_i` there.
+    /// See `super::place`: the one-at-a-time loop's checks and placement (`Placed::new`),
+    /// without its per-point `Option`s and early exits.
     #[target_feature(enable = "avx2")]
     pub(super) fn place<P: Projection>(
         z: &ZBuffer,
@@ -249,14 +249,7 @@ mod x86 {
         out: &mut [Placed],
     ) {
         const FAR: f64 = (1u64 << 30) as f64;
-        let reach = z.reach;
-        let (xspan, yspan) = ((z.width + 2 * reach) as u64, (z.height + 2 * reach) as u64);
         let (check_fold, fold) = (fold.is_some(), fold.unwrap_or(f64::INFINITY));
-        // A fixed-size copy, so that the parameter reads need no bounds check in the loop
-        // (a possible panic there would keep it from vectorising).
-        let mut fixed = [0.0; 16];
-        fixed[..params.len()].copy_from_slice(params);
-        let params = &fixed[..];
         for (i, (o, p)) in out.iter_mut().zip(pts).enumerate() {
             let c = r * *p + t;
             let cd = DVec3::new(c.x as f64, c.y as f64, c.z as f64);
@@ -264,22 +257,18 @@ mod x86 {
             // `Camera::normalized_radius` of a lens that is not a fisheye.
             let folded = check_fold & ((cd.x * cd.x + cd.y * cd.y).sqrt() / cd.z > fold);
             let valid = (c.z > near) & (cd.z >= f64::EPSILON) & q.x.is_finite() & q.y.is_finite();
+            // Not `floor_i`: clamped to ±2^30 (outside any image; NaN to -2^30), `floor` is
+            // one instruction here and the cast needs no check (the loop ran 1.3× faster).
             #[allow(clippy::manual_clamp)]
             let (fx, fy) = (
                 q.x.max(-FAR).min(FAR).floor(),
                 q.y.max(-FAR).min(FAR).floor(),
             );
-            // SAFETY: integers within ±2^30, which i64 holds (`as` would check each lane).
-            let (ix, iy): (i64, i64) = unsafe { (fx.to_int_unchecked(), fy.to_int_unchecked()) };
-            let (xs, ys) = ((ix + reach) as u64, (iy + reach) as u64);
-            let drawn = valid & !folded & (xs < xspan) & (ys < yspan);
-            let at = if drawn { (ys << 16 | xs) as u32 } else { SKIP };
-            *o = Placed {
-                px: q.x,
-                py: q.y,
-                key: crate::splat::key(c.z, first + i),
-                at,
-            };
+            // SAFETY: integers within ±2^30, which i64 holds.
+            let at: (i64, i64) = unsafe { (fx.to_int_unchecked(), fy.to_int_unchecked()) };
+            *o = Placed::new(z, (q.x, q.y), at, crate::splat::key(c.z, first + i));
+            // Not drawn: all bits set, `SKIP`.
+            o.at |= ((!valid | folded) as u32).wrapping_neg();
         }
     }
 

@@ -174,6 +174,9 @@ fn projected_sparse_points_land_on_their_colmap_observations() {
     }
     let ours = sum / n as f64;
     let colmap = nrw_colmap::reprojection_stats(&rec).mean_px.unwrap();
+    eprintln!(
+        "sceaux_castle: {n} observations, renderer {ours:.6} px, COLMAP model {colmap:.6} px"
+    );
     // The renderer's path casts to f32 after re-centring: agreement to a thousandth of a pixel.
     assert!(
         (ours - colmap).abs() < 1e-3,

@@ -15,28 +15,35 @@ use crate::splat::ZBuffer;
 const MAX_REACH: i64 = 32;
 const MAX_VECTORS: usize = (2 * MAX_REACH as usize + 1).div_ceil(4);
 
-/// A projected point: pixel position and depth (as `splat::project`), and the top-left key
-/// of its square in the bordered z-buffer as (row, column), or `SKIP` when it draws nothing.
-#[derive(Debug, Clone, Copy, Default)]
-#[repr(C)]
-pub(crate) struct Projected {
-    x: f32,
-    y: f32,
-    z: f32,
-    at: u32,
+/// A batch of points projected through an undistorted lens, one array per field so that the
+/// projection loop vectorises without shuffles: pixel position and depth (as
+/// `splat::project`), and the index of each square's top-left key in the bordered z-buffer,
+/// or `SKIP` when the point draws nothing.
+#[derive(Debug, Default)]
+pub(crate) struct Batch {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+    at: Vec<u32>,
+    /// Index of the batch's first point.
+    first: usize,
 }
 
-/// `Projected::at` of a point on or behind the camera plane, or whose square misses the image.
+/// `at` of a point on or behind the camera plane, or whose square misses the image. It lies
+/// past every square's corner (`fits` keeps the buffer shorter), so the draw loops' one range
+/// check, which keeps their writes inside the buffer, also skips it.
 const SKIP: u32 = u32::MAX;
 
 /// A point projected through a lens with distortion (f64, by COLMAP's formulas), placed like
-/// a `Projected`: its pixel position, key, and square position (or `SKIP`).
+/// a `Batch`'s point: its pixel position, key, square (or `SKIP`), and the square's position as
+/// (row, column) in the bordered buffer, from which its first pixel centre is computed.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Placed {
     pub(crate) px: f64,
     pub(crate) py: f64,
     pub(crate) key: f64,
     pub(crate) at: u32,
+    square: u32,
 }
 
 impl Placed {
@@ -44,49 +51,82 @@ impl Placed {
     pub(crate) fn new(z: &ZBuffer, (px, py): (f64, f64), (xc, yc): (i64, i64), key: f64) -> Placed {
         let (xs, ys) = ((xc + z.reach) as u64, (yc + z.reach) as u64);
         let inside = xs < (z.width + 2 * z.reach) as u64 && ys < (z.height + 2 * z.reach) as u64;
-        let at = if inside { (ys << 16 | xs) as u32 } else { SKIP };
-        Placed { px, py, key, at }
+        let at = if inside {
+            (ys * z.stride as u64 + xs) as u32
+        } else {
+            SKIP
+        };
+        let square = (ys << 16 | xs) as u32;
+        Placed {
+            px,
+            py,
+            key,
+            at,
+            square,
+        }
     }
 }
 
-/// What the draw loops read of a point; point `i` of a batch starting at index `first`.
-trait Splat {
+/// What the draw loops read of point `i` of a batch.
+trait Splats {
     /// The pixel position is an f32 value (so px - floor(px) is exact).
     const F32: bool;
-    fn at(&self) -> u32;
-    fn pixel(&self) -> (f64, f64);
-    fn key(&self, first: usize, i: usize) -> f64;
+    fn len(&self) -> usize;
+    fn at(&self, i: usize) -> u32;
+    fn pixel(&self, i: usize) -> (f64, f64);
+    /// The square's first column and row in the image (used where `F32` is false).
+    fn origin(&self, i: usize, reach: i64) -> (f64, f64);
+    fn key(&self, i: usize) -> f64;
 }
 
-impl Splat for Projected {
+impl Splats for Batch {
     const F32: bool = true;
     #[inline(always)]
-    fn at(&self) -> u32 {
-        self.at
+    fn len(&self) -> usize {
+        self.at.len()
     }
     #[inline(always)]
-    fn pixel(&self) -> (f64, f64) {
-        (self.x as f64, self.y as f64)
+    fn at(&self, i: usize) -> u32 {
+        self.at[i]
     }
     #[inline(always)]
-    fn key(&self, first: usize, i: usize) -> f64 {
-        crate::splat::key(self.z, first + i)
+    fn pixel(&self, i: usize) -> (f64, f64) {
+        (self.x[i] as f64, self.y[i] as f64)
+    }
+    #[inline(always)]
+    fn origin(&self, _: usize, _: i64) -> (f64, f64) {
+        unreachable!("F32 positions draw from their fractions")
+    }
+    #[inline(always)]
+    fn key(&self, i: usize) -> f64 {
+        crate::splat::key(self.z[i], self.first + i)
     }
 }
 
-impl Splat for Placed {
+impl Splats for [Placed] {
     const F32: bool = false;
     #[inline(always)]
-    fn at(&self) -> u32 {
-        self.at
+    fn len(&self) -> usize {
+        <[Placed]>::len(self)
     }
     #[inline(always)]
-    fn pixel(&self) -> (f64, f64) {
-        (self.px, self.py)
+    fn at(&self, i: usize) -> u32 {
+        self[i].at
     }
     #[inline(always)]
-    fn key(&self, _: usize, _: usize) -> f64 {
-        self.key
+    fn pixel(&self, i: usize) -> (f64, f64) {
+        (self[i].px, self[i].py)
+    }
+    #[inline(always)]
+    fn origin(&self, i: usize, reach: i64) -> (f64, f64) {
+        // In the bordered buffer (2 × reach wide) the square's corner is at (xs, ys).
+        let square = self[i].square;
+        let (xs, ys) = ((square & 0xffff) as i64, (square >> 16) as i64);
+        ((xs - 2 * reach) as f64, (ys - 2 * reach) as f64)
+    }
+    #[inline(always)]
+    fn key(&self, i: usize) -> f64 {
+        self[i].key
     }
 }
 
@@ -102,15 +142,20 @@ fn has_avx2() -> bool {
     }
 }
 
-/// Whether `splat` can draw into `z`: AVX2, and a square position that fits `Projected::at`.
+/// Whether `splat` can draw into `z`: AVX2, a square position that fits `Placed`'s 16-bit
+/// row and column, and keys that a `u32` below `SKIP` indexes.
 pub(crate) fn fits(z: &ZBuffer) -> bool {
     let span = |n: i64| n + 2 * z.reach < u16::MAX as i64;
-    has_avx2() && z.reach <= MAX_REACH && span(z.width) && span(z.height)
+    has_avx2()
+        && z.reach <= MAX_REACH
+        && span(z.width)
+        && span(z.height)
+        && z.keys.len() < SKIP as usize
 }
 
 /// Project `pts` (point `i` has index `first + i`) through the undistorted lens `k` and draw
 /// them as discs of squared radius `r2`, or as the pixel that holds them when `r2` is 0.
-/// `scratch` holds the projections. Call only where `fits(z)`.
+/// `batch` holds the projections. Call only where `fits(z)`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn splat(
     z: &mut ZBuffer,
@@ -119,20 +164,25 @@ pub(crate) fn splat(
     (r, t, k): (Mat3, Vec3, [f32; 4]),
     near: f32,
     r2: f64,
-    scratch: &mut Vec<Projected>,
+    batch: &mut Batch,
 ) {
     assert!(fits(z));
-    scratch.resize(pts.len(), Projected::default());
+    let n = pts.len();
+    batch.x.resize(n, 0.0);
+    batch.y.resize(n, 0.0);
+    batch.z.resize(n, 0.0);
+    batch.at.resize(n, SKIP);
+    batch.first = first;
     #[cfg(target_arch = "x86_64")]
     // SAFETY: the CPU has AVX2 (asserted; `is_x86_feature_detected` caches its answer).
     unsafe {
-        x86::project(scratch, pts, (r, t, k), near, z);
+        x86::project(batch, pts, (r, t, k), near, z);
         if r2 == 0.0 {
-            x86::draw_pixel(z, scratch, first)
+            x86::draw_pixel(z, &*batch)
         } else if z.reach == 1 {
-            x86::draw::<true, _>(z, scratch, first, r2)
+            x86::draw::<true, _>(z, &*batch, r2)
         } else {
-            x86::draw::<false, _>(z, scratch, first, r2)
+            x86::draw::<false, _>(z, &*batch, r2)
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -162,6 +212,7 @@ pub(crate) fn place<P: Projection>(
             py: 0.0,
             key: 0.0,
             at: SKIP,
+            square: 0,
         },
     );
     #[cfg(target_arch = "x86_64")]
@@ -180,11 +231,11 @@ pub(crate) fn draw_placed(z: &mut ZBuffer, placed: &[Placed], r2: f64) {
     // SAFETY: the CPU has AVX2 (asserted; `is_x86_feature_detected` caches its answer).
     unsafe {
         if r2 == 0.0 {
-            x86::draw_pixel(z, placed, 0)
+            x86::draw_pixel(z, placed)
         } else if z.reach == 1 {
-            x86::draw::<true, _>(z, placed, 0, r2)
+            x86::draw::<true, _>(z, placed, r2)
         } else {
-            x86::draw::<false, _>(z, placed, 0, r2)
+            x86::draw::<false, _>(z, placed, r2)
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -200,14 +251,14 @@ mod x86 {
     use glam::DVec3;
     use nrw_colmap::Projection;
 
-    use super::{Placed, Projected, Splat, MAX_VECTORS, SKIP};
+    use super::{Batch, Placed, Splats, MAX_VECTORS, SKIP};
     use crate::splat::{keep_nearest, ZBuffer, SLACK};
 
     /// `splat::project`, plus each square's position: floor(x) in f32 is exact and equals the
     /// portable `floor_f32` (coordinates are clamped to ±2^20 first, far outside any image).
     #[target_feature(enable = "avx2")]
     pub(super) fn project(
-        out: &mut [Projected],
+        out: &mut Batch,
         pts: &[Vec3],
         (r, t, k): (Mat3, Vec3, [f32; 4]),
         near: f32,
@@ -219,8 +270,16 @@ mod x86 {
             (z.width as i32 + 2 * reach) as u32,
             (z.height as i32 + 2 * reach) as u32,
         );
-        for (o, p) in out.iter_mut().zip(pts) {
-            let c = r * *p + t;
+        let stride = z.stride as u32;
+        let n = pts.len();
+        let (xo, yo, zo, ato) = (
+            &mut out.x[..n],
+            &mut out.y[..n],
+            &mut out.z[..n],
+            &mut out.at[..n],
+        );
+        for i in 0..n {
+            let c = r * pts[i] + t;
             let (x, y) = crate::view::pinhole_pixel(k, c);
             // Not `clamp`, which keeps NaN (this maps it to -FAR, outside).
             #[allow(clippy::manual_clamp)]
@@ -232,8 +291,13 @@ mod x86 {
             let (xs, ys) = ((ix + reach) as u32, (iy + reach) as u32);
             // On or behind the camera plane (z ≈ 0 included): never drawn.
             let drawn = c.z > near && xs < xspan && ys < yspan;
-            let at = if drawn { ys << 16 | xs } else { SKIP };
-            *o = Projected { x, y, z: c.z, at };
+            // Below the buffer's length (`fits`), so no wrap-around.
+            let at = if drawn {
+                ys.wrapping_mul(stride) + xs
+            } else {
+                SKIP
+            };
+            (xo[i], yo[i], zo[i], ato[i]) = (x, y, c.z, at);
         }
     }
 
@@ -272,15 +336,26 @@ mod x86 {
         }
     }
 
+    /// 0..n with its quarters interleaved. Consecutive points of a chunk (Morton order) mostly
+    /// hit the same square or one that overlaps it (in the benchmark's whole views at 10⁷
+    /// points: 55% the same pixel, 42% a neighbour within 2), so each point's loads would
+    /// wait for the stores of the one before; the quarters of a chunk lie apart in the image,
+    /// and four such chains overlap in time (r = 1, 10⁷ points: 32 → 27 ms/view). Not for
+    /// r = 0, whose single-key update was slower interleaved (14 → 18 ms/view).
+    #[inline(always)]
+    fn quarters(n: usize) -> impl Iterator<Item = usize> {
+        let q = n / 4;
+        (0..q)
+            .flat_map(move |k| [k, q + k, 2 * q + k, 3 * q + k])
+            .chain(4 * q..n)
+    }
+
     /// r = 0: the pixel that holds the point (the z-buffer has no border at reach 0).
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw_pixel<P: Splat>(z: &mut ZBuffer, proj: &[P], first: usize) {
-        let stride = z.stride as usize;
-        for (i, p) in proj.iter().enumerate() {
-            let at = p.at();
-            if at != SKIP {
-                let slot = (at >> 16) as usize * stride + (at & 0xffff) as usize;
-                keep_nearest(&mut z.keys[slot], p.key(first, i));
+    pub(super) fn draw_pixel<P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P) {
+        for i in 0..proj.len() {
+            if let Some(slot) = z.keys.get_mut(proj.at(i) as usize) {
+                keep_nearest(slot, proj.key(i));
             }
         }
     }
@@ -290,16 +365,14 @@ mod x86 {
     /// Lane l of vector v covers column x = x0 + 4v + l of the square (x0 its first column),
     /// at horizontal offset (x + 0.5) - px from the point, computed as the difference of
     /// x0 + (4v + l + 0.5) and px: the sum is exact, so this is the portable (x + 0.5) - px
-    /// rounded once, and the disc test agrees bit for bit (for f32 positions a form with one
-    /// op fewer, below). Lanes past the square get an offset of 10⁶, fail the disc test and
-    /// write back the key they read.
+    /// rounded once, and the disc test agrees bit for bit. For f32 positions the offsets are
+    /// taken from the fraction f = px - floor(px) as (4v + l - reach + 0.5) - f, one vector op
+    /// fewer per point, as the portable pinhole loop does (same rounding: see
+    /// `splat::Footprint::draw`). Rows are the same vectors with y for x, one lane per row.
+    /// Lanes past the square get an offset of 10⁶, fail the disc test and write back the key
+    /// they read.
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw<const REACH1: bool, P: Splat>(
-        z: &mut ZBuffer,
-        proj: &[P],
-        first: usize,
-        r2: f64,
-    ) {
+    pub(super) fn draw<const REACH1: bool, P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P, r2: f64) {
         let reach = if REACH1 { 1 } else { z.reach };
         let stride = z.stride as usize;
         let side = (2 * reach + 1) as usize;
@@ -322,51 +395,61 @@ mod x86 {
             *o = _mm256_set_pd(lane(3), lane(2), lane(1), lane(0));
         }
         let offsets = &offsets[..vectors];
+        // Squared offsets: columns as vectors, rows one lane each.
         let mut dx2 = [_mm256_setzero_pd(); MAX_VECTORS];
         let dx2 = &mut dx2[..vectors];
+        let mut dy2 = [0f64; 4 * MAX_VECTORS];
         let r2v = _mm256_set1_pd(r2);
-        // The square's last key plus the lanes past it lie within the buffer (SLACK).
-        let last = (side - 1) * stride + 4 * vectors - 1;
-        for (i, p) in proj.iter().enumerate() {
-            let at = p.at();
-            if at == SKIP {
+        // The last square's corner; `at` beyond it (`SKIP`) draws nothing. From there, the
+        // square's last key plus the lanes past it lie within the buffer (SLACK).
+        let Some(corners) = z.keys.len().checked_sub((side - 1) * stride + 4 * vectors) else {
+            return; // (no square fits: an image without pixels)
+        };
+        let keys = z.keys.as_mut_ptr();
+        // Squared offsets of `vectors` lanes from (f, f) where `f` is a position's fraction
+        // (F32) or from its `o + 0.5` lanes to the position (else).
+        let squares = |d: &mut [__m256d], o: f64, p: f64| {
+            let (ov, pv) = (_mm256_set1_pd(o), _mm256_set1_pd(p));
+            for (d, off) in d.iter_mut().zip(offsets) {
+                let t = if P::F32 {
+                    _mm256_sub_pd(*off, pv)
+                } else {
+                    _mm256_sub_pd(_mm256_add_pd(ov, *off), pv)
+                };
+                *d = _mm256_mul_pd(t, t);
+            }
+        };
+        for i in quarters(proj.len()) {
+            let corner = proj.at(i) as usize;
+            if corner > corners {
                 continue;
             }
-            let (xs, ys) = ((at & 0xffff) as i64, (at >> 16) as i64);
-            let corner = ys as usize * stride + xs as usize;
-            let square = &mut z.keys[corner..corner + last + 1];
-            // The square's first column and row in the image: the point's pixel minus reach,
-            // which in the bordered buffer (2 × reach wide) is at xs, ys.
-            let (x0, y0) = ((xs - 2 * reach) as f64, (ys - 2 * reach) as f64);
-            let (px, py) = p.pixel();
+            let (px, py) = proj.pixel(i);
+            let mut rows = [_mm256_setzero_pd(); MAX_VECTORS];
             if P::F32 {
-                // px - floor(px) is exact for an f32 px, so (col - reach + 0.5) - fx rounds
-                // the same real number once: one vector op fewer per point.
-                let fx = _mm256_set1_pd(px - (x0 + reach as f64));
-                for (d, o) in dx2.iter_mut().zip(offsets) {
-                    let dx = _mm256_sub_pd(*o, fx);
-                    *d = _mm256_mul_pd(dx, dx);
-                }
+                squares(dx2, 0.0, px - px.floor());
+                squares(&mut rows[..vectors], 0.0, py - py.floor());
             } else {
-                let (x0, pxv) = (_mm256_set1_pd(x0), _mm256_set1_pd(px));
-                for (d, o) in dx2.iter_mut().zip(offsets) {
-                    let dx = _mm256_sub_pd(_mm256_add_pd(x0, *o), pxv);
-                    *d = _mm256_mul_pd(dx, dx);
-                }
+                let (x0, y0) = proj.origin(i, reach);
+                squares(dx2, x0, px);
+                squares(&mut rows[..vectors], y0, py);
             }
-            let kv = _mm256_set1_pd(p.key(first, i));
-            for j in 0..side {
-                let dy = (y0 + j as f64) + 0.5 - py;
-                let dy2 = _mm256_set1_pd(dy * dy);
+            for (v, r) in rows[..vectors].iter().enumerate() {
+                // SAFETY: 4 of the 4 × MAX_VECTORS slots.
+                unsafe { _mm256_storeu_pd(dy2.as_mut_ptr().add(4 * v), *r) };
+            }
+            let kv = _mm256_set1_pd(proj.key(i));
+            for (j, dy2) in dy2[..side].iter().enumerate() {
+                let dy2 = _mm256_set1_pd(*dy2);
                 for (v, d) in dx2.iter().enumerate() {
                     let d2 = _mm256_add_pd(*d, dy2);
                     // Outside the disc (or NaN): all-ones bits, a NaN that `min` never keeps.
                     let cand = _mm256_or_pd(kv, _mm256_cmp_pd::<_CMP_NLE_UQ>(d2, r2v));
-                    let at = j * stride + 4 * v;
-                    let slots = &mut square[at..at + 4];
-                    let s = slots.as_mut_ptr();
-                    // SAFETY: `slots` holds the 4 keys read and written.
-                    unsafe { _mm256_storeu_pd(s, _mm256_min_pd(cand, _mm256_loadu_pd(s))) };
+                    // SAFETY: corner <= corners, so the 4 keys lie within the buffer (above).
+                    unsafe {
+                        let s = keys.add(corner + j * stride + 4 * v);
+                        _mm256_storeu_pd(s, _mm256_min_pd(cand, _mm256_loadu_pd(s)));
+                    }
                 }
             }
         }

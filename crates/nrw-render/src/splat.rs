@@ -225,7 +225,10 @@ impl Footprint {
         if R != DYNAMIC {
             // Pinhole path (px, py are f32 values): the offsets from the pixel's corner are
             // exact, so (i - R + 0.5) - fx rounds the same real number as the definition's
-            // (xc - R + i + 0.5) - px: bit-identical distances, fewer conversions.
+            // (xc - R + i + 0.5) - px: bit-identical distances, fewer conversions. (Exact
+            // except for px within 2^-30 below 0, whose px + 1 needs over 53 bits: a centre
+            // that close to the image's left or top edge may round its offsets differently
+            // from the definition, by an ulp; the AVX2 kernel rounds it the same way as this.)
             let (fx, fy) = (px - xc as f64, py - yc as f64);
             let d = |i: usize, f: f64| {
                 let t = (i as i64 - R) as f64 + 0.5 - f;
@@ -347,7 +350,7 @@ impl<'a> Splat<'a> {
         let mut proj = vec![[0f32; 3]; CHUNK_POINTS];
         let cloud: &'a RenderCloud = self.cloud;
         let avx2 = self.kernel == Kernel::Auto && simd::fits(self.zbuf);
-        let mut scratch = Vec::new();
+        let mut batch = simd::Batch::default();
         for chunk in self.visible() {
             let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
             // Chunks built by hand may be longer than CHUNK_POINTS: take them in pieces.
@@ -355,7 +358,7 @@ impl<'a> Splat<'a> {
                 let first = chunk.start as usize + piece * CHUNK_POINTS;
                 if avx2 {
                     // The same arithmetic, 8 points or a footprint row per instruction.
-                    simd::splat(self.zbuf, pts, first, (r, t, k), near, fp.r2, &mut scratch);
+                    simd::splat(self.zbuf, pts, first, (r, t, k), near, fp.r2, &mut batch);
                     continue;
                 }
                 let proj = &mut proj[..pts.len()];

@@ -249,23 +249,6 @@ fn svg(rows: &[Row]) -> String {
     s
 }
 
-const OPEN3D: &str = r#"
-import json, sys, time, statistics, numpy as np
-import open3d as o3d, open3d.core as o3c
-pts = np.load(sys.argv[1]); views = json.load(open(sys.argv[2])); runs = int(sys.argv[3])
-pcd = o3d.t.geometry.PointCloud(o3c.Tensor(pts))
-ts = []
-for v in views:
-    K = o3c.Tensor(np.array(v["K"], dtype=np.float64)); E = o3c.Tensor(np.array(v["E"], dtype=np.float64))
-    best = float("inf")
-    for _ in range(runs):
-        t = time.perf_counter()
-        d = pcd.project_to_depth_image(v["w"], v["h"], K, E, depth_scale=1.0, depth_max=1e4)
-        best = min(best, time.perf_counter() - t)
-    ts.append(best)
-print(statistics.median(ts))
-"#;
-
 /// Open3D timing the views once per line read from stdin, answering with a JSON list of
 /// seconds per view: the benchmark alternates rounds of ours and Open3D's, so both tools
 /// see the same phases of a noisy machine.
@@ -292,11 +275,11 @@ struct Open3dRounds {
 }
 
 impl Open3dRounds {
-    /// One OpenMP thread; `None` (and why, on stderr) when Open3D cannot run.
-    fn start(dir: &Path) -> Option<Open3dRounds> {
+    /// `threads` OpenMP threads; `None` (and why, on stderr) when Open3D cannot run.
+    fn start(dir: &Path, threads: usize) -> Option<Open3dRounds> {
         use std::io::BufRead;
         let mut child = Command::new("python3")
-            .env("OMP_NUM_THREADS", "1")
+            .env("OMP_NUM_THREADS", threads.to_string())
             .args(["-c", OPEN3D_ROUNDS])
             .arg(dir.join("pts.npy"))
             .arg(dir.join("views.json"))
@@ -322,35 +305,23 @@ impl Open3dRounds {
         self.out.read_line(&mut line).ok()?;
         serde_json::from_str(&line).ok()
     }
+
+    /// Seconds per view: each view's best of `rounds`, median over views.
+    fn best_of(&mut self, rounds: usize) -> Option<f64> {
+        let mut best: Vec<f64> = self.round()?;
+        for _ in 1..rounds {
+            for (b, t) in best.iter_mut().zip(self.round()?) {
+                *b = b.min(t);
+            }
+        }
+        Some(median(best))
+    }
 }
 
 impl Drop for Open3dRounds {
     fn drop(&mut self) {
         drop(self.child.stdin.take());
         let _ = self.child.wait();
-    }
-}
-
-/// Open3D's seconds per view (depth only; best of `runs`, median over views) on the views and points in `dir`, with
-/// `threads` OpenMP threads; `None` (and why, on stderr) when it could not run.
-fn open3d(dir: &Path, runs: usize, threads: usize) -> Option<f64> {
-    let out = Command::new("python3")
-        .env("OMP_NUM_THREADS", threads.to_string())
-        .args(["-c", OPEN3D])
-        .arg(dir.join("pts.npy"))
-        .arg(dir.join("views.json"))
-        .arg(runs.to_string())
-        .output();
-    match out {
-        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).trim().parse().ok(),
-        Ok(o) => {
-            eprintln!("open3d failed: {}", String::from_utf8_lossy(&o.stderr));
-            None
-        }
-        Err(e) => {
-            eprintln!("python3: {e}");
-            None
-        }
     }
 }
 
@@ -472,7 +443,7 @@ fn speed(quick: bool, ours_only: bool) {
             let views1: Vec<View> = views.iter().map(|[_, v]| v.clone()).collect();
             // Rounds alternate between the tools; each view's best round counts.
             let mut o3d_rounds = (!ours_only)
-                .then(|| Open3dRounds::start(tmp.path()))
+                .then(|| Open3dRounds::start(tmp.path(), 1))
                 .flatten();
             let mut ours = [
                 vec![f64::INFINITY; views.len()],
@@ -578,7 +549,7 @@ fn speed(quick: bool, ours_only: bool) {
                 }
                 let ours_vps = (runs * views1.len()) as f64 / t.elapsed().as_secs_f64();
                 let o3d_all = (!ours_only)
-                    .then(|| open3d(tmp.path(), runs, cores))
+                    .then(|| Open3dRounds::start(tmp.path(), cores)?.best_of(runs))
                     .flatten();
                 let _ = writeln!(
                     md2,

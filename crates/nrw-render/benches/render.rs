@@ -272,11 +272,13 @@ for _ in sys.stdin:
 struct Open3dRounds {
     child: std::process::Child,
     out: std::io::BufReader<std::process::ChildStdout>,
+    /// Views in views.json: a round that answers for another count has failed.
+    views: usize,
 }
 
 impl Open3dRounds {
     /// `threads` OpenMP threads; `None` (and why, on stderr) when Open3D cannot run.
-    fn start(dir: &Path, threads: usize) -> Option<Open3dRounds> {
+    fn start(dir: &Path, threads: usize, views: usize) -> Option<Open3dRounds> {
         use std::io::BufRead;
         let mut child = Command::new("python3")
             .env("OMP_NUM_THREADS", threads.to_string())
@@ -294,25 +296,28 @@ impl Open3dRounds {
             eprintln!("open3d failed to start (see its error above)");
             return None;
         }
-        Some(Open3dRounds { child, out })
+        Some(Open3dRounds { child, out, views })
     }
 
-    /// Seconds per view for one round, or `None` when the process failed.
-    fn round(&mut self) -> Option<Vec<f64>> {
+    /// One round folded into `best` (seconds per view), or `None` when the process failed.
+    fn round_into(&mut self, best: &mut [f64]) -> Option<()> {
         use std::io::{BufRead, Write};
         writeln!(self.child.stdin.as_mut()?, "go").ok()?;
         let mut line = String::new();
         self.out.read_line(&mut line).ok()?;
-        serde_json::from_str(&line).ok()
+        let ts: Vec<f64> = serde_json::from_str(&line).ok()?;
+        (ts.len() == self.views && best.len() == self.views).then_some(())?;
+        for (b, t) in best.iter_mut().zip(ts) {
+            *b = b.min(t);
+        }
+        Some(())
     }
 
     /// Seconds per view: each view's best of `rounds`, median over views.
     fn best_of(&mut self, rounds: usize) -> Option<f64> {
-        let mut best: Vec<f64> = self.round()?;
-        for _ in 1..rounds {
-            for (b, t) in best.iter_mut().zip(self.round()?) {
-                *b = b.min(t);
-            }
+        let mut best = vec![f64::INFINITY; self.views];
+        for _ in 0..rounds {
+            self.round_into(&mut best)?;
         }
         Some(median(best))
     }
@@ -440,10 +445,10 @@ fn speed(quick: bool, ours_only: bool) {
                     [0.0, 1.0].map(|r| View::new(&img, &s.camera, DVec3::ZERO, w, h, r))
                 })
                 .collect();
-            let views1: Vec<View> = views.iter().map(|[_, v]| v.clone()).collect();
+            let views1: Vec<&View> = views.iter().map(|[_, v]| v).collect();
             // Rounds alternate between the tools; each view's best round counts.
             let mut o3d_rounds = (!ours_only)
-                .then(|| Open3dRounds::start(tmp.path(), 1))
+                .then(|| Open3dRounds::start(tmp.path(), 1, views.len()))
                 .flatten();
             let mut ours = [
                 vec![f64::INFINITY; views.len()],
@@ -461,16 +466,9 @@ fn speed(quick: bool, ours_only: bool) {
                     }
                 }
                 if let Some(o) = o3d_rounds.as_mut() {
-                    match o.round() {
-                        Some(ts) if ts.len() == views.len() => {
-                            for (b, t) in o3d_best.iter_mut().zip(ts) {
-                                *b = b.min(t);
-                            }
-                        }
-                        _ => {
-                            eprintln!("open3d stopped answering");
-                            o3d_rounds = None;
-                        }
+                    if o.round_into(&mut o3d_best).is_none() {
+                        eprintln!("open3d stopped answering");
+                        o3d_rounds = None;
                     }
                 }
             }
@@ -549,7 +547,7 @@ fn speed(quick: bool, ours_only: bool) {
                 }
                 let ours_vps = (runs * views1.len()) as f64 / t.elapsed().as_secs_f64();
                 let o3d_all = (!ours_only)
-                    .then(|| Open3dRounds::start(tmp.path(), cores)?.best_of(runs))
+                    .then(|| Open3dRounds::start(tmp.path(), cores, views1.len())?.best_of(runs))
                     .flatten();
                 let _ = writeln!(
                     md2,

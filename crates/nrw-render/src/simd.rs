@@ -407,8 +407,9 @@ mod x86 {
             return; // (no square fits: an image without pixels)
         };
         let keys = z.keys.as_mut_ptr();
-        // Squared offsets of `vectors` lanes from (f, f) where `f` is a position's fraction
-        // (F32) or from its `o + 0.5` lanes to the position (else).
+        // Squared offsets of `vectors` vectors of lanes along one axis: (lane offset) - p where
+        // p is the position's fraction (F32), or (o + lane offset) - p where o is the square's
+        // first column or row and p the position (else).
         let squares = |d: &mut [__m256d], o: f64, p: f64| {
             let (ov, pv) = (_mm256_set1_pd(o), _mm256_set1_pd(p));
             for (d, off) in d.iter_mut().zip(offsets) {

@@ -351,29 +351,47 @@ impl<'a> Splat<'a> {
         let cloud: &'a RenderCloud = self.cloud;
         let avx2 = self.kernel == Kernel::Auto && simd::fits(self.zbuf);
         let mut batch = simd::Batch::default();
-        for chunk in self.visible() {
-            let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
-            // Chunks built by hand may be longer than CHUNK_POINTS: take them in pieces.
-            for (piece, pts) in all.chunks(CHUNK_POINTS).enumerate() {
-                let first = chunk.start as usize + piece * CHUNK_POINTS;
-                if avx2 {
-                    // The same arithmetic, 8 points or a footprint row per instruction.
-                    simd::splat(self.zbuf, pts, first, (r, t, k), near, fp.r2, &mut batch);
-                    continue;
-                }
-                let proj = &mut proj[..pts.len()];
-                project(proj, pts, r, t, k);
-                for (i, &[x, y, z]) in proj.iter().enumerate() {
-                    // On or behind the camera plane (z ≈ 0 included): never drawn.
-                    if z > near {
-                        let (px, py) = (x as f64, y as f64);
-                        fp.draw::<R>(
-                            self.zbuf,
-                            (px, py),
-                            (floor_f32(px), floor_f32(py)),
-                            key(z, first + i),
-                        );
-                    }
+        // Chunks built by hand may be longer than CHUNK_POINTS: taken in pieces, each with its
+        // first point's index, listed ahead so that drawing one can prefetch the next.
+        let pieces: Vec<(usize, &[Vec3])> = self
+            .visible()
+            .into_iter()
+            .flat_map(|chunk| {
+                let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
+                let first = move |piece: usize| chunk.start as usize + piece * CHUNK_POINTS;
+                all.chunks(CHUNK_POINTS)
+                    .enumerate()
+                    .map(move |(piece, pts)| (first(piece), pts))
+            })
+            .collect();
+        for (n, &(first, pts)) in pieces.iter().enumerate() {
+            if avx2 {
+                let next = pieces.get(n + 1).map_or(&[][..], |p| p.1);
+                // The same arithmetic, 8 points or a footprint row per instruction.
+                simd::splat(
+                    self.zbuf,
+                    pts,
+                    first,
+                    (r, t, k),
+                    near,
+                    fp.r2,
+                    &mut batch,
+                    next,
+                );
+                continue;
+            }
+            let proj = &mut proj[..pts.len()];
+            project(proj, pts, r, t, k);
+            for (i, &[x, y, z]) in proj.iter().enumerate() {
+                // On or behind the camera plane (z ≈ 0 included): never drawn.
+                if z > near {
+                    let (px, py) = (x as f64, y as f64);
+                    fp.draw::<R>(
+                        self.zbuf,
+                        (px, py),
+                        (floor_f32(px), floor_f32(py)),
+                        key(z, first + i),
+                    );
                 }
             }
         }

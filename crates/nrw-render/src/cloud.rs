@@ -17,12 +17,41 @@ pub struct Chunk {
     pub max: Vec3,
 }
 
+/// Some of a cloud's points, one slice per axis (see `RenderCloud::xyz`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Span<'a>(pub(crate) [&'a [f32]; 3]);
+
+impl<'a> Span<'a> {
+    /// No point.
+    pub(crate) const EMPTY: Span<'static> = Span([&[], &[], &[]]);
+
+    pub(crate) fn len(&self) -> usize {
+        self.0[0].len()
+    }
+
+    /// Point `i` of the span.
+    #[inline(always)]
+    pub(crate) fn get(&self, i: usize) -> Vec3 {
+        Vec3::new(self.0[0][i], self.0[1][i], self.0[2][i])
+    }
+
+    /// The span in consecutive pieces of at most `n` points.
+    pub(crate) fn pieces(self, n: usize) -> impl Iterator<Item = Span<'a>> {
+        (0..self.len())
+            .step_by(n.max(1))
+            .map(move |s| Span(self.0.map(|a| &a[s..(s + n).min(a.len())])))
+    }
+}
+
 /// A cloud ready to render: local f32 positions around `origin`, optional channels, chunks.
 #[derive(Debug, Clone, Default)]
 pub struct RenderCloud {
     /// World point that local coordinates are relative to (f64, exact).
     pub origin: DVec3,
-    pub positions: Vec<Vec3>,
+    /// Local f32 positions, one array per axis (x, y, z): the pinhole projection loads 8
+    /// points per axis per instruction instead of de-interleaving x, y, z (10⁷ points, whole
+    /// views, r = 1: 22.9 → 21.9 ms/view). `position` gives one point.
+    pub xyz: [Vec<f32>; 3],
     pub colors: Option<Vec<[u8; 3]>>,
     pub normals: Option<Vec<Vec3>>,
     pub chunks: Vec<Chunk>,
@@ -78,6 +107,7 @@ impl RenderCloud {
             .collect();
         order.sort_unstable();
         let positions: Vec<Vec3> = order.iter().map(|&(_, i)| local[i as usize]).collect();
+        let xyz = [0, 1, 2].map(|a| positions.iter().map(|p| p[a]).collect());
         let colors = colors.map(|c| order.iter().map(|&(_, i)| c[i as usize]).collect());
         let normals = normals.map(|v| {
             order
@@ -105,7 +135,7 @@ impl RenderCloud {
             .collect();
         RenderCloud {
             origin,
-            positions,
+            xyz,
             colors,
             normals,
             chunks,
@@ -132,11 +162,26 @@ impl RenderCloud {
 
     /// Number of points.
     pub fn len(&self) -> usize {
-        self.positions.len()
+        self.xyz[0].len()
     }
 
     /// Whether the cloud has no point.
     pub fn is_empty(&self) -> bool {
-        self.positions.is_empty()
+        self.xyz[0].is_empty()
+    }
+
+    /// Point `i` (local frame).
+    pub fn position(&self, i: usize) -> Vec3 {
+        Vec3::new(self.xyz[0][i], self.xyz[1][i], self.xyz[2][i])
+    }
+
+    /// Every point (local frame), in index order.
+    pub fn positions(&self) -> impl Iterator<Item = Vec3> + '_ {
+        (0..self.len()).map(|i| self.position(i))
+    }
+
+    /// Points `range` as one slice per axis.
+    pub(crate) fn span(&self, range: std::ops::Range<usize>) -> Span<'_> {
+        Span(self.xyz.each_ref().map(|a| &a[range.clone()]))
     }
 }

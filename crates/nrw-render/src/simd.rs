@@ -9,6 +9,7 @@
 use glam::{Mat3, Vec3};
 use nrw_colmap::Projection;
 
+use crate::cloud::Span;
 use crate::splat::ZBuffer;
 
 /// Widest square the AVX2 kernel draws: reach 32 (`nrw-etl`'s largest radius), 65 columns.
@@ -160,13 +161,13 @@ pub(crate) fn fits(z: &ZBuffer) -> bool {
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn splat(
     z: &mut ZBuffer,
-    pts: &[Vec3],
+    pts: Span,
     first: usize,
     (r, t, k): (Mat3, Vec3, [f32; 4]),
     near: f32,
     r2: f64,
     batch: &mut Batch,
-    next: &[Vec3],
+    next: Span,
 ) {
     assert!(fits(z));
     let n = pts.len();
@@ -199,7 +200,7 @@ pub(crate) fn splat(
 /// `first + i`. Call only where `fits(z)`.
 pub(crate) fn place<P: Projection>(
     z: &ZBuffer,
-    pts: &[Vec3],
+    pts: Span,
     first: usize,
     (r, t, params): (Mat3, Vec3, &[f64]),
     (near, fold): (f32, Option<f64>),
@@ -233,11 +234,11 @@ pub(crate) fn draw_placed(z: &mut ZBuffer, placed: &[Placed], r2: f64) {
     // SAFETY: the CPU has AVX2 (asserted; `is_x86_feature_detected` caches its answer).
     unsafe {
         if r2 == 0.0 {
-            x86::draw_pixel(z, placed, &[])
+            x86::draw_pixel(z, placed, Span::EMPTY)
         } else if z.reach == 1 {
-            x86::draw_reach1(z, placed, r2, &[])
+            x86::draw_reach1(z, placed, r2, Span::EMPTY)
         } else {
-            x86::draw(z, placed, r2, &[])
+            x86::draw(z, placed, r2, Span::EMPTY)
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -253,7 +254,7 @@ mod x86 {
     use glam::DVec3;
     use nrw_colmap::Projection;
 
-    use super::{Batch, Placed, Splats, MAX_VECTORS, SKIP};
+    use super::{Batch, Placed, Span, Splats, MAX_VECTORS, SKIP};
     use crate::splat::{keep_nearest, ZBuffer, SLACK};
 
     /// `splat::project`, plus each square's position: floor(x) in f32 is exact and equals the
@@ -261,7 +262,7 @@ mod x86 {
     #[target_feature(enable = "avx2")]
     pub(super) fn project(
         out: &mut Batch,
-        pts: &[Vec3],
+        pts: Span,
         (r, t, k): (Mat3, Vec3, [f32; 4]),
         near: f32,
         z: &ZBuffer,
@@ -274,6 +275,7 @@ mod x86 {
         );
         let stride = z.stride as u32;
         let n = pts.len();
+        let [px, py, pz] = pts.0.map(|a| &a[..n]);
         let (xo, yo, zo, ato) = (
             &mut out.x[..n],
             &mut out.y[..n],
@@ -281,7 +283,7 @@ mod x86 {
             &mut out.at[..n],
         );
         for i in 0..n {
-            let c = r * pts[i] + t;
+            let c = r * Vec3::new(px[i], py[i], pz[i]) + t;
             let (x, y) = crate::view::pinhole_pixel(k, c);
             // Not `clamp`, which keeps NaN (this maps it to -FAR, outside).
             #[allow(clippy::manual_clamp)]
@@ -308,7 +310,7 @@ mod x86 {
     #[target_feature(enable = "avx2")]
     pub(super) fn place<P: Projection>(
         z: &ZBuffer,
-        pts: &[Vec3],
+        pts: Span,
         first: usize,
         (r, t, params): (Mat3, Vec3, &[f64]),
         (near, fold): (f32, Option<f64>),
@@ -316,8 +318,8 @@ mod x86 {
     ) {
         const FAR: f64 = (1u64 << 30) as f64;
         let (check_fold, fold) = (fold.is_some(), fold.unwrap_or(f64::INFINITY));
-        for (i, (o, p)) in out.iter_mut().zip(pts).enumerate() {
-            let c = r * *p + t;
+        for (i, o) in out.iter_mut().enumerate() {
+            let c = r * pts.get(i) + t;
             let cd = DVec3::new(c.x as f64, c.y as f64, c.z as f64);
             let q = P::pixel(params, cd);
             // `Camera::normalized_radius` of a lens that is not a fisheye.
@@ -343,41 +345,45 @@ mod x86 {
     /// every chunk, whose positions lie apart in memory when chunks in between are culled).
     /// 10⁷ points, whole views, r = 1: projection 7 → 4 ms/view; r = 0: 13.9 → 13.0 ms/view.
     struct Ahead {
-        start: *const i8,
-        /// Last byte of the piece (0 when there is none, and `start` is any valid address).
+        /// Each axis's first byte.
+        start: [*const i8; 3],
+        /// Last byte of an axis (0 when there is no point, and `start` is any valid address).
         last: usize,
     }
 
     impl Ahead {
-        fn new(next: &[Vec3], fallback: *const f64) -> Ahead {
+        fn new(next: Span, fallback: *const f64) -> Ahead {
             match next.len() {
                 0 => Ahead {
-                    start: fallback as *const i8,
+                    start: [fallback as *const i8; 3],
                     last: 0,
                 },
                 n => Ahead {
-                    start: next.as_ptr() as *const i8,
-                    last: n * size_of::<Vec3>() - 1,
+                    start: next.0.map(|a| a.as_ptr() as *const i8),
+                    last: n * size_of::<f32>() - 1,
                 },
             }
         }
 
-        /// Prefetch the line holding byte `b` of the piece (or its last line).
+        /// Prefetch the lines holding point `i` of the piece (or its last point).
         #[inline(always)]
-        fn fetch(&self, b: usize) {
-            // SAFETY: an address within the piece (or `fallback`); prefetching never faults.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(self.start.add(b.min(self.last))) }
+        fn fetch(&self, i: usize) {
+            let b = (i * size_of::<f32>()).min(self.last);
+            for s in self.start {
+                // SAFETY: an address within the piece (or `fallback`); prefetching never faults.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(s.add(b)) }
+            }
         }
     }
 
     /// r = 0: the pixel that holds the point (the z-buffer has no border at reach 0).
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw_pixel<P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P, next: &[Vec3]) {
+    pub(super) fn draw_pixel<P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P, next: Span) {
         let ahead = Ahead::new(next, z.keys.as_ptr());
         for i in 0..proj.len() {
-            // One line per 4 points (48 bytes of positions).
-            if i % 4 == 0 {
-                ahead.fetch(i * size_of::<Vec3>());
+            // One line per axis every 16 points.
+            if i % 16 == 0 {
+                ahead.fetch(i);
             }
             if let Some(slot) = z.keys.get_mut(proj.at(i) as usize) {
                 keep_nearest(slot, proj.key(i));
@@ -397,7 +403,7 @@ mod x86 {
     /// Lanes past the square get an offset of 10⁶, fail the disc test and write back the key
     /// they read.
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw<P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P, r2: f64, next: &[Vec3]) {
+    pub(super) fn draw<P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P, r2: f64, next: Span) {
         let reach = z.reach;
         let stride = z.stride as usize;
         let side = (2 * reach + 1) as usize;
@@ -448,8 +454,8 @@ mod x86 {
         let ahead = Ahead::new(next, z.keys.as_ptr());
         // (Wider squares overlap less, and ran slower interleaved: r = 2, 8.0 -> 9.5 ms/view.)
         for i in 0..proj.len() {
-            if i % 4 == 0 {
-                ahead.fetch(i * size_of::<Vec3>());
+            if i % 16 == 0 {
+                ahead.fetch(i);
             }
             let corner = proj.at(i) as usize;
             if corner > corners {
@@ -505,12 +511,7 @@ mod x86 {
     /// the body a macro (a closure was not inlined), rather than `draw`'s generic one: half
     /// the instructions per point (27 → 23 ms/view with the prefetch of `Ahead`).
     #[target_feature(enable = "avx2")]
-    pub(super) fn draw_reach1<P: Splats + ?Sized>(
-        z: &mut ZBuffer,
-        proj: &P,
-        r2: f64,
-        next: &[Vec3],
-    ) {
+    pub(super) fn draw_reach1<P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P, r2: f64, next: Span) {
         let stride = z.stride as usize;
         let Some(corners) = z.keys.len().checked_sub(2 * stride + 4) else {
             return;
@@ -569,8 +570,10 @@ mod x86 {
         let n = proj.len();
         let q = n / 4;
         for k in 0..q {
-            // One line per 4 points (48 bytes of positions).
-            ahead.fetch(k * 4 * size_of::<Vec3>());
+            // One line per axis every 16 points (4 rounds).
+            if k % 4 == 0 {
+                ahead.fetch(4 * k);
+            }
             body!(k);
             body!(q + k);
             body!(2 * q + k);

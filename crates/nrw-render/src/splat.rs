@@ -5,7 +5,7 @@
 use glam::{DVec3, Mat3, Vec3};
 use nrw_colmap::{Projection, ProjectionVisitor};
 
-use crate::cloud::{Chunk, RenderCloud, CHUNK_POINTS};
+use crate::cloud::{Chunk, RenderCloud, Span, CHUNK_POINTS};
 use crate::simd;
 use crate::view::{pinhole_pixel, View};
 
@@ -75,9 +75,9 @@ pub enum Kernel {
 
 /// Camera-space depth and pixel of each point (see `pinhole_pixel`), written to `out`.
 #[inline(always)]
-fn project(out: &mut [[f32; 3]], pts: &[Vec3], r: Mat3, t: Vec3, k: [f32; 4]) {
-    for (out, p) in out.iter_mut().zip(pts) {
-        let c = r * *p + t;
+fn project(out: &mut [[f32; 3]], pts: Span, r: Mat3, t: Vec3, k: [f32; 4]) {
+    for (i, out) in out.iter_mut().enumerate() {
+        let c = r * pts.get(i) + t;
         let (x, y) = pinhole_pixel(k, c);
         *out = [x, y, c.z];
     }
@@ -292,16 +292,15 @@ impl<'a> Splat<'a> {
         let avx2 = self.kernel == Kernel::Auto && simd::fits(self.zbuf);
         let mut placed = Vec::with_capacity(CHUNK_POINTS);
         for chunk in self.visible() {
-            let pts = &cloud.positions[chunk.start as usize..chunk.end as usize];
-            for (k, p) in pts.iter().enumerate() {
-                let c: Vec3 = v.rotation * *p + v.translation;
+            for i in chunk.start as usize..chunk.end as usize {
+                let c: Vec3 = v.rotation * cloud.position(i) + v.translation;
                 // On or behind the camera plane (z ≈ 0 included): never drawn.
                 if c.z <= near {
                     continue;
                 }
                 let Some((px, py)) = project(c) else { continue };
                 let at = (floor_i(px), floor_i(py));
-                let key = key(c.z, chunk.start as usize + k);
+                let key = key(c.z, i);
                 if avx2 {
                     placed.push(simd::Placed::new(self.zbuf, (px, py), at, key));
                 } else {
@@ -328,8 +327,8 @@ impl<'a> Splat<'a> {
         let cloud: &'a RenderCloud = self.cloud;
         let mut placed = Vec::with_capacity(CHUNK_POINTS);
         for chunk in self.visible() {
-            let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
-            for (piece, pts) in all.chunks(CHUNK_POINTS).enumerate() {
+            let all = cloud.span(chunk.start as usize..chunk.end as usize);
+            for (piece, pts) in all.pieces(CHUNK_POINTS).enumerate() {
                 let first = chunk.start as usize + piece * CHUNK_POINTS;
                 let lens = (v.rotation, v.translation, params);
                 simd::place::<P>(self.zbuf, pts, first, lens, (near, fold), &mut placed);
@@ -353,20 +352,20 @@ impl<'a> Splat<'a> {
         let mut batch = simd::Batch::default();
         // Chunks built by hand may be longer than CHUNK_POINTS: taken in pieces, each with its
         // first point's index, listed ahead so that drawing one can prefetch the next.
-        let pieces: Vec<(usize, &[Vec3])> = self
+        let pieces: Vec<(usize, Span)> = self
             .visible()
             .into_iter()
             .flat_map(|chunk| {
-                let all = &cloud.positions[chunk.start as usize..chunk.end as usize];
+                let all = cloud.span(chunk.start as usize..chunk.end as usize);
                 let first = move |piece: usize| chunk.start as usize + piece * CHUNK_POINTS;
-                all.chunks(CHUNK_POINTS)
+                all.pieces(CHUNK_POINTS)
                     .enumerate()
                     .map(move |(piece, pts)| (first(piece), pts))
             })
             .collect();
         for (n, &(first, pts)) in pieces.iter().enumerate() {
             if avx2 {
-                let next = pieces.get(n + 1).map_or(&[][..], |p| p.1);
+                let next = pieces.get(n + 1).map_or(Span::EMPTY, |p| p.1);
                 // The same arithmetic, 8 points or a footprint row per instruction.
                 simd::splat(
                     self.zbuf,

@@ -283,11 +283,11 @@ fn one_point_covers_its_splat_and_an_empty_cloud_covers_nothing() {
 fn reference_winners(view: &View, cloud: &RenderCloud, r: f64) -> Vec<Option<usize>> {
     let (w, h) = (view.width as usize, view.height as usize);
     let mut best: Vec<Option<(u32, usize)>> = vec![None; w * h];
-    for (i, p) in cloud.positions.iter().enumerate() {
-        let Some(px) = view.project(*p, cloud.near) else {
+    for (i, p) in cloud.positions().enumerate() {
+        let Some(px) = view.project(p, cloud.near) else {
             continue;
         };
-        let z = (view.rotation * *p + view.translation).z;
+        let z = (view.rotation * p + view.translation).z;
         for y in 0..h {
             for x in 0..w {
                 let (dx, dy) = (x as f64 + 0.5 - px.x, y as f64 + 0.5 - px.y);
@@ -325,9 +325,9 @@ fn splats_match_their_definition_at_the_border_and_for_wide_radii() {
     let (view, _) = test_view(CameraModel::Pinhole, vec![50.0, 50.0, 32.0, 24.0]);
     // The f32 pinhole projection stays within 6e-4 px of COLMAP's f64 one (stated in
     // `view::pinhole_pixel`; here pixels are < 100, so far tighter).
-    for p in &cloud.positions {
-        let c = view.rotation * *p + view.translation;
-        let f32_px = view.project(*p, cloud.near).unwrap();
+    for p in cloud.positions() {
+        let c = view.rotation * p + view.translation;
+        let f32_px = view.project(p, cloud.near).unwrap();
         let f64_px = view
             .camera
             .img_from_cam(DVec3::new(c.x as f64, c.y as f64, c.z as f64))
@@ -396,8 +396,8 @@ fn splats_on_exact_pixel_boundaries_follow_the_definition() {
         .collect();
     let cloud = indexed_cloud(&pts);
     let (view, _) = test_view(CameraModel::Pinhole, vec![128.0, 128.0, 32.0, 24.0]);
-    for p in &cloud.positions {
-        let px = view.project(*p, cloud.near).unwrap();
+    for p in cloud.positions() {
+        let px = view.project(p, cloud.near).unwrap();
         assert_eq!(
             (px * 2.0).round(),
             px * 2.0,

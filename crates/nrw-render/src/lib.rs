@@ -1,9 +1,11 @@
 //! Renders a reconstructed point cloud from each photo's exact camera into a deep buffer
 //! (depth, and colour and normals where the cloud has them) that aligns with the photo pixel
 //! for pixel, and applies the paper's filters. Cost follows the scene: chunks outside a
-//! view are skipped, and lenses without distortion run no distortion code.
+//! view or hidden behind nearer points are skipped, and lenses without distortion run no
+//! distortion code.
 
 pub mod cloud;
+mod occlusion;
 mod simd;
 pub mod splat;
 pub mod verdict;

@@ -499,19 +499,7 @@ fn chunk_culling_changes_nothing() {
     let cloud = read_ply(&dir.path().join("dense/fused.ply")).unwrap();
     let origin = rec.scene_origin();
     let culled = RenderCloud::from_ply(origin, &cloud);
-    let mut whole = culled.clone();
-    let (lo, hi) = whole
-        .chunks
-        .iter()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), c| {
-            (l.min(c.min), h.max(c.max))
-        });
-    whole.chunks = vec![Chunk {
-        start: 0,
-        end: whole.len() as u32,
-        min: lo,
-        max: hi,
-    }];
+    let whole = one_chunk(&culled);
     for img in rec.images.values() {
         let cam = &rec.cameras[&img.camera_id];
         let v = View::new(
@@ -527,4 +515,119 @@ fn chunk_culling_changes_nothing() {
         assert_eq!((a.depth, a.color), (b.depth, b.color));
     }
     let _ = (DQuat::IDENTITY, DVec2::ZERO);
+}
+
+/// The cloud as one chunk: nothing is culled by frustum, and nothing by occlusion (every
+/// point's depth is at least the chunk's least, so no drawn point can hide the chunk).
+fn one_chunk(cloud: &RenderCloud) -> RenderCloud {
+    let mut whole = cloud.clone();
+    let (lo, hi) = whole
+        .chunks
+        .iter()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), c| {
+            (l.min(c.min), h.max(c.max))
+        });
+    whole.chunks = vec![Chunk {
+        start: 0,
+        end: whole.len() as u32,
+        min: lo,
+        max: hi,
+    }];
+    whole
+}
+
+/// A cloud whose chunks are the given groups of points, in order (no Morton sort), with
+/// colours encoding point indices.
+fn grouped_cloud(groups: &[Vec<DVec3>]) -> RenderCloud {
+    let mut cloud = RenderCloud {
+        near: 1e-4,
+        ..Default::default()
+    };
+    let mut colors = Vec::new();
+    for g in groups {
+        let start = cloud.len() as u32;
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for p in g {
+            let p = p.as_vec3();
+            (lo, hi) = (lo.min(p), hi.max(p));
+            for (axis, v) in cloud.xyz.iter_mut().zip(p.to_array()) {
+                axis.push(v);
+            }
+            let i = colors.len();
+            colors.push([i as u8, (i >> 8) as u8, (i >> 16) as u8]);
+        }
+        let end = cloud.len() as u32;
+        cloud.chunks.push(Chunk {
+            start,
+            end,
+            min: lo,
+            max: hi,
+        });
+    }
+    cloud.colors = Some(colors);
+    cloud
+}
+
+#[test]
+fn occlusion_culling_changes_nothing() {
+    // Through each lens, points placed by pixel: a front patch at 3 m with 12 points at every
+    // pixel centre of x 4..=59, y 4..=43 (dense enough for culling to run); behind it at
+    // 6 m, a chunk in the patch's middle (hidden at every radius), a chunk in the patch's
+    // corner pixel whose splats reach the uncovered diagonal neighbour once r >= 1 (culling
+    // that forgot the splat's reach would drop it), and a chunk in the image's corner, clear
+    // of the patch, that strong distortion (k > 0) moves there from behind the patch
+    // (culling that bounded the undistorted position would drop it).
+    let cams = [
+        (CameraModel::Pinhole, vec![50.0, 50.0, 32.0, 24.0]),
+        (CameraModel::SimpleRadial, vec![50.0, 32.0, 24.0, 0.5]),
+        (CameraModel::Radial, vec![50.0, 32.0, 24.0, 0.1, 1.5]),
+    ];
+    for (model, params) in cams {
+        let (_, img) = test_view(model, params.clone());
+        let cam = Camera {
+            id: 1,
+            model,
+            width: 64,
+            height: 48,
+            params,
+        };
+        let at = |x: f64, y: f64, z: f64| {
+            let ray = cam.cam_ray_from_img(DVec2::new(x, y)).unwrap();
+            ray / ray.z * z
+        };
+        let front: Vec<DVec3> = (4..=43)
+            .flat_map(|y| (4..=59).map(move |x| (x as f64 + 0.5, y as f64 + 0.5)))
+            .flat_map(|(x, y)| (0..12).map(move |k| (x, y, 3.0 + 0.001 * k as f64)))
+            .map(|(x, y, z)| at(x, y, z))
+            .collect();
+        let grid = |x0: f64, x1: f64, y0: f64, y1: f64| -> Vec<DVec3> {
+            (0..100)
+                .map(|i| {
+                    let (a, b) = ((i % 10) as f64 / 9.0, (i / 10) as f64 / 9.0);
+                    at(x0 + a * (x1 - x0), y0 + b * (y1 - y0), 6.0)
+                })
+                .collect()
+        };
+        let middle = grid(20.0, 40.0, 15.0, 30.0);
+        let corner = grid(59.05, 59.95, 43.05, 43.95);
+        let image_corner = grid(62.05, 62.95, 46.05, 46.95);
+        let cloud = grouped_cloud(&[front, middle, corner, image_corner]);
+        let whole = one_chunk(&cloud);
+        for r in [0.0f32, 1.0, 1.5] {
+            let view = View::new(&img, &cam, DVec3::ZERO, 64, 48, r);
+            let want = render_with(&view, &whole, r, Kernel::Portable);
+            assert_eq!(want.chunks_hidden, 0);
+            for kernel in [Kernel::Auto, Kernel::Portable] {
+                let got = render_with(&view, &cloud, r, kernel);
+                assert!(
+                    got.chunks_hidden >= 1,
+                    "{model:?}, r = {r}, {kernel:?}: the middle chunk is hidden"
+                );
+                assert!(
+                    got.depth == want.depth && got.color == want.color,
+                    "{model:?}, r = {r}, {kernel:?}: culling changed the render"
+                );
+            }
+        }
+    }
 }

@@ -184,14 +184,19 @@ fn projected_sparse_points_land_on_their_colmap_observations() {
     );
 }
 
-fn test_view(model: CameraModel, params: Vec<f64>) -> (View, Image) {
-    let cam = Camera {
+/// The 64 × 48 camera the small tests look through.
+fn test_camera(model: CameraModel, params: Vec<f64>) -> Camera {
+    Camera {
         id: 1,
         model,
         width: 64,
         height: 48,
         params,
-    };
+    }
+}
+
+fn test_view(model: CameraModel, params: Vec<f64>) -> (View, Image) {
+    let cam = test_camera(model, params);
     let img = Image {
         id: 1,
         name: "t".into(),
@@ -583,14 +588,8 @@ fn occlusion_culling_changes_nothing() {
         (CameraModel::Radial, vec![50.0, 32.0, 24.0, 0.1, 1.5]),
     ];
     for (model, params) in cams {
-        let (_, img) = test_view(model, params.clone());
-        let cam = Camera {
-            id: 1,
-            model,
-            width: 64,
-            height: 48,
-            params,
-        };
+        let cam = test_camera(model, params.clone());
+        let (_, img) = test_view(model, params);
         let at = |x: f64, y: f64, z: f64| {
             let ray = cam.cam_ray_from_img(DVec2::new(x, y)).unwrap();
             ray / ray.z * z

@@ -664,6 +664,97 @@ fn the_sparse_views_scene_is_dropped_whole_with_exit_3() {
 }
 
 #[test]
+fn the_point_source_is_fused_ply_then_sparse_points_then_an_error_and_points_overrides() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 3);
+    let run = |out: &str, extra: &[&str]| -> Output {
+        let out = tmp.path().join(out);
+        let mut args = vec![
+            "ingest",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--min-dim",
+            "96",
+            "--min-photo-side",
+            "100",
+            "--json",
+            "--quiet",
+        ];
+        args.extend(extra);
+        nrw(&args)
+    };
+    // Exit 0 or 3 (every view too sparse) both end with the summary.
+    let source = |o: Output| -> (String, u64) {
+        assert!(
+            matches!(o.status.code(), Some(0 | 3)),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (
+            s["point_source"].as_str().unwrap().into(),
+            s["points"].as_u64().unwrap(),
+        )
+    };
+    let fused = scene.join("dense/fused.ply");
+    let dense = nrw_colmap::read_ply(&fused).unwrap();
+    assert_eq!(source(run("a", &[])), ("ply".into(), dense.len() as u64));
+
+    // --points wins over dense/fused.ply: a cloud of its first 1,000 points.
+    let other = tmp.path().join("other.ply");
+    let mut few = dense.clone();
+    few.positions.truncate(1000);
+    few.colors.as_mut().map(|c| c.truncate(1000));
+    few.normals.as_mut().map(|n| n.truncate(1000));
+    nrw_colmap::write_ply(&few, &other).unwrap();
+    assert_eq!(
+        source(run("b", &["--points", other.to_str().unwrap()])),
+        ("ply".into(), 1000)
+    );
+    let missing = tmp.path().join("nowhere.ply");
+    let err = fails(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        tmp.path().join("c").to_str().unwrap(),
+        "--points",
+        missing.to_str().unwrap(),
+    ]);
+    assert!(err.contains("nowhere.ply"), "{err}");
+
+    // Without dense/fused.ply: the model's sparse points.
+    std::fs::remove_file(&fused).unwrap();
+    let model = scene.join("sparse/0");
+    let mut rec = nrw_colmap::read_scene(&scene).unwrap();
+    assert_eq!(
+        source(run("d", &[])),
+        ("sparse".into(), rec.points.len() as u64)
+    );
+
+    // A model without 3D points either: a clear error, nothing written.
+    rec.points.clear();
+    for img in rec.images.values_mut() {
+        img.points2d.clear();
+    }
+    let format = rec.format.unwrap_or(nrw_colmap::Format::Binary);
+    nrw_colmap::write_model(&rec, &model, format).unwrap();
+    let out = tmp.path().join("e");
+    let err = fails(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("nothing to render") && err.contains("--points"),
+        "{err}"
+    );
+    assert!(!out.join("manifest.json").exists());
+}
+
+#[test]
 fn semantics_are_stored_colour_coded_with_a_transient_mask() {
     use arrow_array::{BinaryArray, StringArray, UInt32Array};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;

@@ -706,8 +706,12 @@ fn the_point_source_is_fused_ply_then_sparse_points_then_an_error_and_points_ove
     let other = tmp.path().join("other.ply");
     let mut few = dense.clone();
     few.positions.truncate(1000);
-    few.colors.as_mut().map(|c| c.truncate(1000));
-    few.normals.as_mut().map(|n| n.truncate(1000));
+    if let Some(c) = few.colors.as_mut() {
+        c.truncate(1000);
+    }
+    if let Some(n) = few.normals.as_mut() {
+        n.truncate(1000);
+    }
     nrw_colmap::write_ply(&few, &other).unwrap();
     assert_eq!(
         source(run("b", &["--points", other.to_str().unwrap()])),

@@ -26,8 +26,8 @@ pub struct DeepBuffer {
     /// Statistics: chunks and points the view had to look at.
     pub chunks_visited: usize,
     pub points_tested: usize,
-    /// Chunks (pieces of at most `CHUNK_POINTS`) skipped as hidden behind nearer points.
-    pub chunks_hidden: usize,
+    /// Of those, points skipped unprojected as hidden behind nearer ones (occlusion culling).
+    pub points_hidden: usize,
 }
 
 impl DeepBuffer {
@@ -305,10 +305,11 @@ impl<'a> Splat<'a> {
         out
     }
 
-    /// Whether a chunk is hidden behind what is drawn already (counted).
-    fn hidden(&mut self, shadow: &Option<Shadow>) -> bool {
+    /// Whether a chunk (or a piece of one) of `points` is hidden behind what is drawn
+    /// already; hidden points are counted.
+    fn hidden(&mut self, shadow: &Option<Shadow>, points: usize) -> bool {
         let hidden = shadow.is_some_and(|s| s.hidden(self.zbuf));
-        self.hidden += hidden as usize;
+        self.hidden += if hidden { points } else { 0 };
         hidden
     }
 
@@ -321,7 +322,7 @@ impl<'a> Splat<'a> {
         let avx2 = self.kernel == Kernel::Auto && simd::fits(self.zbuf);
         let mut placed = Vec::with_capacity(CHUNK_POINTS);
         for (shadow, chunk) in self.visible() {
-            if self.hidden(&shadow) {
+            if self.hidden(&shadow, (chunk.end - chunk.start) as usize) {
                 continue;
             }
             for i in chunk.start as usize..chunk.end as usize {
@@ -361,7 +362,7 @@ impl<'a> Splat<'a> {
         for (shadow, chunk) in self.visible() {
             let all = cloud.span(chunk.start as usize..chunk.end as usize);
             for (piece, pts) in all.pieces(CHUNK_POINTS).enumerate() {
-                if self.hidden(&shadow) {
+                if self.hidden(&shadow, pts.len()) {
                     continue;
                 }
                 let first = chunk.start as usize + piece * CHUNK_POINTS;
@@ -399,7 +400,7 @@ impl<'a> Splat<'a> {
             })
             .collect();
         for (n, &(first, pts, shadow)) in pieces.iter().enumerate() {
-            if self.hidden(&shadow) {
+            if self.hidden(&shadow, pts.len()) {
                 continue;
             }
             if avx2 {
@@ -483,7 +484,7 @@ pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel
         tested: 0,
         hidden: 0,
     };
-    let (chunks_visited, points_tested, chunks_hidden) = view.camera.visit_projection(splat);
+    let (chunks_visited, points_tested, points_hidden) = view.camera.visit_projection(splat);
     // One pass per channel: the depth pass is branch-free and vectorises; the gathers of
     // colour and normal only run for channels the cloud has.
     let mut depth = Vec::with_capacity(n);
@@ -550,6 +551,6 @@ pub fn render_with(view: &View, cloud: &RenderCloud, radius: f32, kernel: Kernel
         covered: hits.iter().sum(),
         chunks_visited,
         points_tested,
-        chunks_hidden,
+        points_hidden,
     }
 }

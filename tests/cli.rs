@@ -400,6 +400,22 @@ fn files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
         .collect()
 }
 
+/// `ingest` of a small synthetic scene, render size and photo-size filter lowered to fit it.
+fn ingest_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--min-dim",
+        "96",
+        "--min-photo-side",
+        "100",
+    ];
+    args.extend(extra);
+    nrw(&args)
+}
+
 /// A small synthetic scene whose photos pass a lowered size filter.
 fn small_scene(dir: &Path, photos: usize) {
     let mut spec = nrw_synth::SceneSpec::demo().shrunk(photos, (120, 160), 60_000);
@@ -412,35 +428,16 @@ fn interrupted_ingest_resumes_to_the_same_bytes_on_any_thread_count() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = tmp.path().join("scene");
     small_scene(&scene, 9);
-    let args = |out: &Path, threads: &str| -> Vec<String> {
-        [
-            "ingest",
-            scene.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--min-dim",
-            "96",
-            "--min-photo-side",
-            "100",
-            "--rows-per-shard",
-            "2",
-            "--quiet",
-            "--threads",
-            threads,
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
+    let run = |out: &Path, threads: &str, extra: &[&str]| -> Output {
+        let common = ["--rows-per-shard", "2", "--quiet", "--threads", threads];
+        ingest_small(&scene, out, &[&common[..], extra].concat())
     };
     let whole = tmp.path().join("whole");
-    let a: Vec<String> = args(&whole, "1");
-    let o = nrw(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let o = run(&whole, "1", &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
     let resumed = tmp.path().join("resumed");
-    let mut b = args(&resumed, "2");
-    b.extend(["--stop-after-shards".to_string(), "2".to_string()]);
-    let o = nrw(&b.iter().map(String::as_str).collect::<Vec<_>>());
+    let o = run(&resumed, "2", &["--stop-after-shards", "2"]);
     assert_eq!(
         o.status.code(),
         Some(130),
@@ -452,12 +449,7 @@ fn interrupted_ingest_resumes_to_the_same_bytes_on_any_thread_count() {
         !resumed.join("manifest.json").exists(),
         "no manifest for an unfinished dataset"
     );
-    let b = args(&resumed, "2");
-    let o = nrw(&b
-        .iter()
-        .map(String::as_str)
-        .chain(["--json"])
-        .collect::<Vec<_>>());
+    let o = run(&resumed, "2", &["--json"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(
@@ -669,21 +661,8 @@ fn the_point_source_is_fused_ply_then_sparse_points_then_an_error_and_points_ove
     let scene = tmp.path().join("scene");
     small_scene(&scene, 3);
     let run = |out: &str, extra: &[&str]| -> Output {
-        let out = tmp.path().join(out);
-        let mut args = vec![
-            "ingest",
-            scene.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--min-dim",
-            "96",
-            "--min-photo-side",
-            "100",
-            "--json",
-            "--quiet",
-        ];
-        args.extend(extra);
-        nrw(&args)
+        let extra = [&["--json", "--quiet"], extra].concat();
+        ingest_small(&scene, &tmp.path().join(out), &extra)
     };
     // Exit 0 or 3 (every view too sparse) both end with the summary.
     let source = |o: Output| -> (String, u64) {
@@ -849,23 +828,12 @@ fn small_dataset(tmp: &Path, n: usize, semantics: bool) -> PathBuf {
     nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
     let out = tmp.join(format!("ds{n}"));
     let labels = scene.join("ground_truth/semantics");
-    let mut args = vec![
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--min-photo-side",
-        "100",
-        "--min-dim",
-        "96",
-        "--max-empty",
-        "1.0",
-        "--quiet",
-    ];
+    let mut extra = vec!["--max-empty", "1.0", "--quiet"];
     if semantics {
-        args.extend(["--semantics", labels.to_str().unwrap()]);
+        extra.extend(["--semantics", labels.to_str().unwrap()]);
     }
-    ok(&args);
+    let o = ingest_small(&scene, &out, &extra);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     out
 }
 

@@ -123,3 +123,46 @@ pub fn decode_png(bytes: &[u8], name: &Path) -> Result<(u32, u32, u8, Vec<u8>)> 
     let ch = img.color().channel_count();
     Ok((img.width(), img.height(), ch, img.into_bytes()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Intensity-weighted centre of an image, in pixel-edge coordinates (pixel x spans x..x+1).
+    fn centroid(img: &RgbImage) -> (f64, f64) {
+        let (mut m, mut mx, mut my) = (0.0, 0.0, 0.0);
+        for (x, y, p) in img.enumerate_pixels() {
+            let w = p[0] as f64;
+            m += w;
+            mx += w * (x as f64 + 0.5);
+            my += w * (y as f64 + 0.5);
+        }
+        (mx / m, my / m)
+    }
+
+    #[test]
+    fn a_resized_photo_puts_a_feature_where_the_scaled_intrinsics_do() {
+        // A bright 6 × 6 block centred at (123, 83) on grey, resized by non-integer factors.
+        // Intrinsics scale as x' = s·x (pixel edges to edges), so the block must land at
+        // (123·sx, 83·sy); a centre-to-centre resize would put it ~0.25 px off.
+        let mut img = RgbImage::from_pixel(301, 201, image::Rgb([40, 40, 40]));
+        for y in 80..86 {
+            for x in 120..126 {
+                img.put_pixel(x, y, image::Rgb([240, 240, 240]));
+            }
+        }
+        let (w, h) = (150, 100);
+        let small = resize_photo(&img, w, h);
+        // The grey floor weighs every pixel alike: subtract it so only the block counts.
+        let mut block = small.clone();
+        for p in block.pixels_mut() {
+            p[0] = p[0].saturating_sub(40);
+        }
+        let (cx, cy) = centroid(&block);
+        let (ex, ey) = (123.0 * w as f64 / 301.0, 83.0 * h as f64 / 201.0);
+        assert!(
+            (cx - ex).abs() < 0.05 && (cy - ey).abs() < 0.05,
+            "block at ({cx:.3}, {cy:.3}), scaled intrinsics put it at ({ex:.3}, {ey:.3})"
+        );
+    }
+}

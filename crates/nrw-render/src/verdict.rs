@@ -73,3 +73,31 @@ impl Filters {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_paper_filters_decide_at_their_thresholds_on_the_shorter_side() {
+        let f = Filters::default();
+        // 450 px across is kept, 449 is dropped with its value, whichever side is shorter.
+        assert_eq!(f.check_size(450, 2000), None);
+        assert_eq!(f.check_size(2000, 450), None);
+        for (w, h) in [(449, 2000), (2000, 449)] {
+            let v = f.check_size(w, h).unwrap();
+            assert_eq!(
+                (v.name(), v.value(), v.is_kept()),
+                ("too_small", 449.0, false)
+            );
+        }
+        // Exactly 85% empty is kept; more is dropped, the ratio recorded either way.
+        let kept = f.check_render(0.85);
+        assert_eq!(
+            (kept.name(), kept.value(), kept.is_kept()),
+            ("kept", 0.85, true)
+        );
+        let sparse = f.check_render(0.850001);
+        assert_eq!((sparse.name(), sparse.value()), ("too_sparse", 0.850001));
+    }
+}

@@ -7,6 +7,7 @@ pub mod codec;
 pub mod depth;
 pub mod descriptors;
 pub mod error;
+pub mod export;
 pub mod manifest;
 pub mod parquet_io;
 pub mod reader;

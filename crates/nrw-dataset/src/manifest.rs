@@ -11,7 +11,7 @@ use crate::atomic::write_bytes_atomic;
 use crate::error::{DatasetError, Result};
 
 /// Bumped whenever a table's schema changes incompatibly.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// A file recorded in the manifest.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -76,6 +76,14 @@ impl View {
             .transpose()
     }
 
+    /// ADE20K class ids (0 = unlabelled), when the dataset has semantics.
+    pub fn labels(&self) -> Result<Option<GrayImage>> {
+        self.labels_png
+            .as_ref()
+            .map(|b| Ok(decode_image(b, "labels_png", &self.name)?.into_luma8()))
+            .transpose()
+    }
+
     /// A `size`×`size` crop at (x, y) of every channel (the paper trains on 256×256).
     pub fn crop_at(&self, x: u32, y: u32, size: u32) -> Result<Crop> {
         if x + size > self.width || y + size > self.height {
@@ -371,6 +379,7 @@ fn views_of(b: &RecordBatch, path: &Path) -> Result<Vec<View>> {
     let q = [f("qw")?, f("qx")?, f("qy")?, f("qz")?];
     let t = [f("tx")?, f("ty")?, f("tz")?];
     let empty = f("empty_ratio")?;
+    let labels = bin("labels_png")?;
     let (photo, color, depth, normal, sem, tr) = (
         bin("photo_png")?,
         bin("color_png")?,
@@ -409,6 +418,7 @@ fn views_of(b: &RecordBatch, path: &Path) -> Result<Vec<View>> {
             normal_png: opt(normal, i),
             semantics_png: opt(sem, i),
             transient_png: opt(tr, i),
+            labels_png: opt(labels, i),
         });
     }
     Ok(out)

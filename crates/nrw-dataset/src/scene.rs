@@ -277,6 +277,24 @@ pub fn read_verdicts(dir: &Path) -> Result<Vec<(u32, String, String)>> {
     Ok(out)
 }
 
+/// The nearest and farthest rendered depth over the kept views (from `depth_min` and
+/// `depth_max`), if any view was kept.
+pub fn read_depth_range(dir: &Path) -> Result<Option<(f64, f64)>> {
+    use crate::parquet_io::column;
+    let path = dir.join(IMAGES_TABLE);
+    let mut range: Option<(f64, f64)> = None;
+    for b in crate::parquet_io::read_batches(&path, Some(&["depth_min", "depth_max"]))? {
+        let lo = column::<Float64Array>(&b, "depth_min", &path)?;
+        let hi = column::<Float64Array>(&b, "depth_max", &path)?;
+        for (l, h) in lo.iter().zip(hi.iter()) {
+            if let (Some(l), Some(h)) = (l, h) {
+                range = Some(range.map_or((l, h), |(a, b)| (a.min(l), b.max(h))));
+            }
+        }
+    }
+    Ok(range)
+}
+
 /// The largest rendered depth over the kept views (from `depth_max`), if any view was kept.
 pub fn read_depth_max(dir: &Path) -> Result<Option<f64>> {
     use crate::parquet_io::column;

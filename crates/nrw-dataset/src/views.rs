@@ -47,6 +47,10 @@ pub struct ViewRow {
     pub semantics_png: Option<Vec<u8>>,
     /// Transient mask, PNG L8 (255 = transient class), when --semantics was given.
     pub transient_png: Option<Vec<u8>>,
+    /// ADE20K class ids (0 = unlabelled), PNG L8, when --semantics was given: the colour
+    /// coding is not invertible (road and skyscraper share a colour), so exports that recode
+    /// classes (the paper's official colours) read the ids from here.
+    pub labels_png: Option<Vec<u8>>,
 }
 
 /// Arrow schema of a view shard (documented in schemas/views.toml).
@@ -79,6 +83,7 @@ pub fn views_schema() -> SchemaRef {
         Field::new("normal_png", DataType::Binary, true),
         Field::new("semantics_png", DataType::Binary, true),
         Field::new("transient_png", DataType::Binary, true),
+        Field::new("labels_png", DataType::Binary, true),
     ]))
 }
 
@@ -136,6 +141,7 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
             bins(&|r| r.normal_png.as_deref()),
             bins(&|r| r.semantics_png.as_deref()),
             bins(&|r| r.transient_png.as_deref()),
+            bins(&|r| r.labels_png.as_deref()),
         ],
     )
     .map_err(|e| DatasetError::Arrow {
@@ -161,6 +167,7 @@ pub fn write_shard(dir: &Path, rel: &str, rows: &[ViewRow]) -> Result<FileEntry>
         "normal_png",
         "semantics_png",
         "transient_png",
+        "labels_png",
     ] {
         props = props
             .set_column_compression(ColumnPath::from(c), Compression::UNCOMPRESSED)

@@ -71,7 +71,7 @@ fn main() -> std::process::ExitCode {
         Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Split(a) => cmd::split::run(a),
-        Command::Export(a) => cmd::export::run(a),
+        Command::Export(a) => cmd::export::run(a).map(|_| ()),
         Command::Style(a) => cmd::style::run(a),
         Command::Triplets(a) => cmd::triplets::run(a),
         Command::Qa(a) => cmd::qa::run(a).map(|_| ()),

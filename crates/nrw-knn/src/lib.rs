@@ -43,6 +43,30 @@ pub struct Neighbours {
     pub furthest: Vec<(usize, f64)>,
 }
 
+/// The full N × N matrix of squared distances, row-major, each pair summed exactly in f64
+/// (`distance2_f64`) and mirrored: symmetric with a zero diagonal by construction. O(N² · D):
+/// for the published pretraining's `dist_<name>.pckl`, which wants every pair.
+pub fn distance_matrix(rows: &[&[f32]]) -> Vec<f64> {
+    let n = rows.len();
+    let upper: Vec<Vec<f64>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            (i + 1..n)
+                .map(|j| distance2_f64(rows[i], rows[j]))
+                .collect()
+        })
+        .collect();
+    let mut m = vec![0f64; n * n];
+    for (i, row) in upper.iter().enumerate() {
+        for (k, &d) in row.iter().enumerate() {
+            let j = i + 1 + k;
+            m[i * n + j] = d;
+            m[j * n + i] = d;
+        }
+    }
+    m
+}
+
 /// Squared distance summed in f64 (eight interleaved partial sums, so it vectorises; the
 /// f64 sum of f32 differences is exact to ~1e-15 relative either way).
 pub fn distance2_f64(a: &[f32], b: &[f32]) -> f64 {

@@ -26,6 +26,11 @@ pub enum Tier {
     },
     /// Mean and covariance of RGB in [0, 1] (9 numbers): no network, no weights.
     ColorStats,
+    /// The paper's published definition (`style_loss.compute_pairwise_style_loss_v2`): a
+    /// `crop` × `crop` centre crop of the stored photo (no resize), input v·2/255 − 1, VGG16
+    /// Grams of relu1_2 … relu5_2 over C·H·W, distance Σ_layers mean((G_a − G_b)²). Each
+    /// layer's packed Gram is divided by C so the squared L2 distance is that mean.
+    Official { crop: u32 },
 }
 
 impl Tier {
@@ -38,10 +43,23 @@ impl Tier {
         }
     }
 
-    /// Parse `vgg16-256`, `vgg16-512-l12`, `vgg19-full`, `color-stats`.
+    /// The crop the published code uses by default (its README runs `train_resolution` 512).
+    pub const OFFICIAL_CROP: u32 = 512;
+
+    /// Parse `vgg16-256`, `vgg16-512-l12`, `vgg19-full`, `color-stats`, `official`,
+    /// `official-256`.
     pub fn parse(s: &str) -> Option<Tier> {
         if s == "color-stats" {
             return Some(Tier::ColorStats);
+        }
+        if s == "official" {
+            return Some(Tier::Official {
+                crop: Self::OFFICIAL_CROP,
+            });
+        }
+        if let Some(n) = s.strip_prefix("official-") {
+            let crop = n.parse::<u32>().ok().filter(|&n| n >= MIN_SIDE)?;
+            return Some(Tier::Official { crop });
         }
         let (arch, rest) = if let Some(r) = s.strip_prefix("vgg16-") {
             (Arch::Vgg16, r)
@@ -81,6 +99,8 @@ impl Tier {
     pub fn name(&self) -> String {
         match self {
             Tier::ColorStats => "color-stats".into(),
+            Tier::Official { crop } if *crop == Self::OFFICIAL_CROP => "official".into(),
+            Tier::Official { crop } => format!("official-{crop}"),
             Tier::Vgg { arch, size, layers } => {
                 let s = size.map_or("full".to_string(), |n| n.to_string());
                 let a = arch.name();
@@ -96,17 +116,51 @@ impl Tier {
 
     /// Whether this tier needs network weights.
     pub fn needs_weights(&self) -> bool {
-        matches!(self, Tier::Vgg { .. })
+        self.arch().is_some()
     }
+
+    /// The network the tier runs, if any.
+    pub fn arch(&self) -> Option<Arch> {
+        match self {
+            Tier::Vgg { arch, .. } => Some(*arch),
+            Tier::Official { .. } => Some(Arch::Vgg16),
+            Tier::ColorStats => None,
+        }
+    }
+
+    /// The input scaling the tier runs with: the official tier fixes its own (v·2/255 − 1),
+    /// the others take the caller's.
+    pub fn preprocess(&self, asked: Preprocess) -> Preprocess {
+        match self {
+            Tier::Official { .. } => Preprocess::MinusOneToOne,
+            _ => asked,
+        }
+    }
+}
+
+/// `crop` × `crop` pixels from the centre, placed as the published `utils.get_central_crop`
+/// places them (start = (side − crop) // 2), or None when the photo is smaller.
+pub fn central_crop(photo: &RgbImage, crop: u32) -> Option<RgbImage> {
+    let (w, h) = (photo.width(), photo.height());
+    if w < crop || h < crop {
+        return None;
+    }
+    Some(image::imageops::crop_imm(photo, (w - crop) / 2, (h - crop) / 2, crop, crop).to_image())
 }
 
 /// Upper triangle of a symmetric c × c matrix, off-diagonals times √2 (norm-preserving).
 pub fn pack_symmetric(c: usize, g: &[f64], out: &mut Vec<f32>) {
-    let s2 = std::f64::consts::SQRT_2;
+    pack_symmetric_scaled(c, g, 1.0, out);
+}
+
+/// `pack_symmetric` of `scale` · g, scaled in f64 before the one rounding to f32 (where the
+/// descriptor gives up precision).
+pub fn pack_symmetric_scaled(c: usize, g: &[f64], scale: f64, out: &mut Vec<f32>) {
+    let off = std::f64::consts::SQRT_2 * scale;
     for i in 0..c {
-        out.push(g[i * c + i] as f32);
+        out.push((g[i * c + i] * scale) as f32);
         for j in i + 1..c {
-            out.push((g[i * c + j] * s2) as f32);
+            out.push((g[i * c + j] * off) as f32);
         }
     }
 }
@@ -144,6 +198,33 @@ pub fn describe(
         }
     }
     Ok(match tier {
+        Tier::Official { crop } => {
+            let net = net.expect("the official tier needs weights (checked by the caller)");
+            assert_eq!(
+                net.arch,
+                Arch::Vgg16,
+                "official tier runs VGG16 (checked by the caller)"
+            );
+            let img = central_crop(photo, *crop).ok_or_else(|| StyleError::SmallerThanCrop {
+                width: photo.width(),
+                height: photo.height(),
+                crop: *crop,
+            })?;
+            let n = *crop as usize;
+            let feats = net.style_features_upto(
+                &to_input(&img, Preprocess::MinusOneToOne),
+                n,
+                n,
+                STYLE_LAYERS.len(),
+                par,
+            );
+            let mut out = Vec::new();
+            for a in &feats {
+                // mean over the C × C entries = ‖·‖²_F / C², so each Gram is scaled by 1/C.
+                pack_symmetric_scaled(a.c, &a.gram(par), 1.0 / a.c as f64, &mut out);
+            }
+            out
+        }
         Tier::ColorStats => {
             let n = (photo.width() * photo.height()) as f64;
             let mut mean = [0f64; 3];
@@ -235,11 +316,25 @@ mod tests {
             "vgg16-full",
             "vgg16-128-l5",
             "color-stats",
+            "official",
+            "official-256",
         ] {
             assert_eq!(Tier::parse(s).unwrap().name(), s);
         }
+        assert_eq!(
+            Tier::parse("official-512").unwrap(),
+            Tier::Official { crop: 512 }
+        );
         assert_eq!(Tier::parse("vgg16-512").unwrap(), Tier::reference());
-        for bad in ["vgg16-8", "vgg16-256-l9", "vgg11-256", "vgg16-", "colour"] {
+        for bad in [
+            "vgg16-8",
+            "vgg16-256-l9",
+            "vgg11-256",
+            "vgg16-",
+            "colour",
+            "official-8",
+            "official-",
+        ] {
             assert!(Tier::parse(bad).is_none(), "{bad}");
         }
     }

@@ -21,6 +21,8 @@ pub enum StyleError {
         height: u32,
         tier: String,
     },
+    #[error("a {width}×{height} photo is smaller than the {crop}×{crop} centre crop of the official tier (the published code asserts the same); use --tier official-N with N ≤ {}", width.min(height))]
+    SmallerThanCrop { width: u32, height: u32, crop: u32 },
 }
 
 /// Result alias for this crate.

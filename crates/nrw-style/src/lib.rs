@@ -7,7 +7,7 @@ pub mod error;
 pub mod preprocess;
 pub mod vgg;
 
-pub use descriptor::{describe, distance2, Tier};
+pub use descriptor::{central_crop, describe, distance2, Tier};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};

@@ -33,7 +33,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let scene = args.out.join("scene");
     super::synth::generate(&spec, &scene)?;
     let dataset = args.out.join("dataset");
-    let summary = ingest::run(&IngestArgs::new(scene.clone(), dataset.clone()))?;
+    // The synthetic scene's ground-truth ADE20K labels stand in for a segmentation model.
+    let summary = ingest::run(&IngestArgs {
+        semantics: Some(scene.join("ground_truth/semantics")),
+        ..IngestArgs::new(scene.clone(), dataset.clone())
+    })?;
     if summary.kept == 0 {
         return Err(crate::error::EtlError::Usage(
             "the demo scene kept no view: this is a bug".into(),
@@ -72,11 +76,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         check_up_to: 20_000,
     })?;
     let export = args.out.join("export");
-    super::export::run(&super::export::ExportArgs {
-        dataset: dataset.clone(),
-        layout: super::export::Layout::Official,
-        out: export.clone(),
-    })?;
+    super::export::run(&super::export::ExportArgs::official(
+        dataset.clone(),
+        export.clone(),
+    ))?;
     let report = super::qa::run(&super::qa::QaArgs {
         dataset: dataset.clone(),
         out: None,

@@ -1,156 +1,178 @@
-//! `nrw-etl export`: a dataset as plain files. `official` is the layout the paper's published
-//! TensorFlow code reads; `files` is one folder per photo for ordinary viewers.
+//! `nrw-etl export`: a dataset as files other tools read. `official` and `tfrecord` are what
+//! the paper's published TensorFlow code reads; `files` is one folder per photo for ordinary
+//! viewers. The layouts and their bytes live in `nrw_dataset::export`; this parses arguments,
+//! supplies the style distance matrix, draws the bar and prints.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use nrw_dataset::atomic::write_bytes_atomic;
+use indicatif::{ProgressBar, ProgressStyle};
+use nrw_dataset::export::official::DepthMapping;
+use nrw_dataset::export::{ExportConfig, ExportSummary, Layout as DsLayout};
 
-use crate::error::{EtlError, Result};
+use crate::error::Result;
 
 /// `--layout` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Layout {
-    /// train/ and val/ with %04d_reference.png, %04d_color.png (RGBA), %04d_depth.png (16-bit), %04d_seg_rgb.png
+    /// train/ and val/ with NNNN_reference.png, NNNN_color.png (RGBA), NNNN_depth.png (levels 0-255), NNNN_seg_rgb.png (the published colour coding), dist_NAME.pckl with official descriptors
     Official,
-    /// SPLIT/NAME/{photo.png, color.png, depth.exr, normal.png, semantics.png, transient.png, meta.json}
+    /// NAME_train.tfrecord / NAME_val.tfrecord (or NAME-0000i-of-0000N_SPLIT.tfrecord with --shards N): the Examples the published data.py parses
+    Tfrecord,
+    /// SPLIT/NAME/{photo.png, color.png, depth.exr, normal.png, semantics.png, labels.png, transient.png, meta.json}
     Files,
+}
+
+/// `--depth` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Depth {
+    /// Levels even in inverse depth between the dataset's nearest and farthest depth (finer near the camera)
+    Inverse,
+    /// Levels even in depth between the dataset's nearest and farthest depth
+    Linear,
 }
 
 /// Arguments of `export`.
 #[derive(Debug, Args)]
+#[command(after_help = "Examples:
+  nrw-etl export DATASET --out trevi_official --name trevi
+  nrw-etl export DATASET --layout tfrecord --crop 512 --shards 8 --out tfrecords --name trevi
+  nrw-etl export DATASET --no-semantics --out official   # then train with --use_semantic=False
+
+The official and tfrecord layouts follow google/neural_rerendering_in_the_wild: every channel
+is scaled by its loaders as x * 2/255 - 1, so depth is written as levels 1-255 (0 = empty) by
+the mapping --depth names; export.json records the mapping, its near and far, and the formula
+that recovers depth. Writing into an earlier export replaces it whole.")]
 pub struct ExportArgs {
     /// Dataset folder written by `ingest` (and `split`)
     pub dataset: PathBuf,
     /// Which layout to write
     #[arg(long, value_enum, default_value = "official")]
     pub layout: Layout,
-    /// Folder to write into
+    /// Folder to write into (created; an earlier export there is replaced whole)
     #[arg(long)]
     pub out: PathBuf,
+    /// Dataset name the published code is run with (--dataset_name): NAME_train.tfrecord, dist_NAME.pckl [default: the dataset folder's name]
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Centre crop of every channel, as the published code's 512 × 512 (official, tfrecord); smaller views are skipped and listed
+    #[arg(long)]
+    pub crop: Option<u32>,
+    /// Export without semantics (no *_seg_rgb.png; empty `seg` in TFRecords): train with --use_semantic=False
+    #[arg(long)]
+    pub no_semantics: bool,
+    /// How depth becomes the levels 1-255 the published loaders expect
+    #[arg(long, value_enum, default_value = "inverse")]
+    pub depth: Depth,
+    /// TFRecord files per split
+    #[arg(long, default_value_t = 1)]
+    pub shards: usize,
+    /// No progress bar
+    #[arg(long)]
+    pub quiet: bool,
 }
 
-/// 16-bit depth PNG: value = round(depth / depth_max · 65535), at least 1 where depth > 0, 0 where empty.
-pub fn depth_png(depth: &nrw_dataset::depth::DepthMap, depth_max: f64) -> Result<Vec<u8>> {
-    use image::ImageEncoder;
-    let mut raw = Vec::with_capacity(depth.data.len() * 2);
-    for &d in &depth.data {
-        let v = if d > 0.0 {
-            ((d as f64 / depth_max * 65535.0).round() as u32).clamp(1, 65535) as u16
-        } else {
-            0
-        };
-        raw.extend_from_slice(&v.to_ne_bytes()); // the encoder takes native-endian samples
+impl ExportArgs {
+    /// The paper's official layout of `dataset` into `out`, with every default.
+    pub fn official(dataset: PathBuf, out: PathBuf) -> Self {
+        ExportArgs {
+            dataset,
+            layout: Layout::Official,
+            out,
+            name: None,
+            crop: None,
+            no_semantics: false,
+            depth: Depth::Inverse,
+            shards: 1,
+            quiet: true,
+        }
     }
-    let mut out = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut out)
-        .write_image(
-            &raw,
-            depth.width as u32,
-            depth.height as u32,
-            image::ExtendedColorType::L16,
-        )
-        .map_err(|e| EtlError::Usage(format!("cannot encode 16-bit depth PNG: {e}")))?;
-    Ok(out)
-}
-
-fn write(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_bytes_atomic(path, bytes)?;
-    Ok(())
 }
 
 /// Run `export`.
-pub fn run(args: &ExportArgs) -> Result<()> {
+pub fn run(args: &ExportArgs) -> Result<ExportSummary> {
     super::qa::timed(Some(args.dataset.as_path()), "export", || run_stage(args))
 }
 
-fn run_stage(args: &ExportArgs) -> Result<()> {
+fn default_name(dataset: &std::path::Path) -> String {
+    std::fs::canonicalize(dataset)
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "dataset".into())
+}
+
+fn run_stage(args: &ExportArgs) -> Result<ExportSummary> {
     let ds = super::require_views(&args.dataset)?;
-    let splits: Vec<String> = ds.splits().into_iter().map(|(k, _)| k).collect();
-    if args.layout == Layout::Official && !splits.iter().any(|s| s == "train") {
-        return Err(EtlError::Usage(format!(
-            "{}: the official layout needs train/ and val/; run `nrw-etl split {} --val N` first (--val 0 puts every photo in train)",
-            args.dataset.display(),
-            args.dataset.display()
-        )));
+    let cfg = ExportConfig {
+        layout: match args.layout {
+            Layout::Official => DsLayout::Official,
+            Layout::Tfrecord => DsLayout::Tfrecord,
+            Layout::Files => DsLayout::Files,
+        },
+        out: args.out.clone(),
+        name: args
+            .name
+            .clone()
+            .unwrap_or_else(|| default_name(&args.dataset)),
+        crop: args.crop,
+        semantics: !args.no_semantics,
+        depth: match args.depth {
+            Depth::Inverse => DepthMapping::Inverse,
+            Depth::Linear => DepthMapping::Linear,
+        },
+        shards: args.shards,
+    };
+    let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total as u64).with_style(
+            ProgressStyle::with_template(
+                "{msg:>10} [{bar:30}] {pos}/{len} views {elapsed} (eta {eta})",
+            )
+            .expect("template")
+            .progress_chars("=> "),
+        )
+    };
+    bar.set_message("export");
+    let dist =
+        |ids: &[u32]| super::triplets::official_distance_matrix(&args.dataset, ids, cfg.crop);
+    let summary = nrw_dataset::export::export(&ds, &cfg, &dist, &|| bar.inc(1))?;
+    bar.finish_and_clear();
+    if !args.quiet {
+        print_summary(args, &summary);
     }
-    // The depth scale: the largest depth of the dataset (recorded per view by ingest) maps to 65535.
-    let depth_max = nrw_dataset::scene::read_depth_max(&args.dataset)?.unwrap_or(1.0);
-    let mut written = 0usize;
-    for split in &splits {
-        let dir = args.out.join(split);
-        for (k, v) in ds.iter_split(split)?.enumerate() {
-            let v = v?;
-            match args.layout {
-                Layout::Official => {
-                    write(&dir.join(format!("{k:04}_reference.png")), &v.photo_png)?;
-                    write(&dir.join(format!("{k:04}_color.png")), &v.color_png)?;
-                    write(
-                        &dir.join(format!("{k:04}_depth.png")),
-                        &depth_png(&v.depth()?, depth_max)?,
-                    )?;
-                    if let Some(s) = &v.semantics_png {
-                        write(&dir.join(format!("{k:04}_seg_rgb.png")), s)?;
-                    }
-                }
-                Layout::Files => {
-                    let d = dir.join(Path::new(&v.name).with_extension(""));
-                    write(&d.join("photo.png"), &v.photo_png)?;
-                    write(&d.join("color.png"), &v.color_png)?;
-                    write(&d.join("depth.exr"), &v.depth_exr)?;
-                    for (name, payload) in [
-                        ("normal.png", &v.normal_png),
-                        ("semantics.png", &v.semantics_png),
-                        ("transient.png", &v.transient_png),
-                    ] {
-                        if let Some(p) = payload {
-                            write(&d.join(name), p)?;
-                        }
-                    }
-                    let meta = serde_json::json!({
-                        "image_id": v.image_id, "name": v.name, "camera_id": v.camera_id, "model": v.model,
-                        "width": v.width, "height": v.height, "params": v.params,
-                        "qvec": v.qvec, "tvec": v.tvec, "empty_ratio": v.empty_ratio,
-                    });
-                    write(
-                        &d.join("meta.json"),
-                        serde_json::to_string_pretty(&meta)
-                            .expect("json")
-                            .as_bytes(),
-                    )?;
-                }
-            }
-            written += 1;
-        }
-    }
-    if args.layout == Layout::Official {
-        // Beside the split folders, not in them: those hold exactly the paper's files.
-        let index: serde_json::Map<String, serde_json::Value> = splits
-            .iter()
-            .map(|s| Ok((s.clone(), serde_json::json!(ds.ids(s)?))))
-            .collect::<Result<_>>()?;
-        write(
-            &args.out.join("index.json"),
-            serde_json::to_string_pretty(&index)
-                .expect("json")
-                .as_bytes(),
-        )?;
-    }
-    let scale = serde_json::json!({
-        "depth_max": depth_max,
-        "depth_png": "value = round(depth / depth_max * 65535), at least 1 where depth > 0; 0 = empty; depth = value / 65535 * depth_max (camera-space z, model units)",
-    });
-    write(
-        &args.out.join("depth_scale.json"),
-        serde_json::to_string_pretty(&scale)
-            .expect("json")
-            .as_bytes(),
-    )?;
+    Ok(summary)
+}
+
+fn print_summary(args: &ExportArgs, s: &ExportSummary) {
+    let per: Vec<String> = s
+        .splits
+        .iter()
+        .map(|p| format!("{} {}", p.split, p.image_ids.len()))
+        .collect();
     println!(
-        "exported {written} views of {} to {} ({:?} layout)",
+        "exported {} views ({}) of {} to {} ({:?} layout)",
+        s.views(),
+        per.join(", "),
         args.dataset.display(),
         args.out.display(),
         args.layout
     );
-    Ok(())
+    for k in &s.skipped {
+        eprintln!(
+            "skipped {} (image {}, {} split): {}×{} is {}",
+            k.name, k.image_id, k.split, k.width, k.height, k.reason
+        );
+    }
+    for e in &s.empty_splits {
+        eprintln!("split {e} has no view to export: not written");
+    }
+    match &s.dist_pickle {
+        Some(p) => println!("style distances: {} (pretrain_appearance loads it)", args.out.join(p).display()),
+        None if args.layout == Layout::Official => eprintln!(
+            "no dist_NAME.pckl: the dataset has no official style descriptors (`nrw-etl style DATASET --tier official --weights VGG16`)"
+        ),
+        None => {}
+    }
 }

@@ -323,17 +323,17 @@ fn process(
     let photo_path = photos_dir.join(&img.name);
     let photo = resize_photo(&load_photo(&photo_path)?, w, h);
     let name = format!("image {}", img.id);
-    let (semantics_png, transient_png) = match &args.semantics {
-        None => (None, None),
+    let (semantics_png, transient_png, labels_png) = match &args.semantics {
+        None => (None, None, None),
         Some(dir) => {
             let path = dir.join(Path::new(&img.name).with_extension("png"));
             let labels = nrw_dataset::semantics::load_labels(&path, photo_size.0, photo_size.1)?;
-            let (rgb, mask) = nrw_dataset::semantics::colorize(
-                &nrw_dataset::semantics::resize_labels(&labels, w, h),
-            );
+            let ids = nrw_dataset::semantics::resize_labels(&labels, w, h);
+            let (rgb, mask) = nrw_dataset::semantics::colorize(&ids);
             (
                 Some(nrw_dataset::codec::encode_rgb_bytes(&name, w, h, &rgb)?),
                 Some(nrw_dataset::codec::encode_gray(&name, w, h, &mask)?),
+                Some(nrw_dataset::codec::encode_gray(&name, w, h, ids.as_raw())?),
             )
         }
     };
@@ -363,6 +363,7 @@ fn process(
         },
         semantics_png,
         transient_png,
+        labels_png,
     };
     Ok((outcome, Some(row)))
 }

@@ -45,6 +45,13 @@ pub struct SplitStage {
 #[serde(deny_unknown_fields)]
 pub struct ExportStage {
     pub layout: String,
+    /// false: export without semantics (train with --use_semantic=False)
+    #[serde(default = "yes")]
+    pub semantics: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// Arguments of `run`.
@@ -101,18 +108,19 @@ pub fn run(args: &RunArgs) -> Result<bool> {
     if let Some(e) = &p.export {
         let layout = match e.layout.as_str() {
             "official" => Layout::Official,
+            "tfrecord" => Layout::Tfrecord,
             "files" => Layout::Files,
             other => {
                 return Err(EtlError::Usage(format!(
-                    "{}: export.layout {other:?} is not official or files",
+                    "{}: export.layout {other:?} is not official, tfrecord or files",
                     args.pipeline.display()
                 )))
             }
         };
         super::export::run(&ExportArgs {
-            dataset: args.out.clone(),
             layout,
-            out: args.out.join("export"),
+            no_semantics: !e.semantics,
+            ..ExportArgs::official(args.out.clone(), args.out.join("export"))
         })?;
     }
     Ok(true)

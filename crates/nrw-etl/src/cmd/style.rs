@@ -32,7 +32,10 @@ pub const PART_PHOTOS: usize = 64;
 pub struct StyleArgs {
     /// Dataset folder: describe every kept photo into DATASET/descriptors/
     pub dataset: Option<PathBuf>,
-    /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>], the same with vgg19, or color-stats (no weights needed)
+    /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>], the same with vgg19,
+    /// official[-N] (the published code's distance: N×N centre crop, default 512, no resize,
+    /// v·2/255 − 1, per-layer mean squared Gram difference; needed for the official export's
+    /// dist_<name>.pckl), or color-stats (no weights needed)
     #[arg(long, default_value = "vgg16-512")]
     pub tier: String,
     /// VGG16 or VGG19 weights: safetensors with torchvision names (features.N.weight / .bias); never downloaded
@@ -47,7 +50,7 @@ pub struct StyleArgs {
     /// With --image: output safetensors with f32 tensors gram_relu1_2 … gram_relu5_2
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Network input scaling: torchvision's ImageNet mean/std, or the official code's v/127.5 − 1 (recorded with the descriptors)
+    /// Network input scaling: torchvision's ImageNet mean/std, or the official code's v/127.5 − 1 (recorded with the descriptors; the official tier always uses the latter)
     #[arg(long, value_enum, default_value = "imagenet")]
     pub preprocess: Pre,
     /// No progress bar
@@ -64,8 +67,8 @@ fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
         ))),
         (true, Some(p)) => {
             let net = Vgg::load(p).map_err(|e| EtlError::Usage(e.to_string()))?;
-            if let Tier::Vgg { arch, .. } = tier {
-                if net.arch != *arch {
+            if let Some(arch) = tier.arch() {
+                if net.arch != arch {
                     return Err(EtlError::Usage(format!(
                         "{}: these are {} weights but tier {} needs {}",
                         p.display(),
@@ -123,6 +126,7 @@ fn run_stage(args: &StyleArgs) -> Result<()> {
         ))
     })?;
     let net = load_weights(args.weights.as_deref(), &tier)?;
+    let pre = tier.preprocess(pre);
     let kind = DescriptorKind {
         tier: tier.name(),
         weights_sha256: net.as_ref().map_or(String::new(), |n| n.sha256.clone()),

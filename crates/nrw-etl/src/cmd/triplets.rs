@@ -151,3 +151,47 @@ fn run_stage(args: &TripletsArgs) -> Result<()> {
     );
     Ok(())
 }
+
+/// The style distance matrix of the given views in that order, from the dataset's `official`
+/// descriptors (`dist_<name>.pckl` of the official export), or None when the dataset holds
+/// descriptors of another tier or none. `crop` is the export's: a crop smaller than the
+/// descriptors' would make the published code crop the exported photos differently.
+pub fn official_distance_matrix(
+    dataset: &std::path::Path,
+    ids: &[u32],
+    crop: Option<u32>,
+) -> nrw_dataset::Result<Option<Vec<f64>>> {
+    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(dataset)? else {
+        return Ok(None);
+    };
+    let Some(nrw_style::Tier::Official { crop: tier_crop }) = nrw_style::Tier::parse(&kind.tier)
+    else {
+        return Ok(None);
+    };
+    let field = |problem: String| nrw_dataset::DatasetError::Value {
+        path: dataset.join(nrw_dataset::descriptors::DESCRIPTORS_DIR),
+        record: format!("tier {}", kind.tier),
+        field: "descriptor".into(),
+        problem,
+    };
+    if let Some(c) = crop.filter(|&c| c < tier_crop) {
+        return Err(field(format!(
+            "the descriptors are of a {tier_crop}×{tier_crop} crop but the export crops to {c}×{c}; describe with --tier official-{c} or export with a larger --crop"
+        )));
+    }
+    let by_id: std::collections::HashMap<u32, &[f32]> = rows
+        .iter()
+        .map(|r| (r.image_id, r.descriptor.as_slice()))
+        .collect();
+    let picked: Vec<&[f32]> = ids
+        .iter()
+        .map(|id| {
+            by_id.get(id).copied().ok_or_else(|| {
+                field(format!(
+                    "image {id} has no descriptor; rerun `nrw-etl style` on the dataset"
+                ))
+            })
+        })
+        .collect::<nrw_dataset::Result<_>>()?;
+    Ok(Some(nrw_knn::distance_matrix(&picked)))
+}

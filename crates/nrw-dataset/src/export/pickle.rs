@@ -1,0 +1,116 @@
+//! `dist_<name>.pckl`: the pickle the published pretraining (`pretrain_appearance.py`) loads,
+//! `{'dist_matrix': numpy.ndarray float64 N × N}`, written as numpy's own `ndarray.__reduce__`
+//! would be pickled (protocol 3; protocol 4 past 4 GiB of data), so `pickle.load` with numpy
+//! 1.x or 2.x rebuilds the array without this tool.
+
+const PROTO: u8 = 0x80;
+const EMPTY_DICT: u8 = b'}';
+const BINUNICODE: u8 = b'X';
+const GLOBAL: u8 = b'c';
+const BININT: u8 = b'J';
+const BININT1: u8 = b'K';
+const MARK: u8 = b'(';
+const TUPLE: u8 = b't';
+const TUPLE1: u8 = 0x85;
+const TUPLE2: u8 = 0x86;
+const TUPLE3: u8 = 0x87;
+const REDUCE: u8 = b'R';
+const BUILD: u8 = b'b';
+const NONE: u8 = b'N';
+const NEWTRUE: u8 = 0x88;
+const NEWFALSE: u8 = 0x89;
+const SHORT_BINBYTES: u8 = b'C';
+const BINBYTES: u8 = b'B';
+const BINBYTES8: u8 = 0x8e;
+const SETITEM: u8 = b's';
+const STOP: u8 = b'.';
+
+fn unicode(s: &str, out: &mut Vec<u8>) {
+    out.push(BINUNICODE);
+    out.extend_from_slice(&(s.len() as u32).to_le_bytes());
+    out.extend_from_slice(s.as_bytes());
+}
+
+fn global(module: &str, name: &str, out: &mut Vec<u8>) {
+    out.push(GLOBAL);
+    out.extend_from_slice(format!("{module}\n{name}\n").as_bytes());
+}
+
+fn int(v: i32, out: &mut Vec<u8>) {
+    if (0..256).contains(&v) {
+        out.extend_from_slice(&[BININT1, v as u8]);
+    } else {
+        out.push(BININT);
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// `numpy.dtype('<f8')` as numpy pickles it.
+fn dtype_f8(out: &mut Vec<u8>) {
+    global("numpy", "dtype", out);
+    unicode("f8", out);
+    out.extend_from_slice(&[NEWFALSE, NEWTRUE, TUPLE3, REDUCE, MARK]);
+    int(3, out);
+    unicode("<", out);
+    out.extend_from_slice(&[NONE, NONE, NONE]);
+    int(-1, out);
+    int(-1, out);
+    int(0, out);
+    out.extend_from_slice(&[TUPLE, BUILD]);
+}
+
+/// The pickle of `{key: n × n float64 array}` with `values` row-major (length n²).
+pub fn matrix_dict(key: &str, n: usize, values: &[f64]) -> Vec<u8> {
+    assert_eq!(values.len(), n * n, "an n × n matrix has n² values");
+    let data_len = values.len() * 8;
+    let big = data_len > u32::MAX as usize;
+    let mut out = Vec::with_capacity(data_len + 512);
+    out.extend_from_slice(&[PROTO, if big { 4 } else { 3 }, EMPTY_DICT]);
+    unicode(key, &mut out);
+    // numpy.core.multiarray._reconstruct(numpy.ndarray, (0,), b'b')
+    global("numpy.core.multiarray", "_reconstruct", &mut out);
+    global("numpy", "ndarray", &mut out);
+    int(0, &mut out);
+    out.push(TUPLE1);
+    out.extend_from_slice(&[SHORT_BINBYTES, 1, b'b', TUPLE3, REDUCE]);
+    // __setstate__((1, (n, n), dtype('<f8'), False, data))
+    out.push(MARK);
+    int(1, &mut out);
+    int(n as i32, &mut out);
+    int(n as i32, &mut out);
+    out.push(TUPLE2);
+    dtype_f8(&mut out);
+    out.push(NEWFALSE);
+    if big {
+        out.push(BINBYTES8);
+        out.extend_from_slice(&(data_len as u64).to_le_bytes());
+    } else {
+        out.push(BINBYTES);
+        out.extend_from_slice(&(data_len as u32).to_le_bytes());
+    }
+    for v in values {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out.extend_from_slice(&[TUPLE, BUILD, SETITEM, STOP]);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_matrix_bytes_are_in_the_pickle_row_major_little_endian() {
+        let v = [0.0, 1.5, 1.5, 0.0];
+        let p = matrix_dict("dist_matrix", 2, &v);
+        assert_eq!(&p[..3], &[0x80, 3, b'}']);
+        assert_eq!(*p.last().unwrap(), b'.');
+        let raw: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let at = p
+            .windows(raw.len())
+            .position(|w| w == raw.as_slice())
+            .expect("data present");
+        assert_eq!(p[at - 5], BINBYTES);
+        assert_eq!(&p[at - 4..at], &32u32.to_le_bytes());
+    }
+}

@@ -1,10 +1,13 @@
 //! End-to-end tests of the `nrw-etl` binary on the real scenes in ../shared/data.
 
+#[path = "support/shared.rs"]
+mod shared;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn data() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
+    shared::shared_path("data")
 }
 
 fn nrw(args: &[&str]) -> Output {
@@ -33,6 +36,9 @@ fn fails(args: &[&str]) -> String {
 
 #[test]
 fn inspect_json_equals_pycolmap_on_every_copy_of_every_scene() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     let cases = [
         ("sacre_coeur", "sacre_coeur", "bin"),
         ("sacre_coeur", "sacre_coeur", "txt"),
@@ -82,6 +88,9 @@ fn inspect_json_equals_pycolmap_on_every_copy_of_every_scene() {
 
 #[test]
 fn inspect_summary_is_readable() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     let out = ok(&["inspect", data().join("sceaux_castle").to_str().unwrap()]);
     assert!(out.contains("images       11"), "{out}");
     assert!(
@@ -92,6 +101,9 @@ fn inspect_summary_is_readable() {
 
 #[test]
 fn ingest_writes_scene_tables_and_a_manifest_that_describes_them() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     use arrow_array::{BooleanArray, StringArray, UInt32Array};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
@@ -197,6 +209,9 @@ fn walk(d: &Path) -> Vec<PathBuf> {
 
 #[test]
 fn corrupted_models_fail_with_file_record_and_field() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     let src = data().join("sacre_coeur/sparse/0");
     for f in ["cameras.bin", "images.bin", "points3D.bin"] {
@@ -230,6 +245,9 @@ fn corrupted_models_fail_with_file_record_and_field() {
 
 #[test]
 fn ingest_without_photos_says_where_it_looked() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     let model = tmp.path().join("sparse/0");
     std::fs::create_dir_all(&model).unwrap();
@@ -471,6 +489,9 @@ fn interrupted_ingest_resumes_to_the_same_bytes_on_any_thread_count() {
 
 #[test]
 fn a_scene_where_every_view_is_dropped_exits_3_with_every_verdict_recorded() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     use arrow_array::{Float64Array, StringArray};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
     let out = tempfile::tempdir().unwrap();
@@ -517,6 +538,9 @@ fn a_scene_where_every_view_is_dropped_exits_3_with_every_verdict_recorded() {
 
 #[test]
 fn shard_payloads_decode_and_align() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     use arrow_array::{BinaryArray, UInt32Array};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
     let out = tempfile::tempdir().unwrap();
@@ -580,17 +604,10 @@ fn shard_payloads_decode_and_align() {
 
 #[test]
 fn shards_read_back_with_pyarrow_duckdb_and_openexr() {
-    let deps = "import pyarrow, duckdb, OpenEXR, PIL, numpy";
-    let have = Command::new("python3")
-        .args(["-c", deps])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !have {
-        assert!(
-            std::env::var("NRW_REQUIRE_PY_ORACLES").map_or(true, |v| v != "1"),
-            "NRW_REQUIRE_PY_ORACLES=1 but `python3 -c '{deps}'` fails"
-        );
-        eprintln!("python readers not installed: skipped (CI requires them)");
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    if !python_has("import pyarrow, duckdb, OpenEXR, PIL, numpy") {
         return;
     }
     let out = tempfile::tempdir().unwrap();
@@ -1038,27 +1055,20 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
     let err = fails(&["export", d, "--out", off.to_str().unwrap()]);
     assert!(err.contains("nrw-etl split"), "{err}");
     ok(&["split", d, "--val", "2"]);
-    // The paper's style distance, when the VGG16 weights are there (CI has them).
-    let weights = data().join("../weights/vgg16_imagenet.safetensors");
-    let with_dist = weights.is_file();
-    if with_dist {
+    // The paper's style distance, when the VGG16 weights are there (CI requires them).
+    let weights = shared::shared("weights/vgg16_imagenet.safetensors");
+    if let Some(w) = &weights {
         ok(&[
             "style",
             d,
             "--tier",
             "official-64",
             "--weights",
-            weights.to_str().unwrap(),
+            w.to_str().unwrap(),
             "--quiet",
         ]);
-    } else {
-        assert_ne!(
-            std::env::var("CI").as_deref(),
-            Ok("true"),
-            "CI has ../shared/weights"
-        );
-        eprintln!("no ../shared/weights: the distance-matrix part is skipped");
     }
+    let with_dist = weights.is_some();
     let stdout = ok(&[
         "export",
         d,
@@ -1140,20 +1150,20 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
             "tiny-00001-of-00002_val.tfrecord",
         ]
     );
-    // Depth: levels 1-255 by the formula export.json records, 0 exactly where empty; the
-    // recorded inverse gives back the depth within half a level's spacing.
+    // Depth: levels 1-255 by the formula export.json records (linear by default), 0 exactly
+    // where empty; the recorded inverse gives back the depth within half a level's spacing.
     let ds = Dataset::open(&ds_dir).unwrap();
     let meta = export_json(&off);
     let (near, far) = (
         meta["depth"]["near"].as_f64().unwrap(),
         meta["depth"]["far"].as_f64().unwrap(),
     );
-    assert_eq!(meta["depth"]["mapping"], "inverse");
+    assert_eq!(meta["depth"]["mapping"], "linear");
     assert_eq!(
         Some((near, far)),
         nrw_dataset::scene::read_depth_range(&ds_dir).unwrap()
     );
-    let step = (1.0 / near - 1.0 / far) / 254.0;
+    let step = (far - near) / 254.0;
     let mut levels = std::collections::BTreeSet::new();
     for split in ["train", "val"] {
         let ids = meta["splits"]
@@ -1177,9 +1187,10 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
                 assert_eq!(l == 0, t == 0.0, "0 = empty");
                 if l > 0 {
                     levels.insert(l);
-                    let inv = 1.0 / near - (l - 1) as f64 / 254.0 * (1.0 / near - 1.0 / far);
+                    // The recorded formula: d = near + (level - 1) / 254 * (far - near).
+                    let back = near + (l - 1) as f64 / 254.0 * (far - near);
                     assert!(
-                        (inv - 1.0 / t as f64).abs() <= step / 2.0 + 1e-12,
+                        (back - t as f64).abs() <= step / 2.0 * (1.0 + 1e-9),
                         "level {l} for depth {t}"
                     );
                 }
@@ -1265,10 +1276,7 @@ fn official_export_refuses_bad_requests_and_never_leaves_stale_files() {
     let run = nrw(&["export", p, "--out", o, "--no-semantics"]);
     assert!(run.status.success());
     let err = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        err.contains("split val has no view") || !err.contains("val"),
-        "{err}"
-    );
+    assert!(err.contains("split val has no view: not written"), "{err}");
     let files = listing(&out);
     assert_eq!(files.len(), 5 * 3 + 1, "{files:?}");
     assert!(files.iter().all(|f| !f.contains("seg_rgb")));
@@ -1351,17 +1359,7 @@ fn official_export_refuses_bad_requests_and_never_leaves_stale_files() {
 
 #[test]
 fn the_twenty_line_python_example_yields_aligned_training_tensors() {
-    let deps = "import pyarrow, OpenEXR, PIL, numpy";
-    if !Command::new("python3")
-        .args(["-c", deps])
-        .status()
-        .is_ok_and(|s| s.success())
-    {
-        assert!(
-            std::env::var("NRW_REQUIRE_PY_ORACLES").map_or(true, |v| v != "1"),
-            "python readers required in CI"
-        );
-        eprintln!("python readers not installed: skipped (CI requires them)");
+    if !python_has("import pyarrow, OpenEXR, PIL, numpy") {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -1389,7 +1387,10 @@ fn the_twenty_line_python_example_yields_aligned_training_tensors() {
 
 #[test]
 fn style_image_writes_the_five_grams_that_match_pytorch() {
-    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared");
+    let Some(_) = shared::shared("fixtures") else {
+        return;
+    };
+    let shared = shared::shared_dir();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("g.safetensors");
     let png = shared.join("fixtures/vgg16/02928139_3448003521_320x240.png");
@@ -1449,7 +1450,10 @@ fn style_image_writes_the_five_grams_that_match_pytorch() {
 
 #[test]
 fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
-    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared");
+    let Some(_) = shared::shared("weights") else {
+        return;
+    };
+    let shared = shared::shared_dir();
     let weights = shared.join("weights/vgg16_imagenet.safetensors");
     let tmp = tempfile::tempdir().unwrap();
     let ds = small_dataset(tmp.path(), 5, false);
@@ -1573,6 +1577,9 @@ fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
 
 #[test]
 fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     let pipelines = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines");
     let paper = pipelines.join("paper.toml");
@@ -1970,6 +1977,9 @@ fn qa_report_figures_equal_the_tables_at_every_stage() {
 
 #[test]
 fn qa_report_of_a_dataset_where_every_view_was_dropped() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
     let out = tempfile::tempdir().unwrap();
     let d = out.path().to_str().unwrap();
     let o = nrw(&[

@@ -65,7 +65,7 @@ impl ExportConfig {
             name,
             crop: None,
             semantics: true,
-            depth: DepthMapping::Inverse,
+            depth: DepthMapping::Linear,
             shards: 1,
         }
     }
@@ -297,10 +297,10 @@ fn encode_official(
     Ok(files)
 }
 
-/// The Example `AlignedRenderedDataset` + `_to_example` make of a view: `height`, `width`,
+/// The TFRecord frame of the Example `AlignedRenderedDataset` + `_to_example` make of a view: `height`, `width`,
 /// `rendered` (RGBA u8), `depth` (u16, little-endian), `real` (RGB u8), `seg` (RGB u8; empty
 /// with --no-semantics, which the published parser reads only with --use_semantic).
-fn encode_example(v: &View, cfg: &ExportConfig, scale: &DepthScale) -> Result<Vec<u8>> {
+fn encode_record(v: &View, cfg: &ExportConfig, scale: &DepthScale) -> Result<Vec<u8>> {
     use tfrecord::Feature;
     let o = official_view(v, cfg, scale)?;
     let depth16: Vec<u8> = o
@@ -310,7 +310,7 @@ fn encode_example(v: &View, cfg: &ExportConfig, scale: &DepthScale) -> Result<Ve
         .flat_map(|&l| (l as u16).to_le_bytes())
         .collect();
     let empty: &[u8] = &[];
-    Ok(tfrecord::encode_example(&[
+    Ok(tfrecord::encode_record(&[
         ("height", Feature::Int64(o.reference.height() as i64)),
         ("width", Feature::Int64(o.reference.width() as i64)),
         ("rendered", Feature::Bytes(o.color.as_raw())),
@@ -441,6 +441,10 @@ fn write_all(
         empty_splits: Vec::new(),
         dist_pickle: None,
     };
+    if cfg.layout != Layout::Files && !splits.iter().any(|(s, _)| s == "val") {
+        // The published code validates on val/ (or <name>_val.tfrecord): say it is missing.
+        summary.empty_splits.push("val".into());
+    }
     for (split, n) in splits {
         if *n == 0 {
             summary.empty_splits.push(split.clone());
@@ -498,6 +502,50 @@ fn write_all(
     Ok(summary)
 }
 
+/// Where one split's encoded views go: files in the staging folder, or TFRecord shards.
+struct Sink<'a> {
+    staged: &'a Path,
+    records: Vec<(String, std::io::BufWriter<std::fs::File>)>,
+    /// Views of the split in all (shard choice: position · shards / views).
+    views: usize,
+    files: Vec<String>,
+}
+
+impl Sink<'_> {
+    fn put(&mut self, pos: usize, files: Encoded) -> Result<()> {
+        use std::io::Write;
+        for (rel, bytes) in files {
+            if self.records.is_empty() {
+                write_file(&self.staged.join(&rel), &bytes)?;
+                self.files.push(rel);
+            } else {
+                let shard = pos * self.records.len() / self.views;
+                let (rel, w) = &mut self.records[shard];
+                w.write_all(&bytes)
+                    .map_err(|e| DatasetError::io(self.staged.join(&*rel), e))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Flush and sync the TFRecord files; the files written, relative to the export.
+    fn finish(self) -> Result<Vec<String>> {
+        let mut files = self.files;
+        for (rel, w) in self.records {
+            let path = self.staged.join(&rel);
+            let f = w
+                .into_inner()
+                .map_err(|e| DatasetError::io(&path, e.into_error()))?;
+            f.sync_all().map_err(|e| DatasetError::io(&path, e))?;
+            files.push(rel);
+        }
+        Ok(files)
+    }
+}
+
+/// Encoded views of one batch: (position in the split, files).
+type EncodedBatch = Vec<(usize, Encoded)>;
+
 #[allow(clippy::too_many_arguments)]
 fn write_split(
     ds: &Dataset,
@@ -516,94 +564,111 @@ fn write_split(
         names: Vec::new(),
         files: Vec::new(),
     };
-    let mut records: Vec<std::io::BufWriter<std::fs::File>> = Vec::new();
+    let mut sink = Sink {
+        staged,
+        records: Vec::new(),
+        views: n,
+        files: Vec::new(),
+    };
     if cfg.layout == Layout::Tfrecord {
         for i in 0..cfg.shards {
             let rel = tfrecord_name(&cfg.name, split, i, cfg.shards);
             let p = staged.join(&rel);
             let f = std::fs::File::create(&p).map_err(|e| DatasetError::io(&p, e))?;
-            records.push(std::io::BufWriter::with_capacity(1 << 20, f));
-            out.files.push(rel);
+            sink.records
+                .push((rel, std::io::BufWriter::with_capacity(1 << 20, f)));
         }
     }
-    let mut seen = 0usize; // views of the split read so far: picks the TFRecord shard
-    let mut iter = ds.iter_split(split)?;
-    loop {
-        let batch: Vec<View> = iter.by_ref().take(BATCH).collect::<Result<_>>()?;
-        if batch.is_empty() {
-            break;
-        }
-        // Which views fit the crop, and the index each one takes.
-        let mut jobs: Vec<(usize, usize, &View)> = Vec::new(); // (index, position in split, view)
-        for v in &batch {
-            let fits = cfg.layout == Layout::Files
-                || cfg.crop.is_none_or(|c| v.width >= c && v.height >= c);
-            if fits {
-                jobs.push((out.image_ids.len(), seen, v));
-                out.image_ids.push(v.image_id);
-                out.names.push(v.name.clone());
-            } else {
-                let c = cfg.crop.expect("only a crop skips");
-                skipped.push(Skipped {
-                    split: split.into(),
-                    image_id: v.image_id,
-                    name: v.name.clone(),
-                    width: v.width,
-                    height: v.height,
-                    reason: format!("smaller than the {c}×{c} crop"),
-                });
-                tick();
-            }
-            seen += 1;
-        }
-        let encoded: Vec<Encoded> = jobs
-            .par_iter()
-            .map(|(k, _, v)| {
-                let stem = format!("{k:0width$}");
-                let e = match cfg.layout {
-                    Layout::Official => encode_official(
-                        v,
-                        cfg,
-                        scale.expect("paper layout"),
-                        &format!("{split}/{stem}"),
-                    ),
-                    Layout::Tfrecord => Ok(vec![(
-                        String::new(),
-                        encode_example(v, cfg, scale.expect("paper layout"))?,
-                    )]),
-                    Layout::Files => encode_files(
-                        v,
-                        &format!(
-                            "{split}/{}",
-                            Path::new(&v.name).with_extension("").display()
-                        ),
-                    ),
-                };
-                tick();
-                e
-            })
-            .collect::<Result<_>>()?;
-        for ((_, pos, _), files) in jobs.iter().zip(encoded) {
-            for (rel, bytes) in files {
-                if cfg.layout == Layout::Tfrecord {
-                    let shard = pos * cfg.shards / n;
-                    tfrecord::write_record(&mut records[shard], &bytes)
-                        .map_err(|e| DatasetError::io(staged.join(&out.files[shard]), e))?;
-                } else {
-                    write_file(&staged.join(&rel), &bytes)?;
-                    out.files.push(rel);
+    // Batches are decoded and encoded on all cores while a writer thread appends the
+    // previous batch, in order.
+    out.files = std::thread::scope(|scope| -> Result<Vec<String>> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<EncodedBatch>(2);
+        let writer = scope.spawn(move || -> Result<Vec<String>> {
+            for batch in rx {
+                for (pos, files) in batch {
+                    sink.put(pos, files)?;
                 }
             }
-        }
-    }
-    for (w, rel) in records.into_iter().zip(&out.files) {
-        let f = w
-            .into_inner()
-            .map_err(|e| DatasetError::io(staged.join(rel), e.into_error()))?;
-        f.sync_all()
-            .map_err(|e| DatasetError::io(staged.join(rel), e))?;
-    }
+            sink.finish()
+        });
+        let produced = (|| -> Result<()> {
+            let mut seen = 0usize; // views of the split read so far
+            let mut iter = ds.iter_split(split)?;
+            loop {
+                let batch: Vec<View> = iter.by_ref().take(BATCH).collect::<Result<_>>()?;
+                if batch.is_empty() {
+                    return Ok(());
+                }
+                let mut jobs: Vec<(usize, usize, &View)> = Vec::new(); // (index, position, view)
+                for v in &batch {
+                    let fits = cfg.layout == Layout::Files
+                        || cfg.crop.is_none_or(|c| v.width >= c && v.height >= c);
+                    if fits {
+                        jobs.push((out.image_ids.len(), seen, v));
+                        out.image_ids.push(v.image_id);
+                        out.names.push(v.name.clone());
+                    } else {
+                        let c = cfg.crop.expect("only a crop skips");
+                        skipped.push(Skipped {
+                            split: split.into(),
+                            image_id: v.image_id,
+                            name: v.name.clone(),
+                            width: v.width,
+                            height: v.height,
+                            reason: format!("smaller than the {c}×{c} crop"),
+                        });
+                        tick();
+                    }
+                    seen += 1;
+                }
+                let encoded: EncodedBatch = jobs
+                    .par_iter()
+                    .map(|&(k, pos, v)| {
+                        let e = encode_view(v, cfg, scale, split, &format!("{k:0width$}"))?;
+                        tick();
+                        Ok((pos, e))
+                    })
+                    .collect::<Result<_>>()?;
+                if tx.send(encoded).is_err() {
+                    return Ok(()); // the writer stopped on an error, which join returns
+                }
+            }
+        })();
+        drop(tx);
+        let written = writer.join().expect("writer thread does not panic");
+        produced?;
+        written
+    })?;
     Ok(out)
+}
+
+/// One view's files in the layout asked for (a single TFRecord frame for `tfrecord`).
+fn encode_view(
+    v: &View,
+    cfg: &ExportConfig,
+    scale: Option<&DepthScale>,
+    split: &str,
+    stem: &str,
+) -> Result<Encoded> {
+    match cfg.layout {
+        Layout::Official => encode_official(
+            v,
+            cfg,
+            scale.expect("paper layout"),
+            &format!("{split}/{stem}"),
+        ),
+        Layout::Tfrecord => Ok(vec![(
+            String::new(),
+            encode_record(v, cfg, scale.expect("paper layout"))?,
+        )]),
+        Layout::Files => encode_files(
+            v,
+            &format!(
+                "{split}/{}",
+                Path::new(&v.name).with_extension("").display()
+            ),
+        ),
+    }
 }
 
 #[cfg(test)]

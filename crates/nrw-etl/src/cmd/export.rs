@@ -26,10 +26,10 @@ pub enum Layout {
 /// `--depth` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Depth {
+    /// Levels even in depth between the dataset's nearest and farthest depth (more levels on the landmark in docs/bench/official_export.md)
+    Linear,
     /// Levels even in inverse depth between the dataset's nearest and farthest depth (finer near the camera)
     Inverse,
-    /// Levels even in depth between the dataset's nearest and farthest depth
-    Linear,
 }
 
 /// Arguments of `export`.
@@ -62,7 +62,7 @@ pub struct ExportArgs {
     #[arg(long)]
     pub no_semantics: bool,
     /// How depth becomes the levels 1-255 the published loaders expect
-    #[arg(long, value_enum, default_value = "inverse")]
+    #[arg(long, value_enum, default_value = "linear")]
     pub depth: Depth,
     /// TFRecord files per split
     #[arg(long, default_value_t = 1)]
@@ -82,7 +82,7 @@ impl ExportArgs {
             name: None,
             crop: None,
             no_semantics: false,
-            depth: Depth::Inverse,
+            depth: Depth::Linear,
             shards: 1,
             quiet: true,
         }
@@ -166,7 +166,9 @@ fn print_summary(args: &ExportArgs, s: &ExportSummary) {
         );
     }
     for e in &s.empty_splits {
-        eprintln!("split {e} has no view to export: not written");
+        eprintln!(
+            "split {e} has no view: not written (the published code's {e} glob will find nothing; `nrw-etl split DATASET --val N` holds out N photos)"
+        );
     }
     match &s.dist_pickle {
         Some(p) => println!("style distances: {} (pretrain_appearance loads it)", args.out.join(p).display()),

@@ -101,10 +101,10 @@ fn accuracy(quick: bool) {
         .collect();
     let mut best = vec![vec![f64::INFINITY; truth.len()]; configs.len()];
     for _ in 0..ACCURACY_ROUNDS {
-        for ((vs, bs), &(_, radius)) in views.iter().zip(&mut best).zip(&configs) {
+        for (vs, bs) in views.iter().zip(&mut best) {
             for (view, b) in vs.iter().zip(bs.iter_mut()) {
                 let t = Instant::now();
-                std::hint::black_box(render(view, &rc, radius));
+                std::hint::black_box(render(view, &rc));
                 *b = b.min(t.elapsed().as_secs_f64());
             }
         }
@@ -115,7 +115,7 @@ fn accuracy(quick: bool) {
         let (mut surface, mut covered_surface, mut empty_sum) = (0usize, 0usize, 0.0);
         for ((_, gt, labels), view) in truth.iter().zip(vs) {
             let (w, h) = (view.width, view.height);
-            let buf = render(view, &rc, radius);
+            let buf = render(view, &rc);
             empty_sum += buf.empty_ratio();
             for y in 0..h as usize {
                 let py = (((y as f64 + 0.5) / view.scale.y) as usize).min(gt.height - 1);
@@ -480,9 +480,9 @@ fn speed(quick: bool, ours_only: bool) {
             let (mut visited, mut tested, mut hidden) = (0usize, [0usize; 2], [0usize; 2]);
             for _ in 0..runs {
                 for (vi, pair) in views.iter().enumerate() {
-                    for (k, (v, r)) in pair.iter().zip([0.0f32, 1.0]).enumerate() {
+                    for (k, v) in pair.iter().enumerate() {
                         let t = Instant::now();
-                        let b = std::hint::black_box(render(v, &rc, r));
+                        let b = std::hint::black_box(render(v, &rc));
                         ours[k][vi] = ours[k][vi].min(t.elapsed().as_secs_f64());
                         visited += b.chunks_visited;
                         tested[k] += b.points_tested;
@@ -506,7 +506,7 @@ fn speed(quick: bool, ours_only: bool) {
                 let mut best = f64::INFINITY;
                 for _ in 0..runs {
                     let t = Instant::now();
-                    std::hint::black_box(render_with(v, &rc, 1.0, Kernel::Portable));
+                    std::hint::black_box(render_with(v, &rc, Kernel::Portable));
                     best = best.min(t.elapsed().as_secs_f64());
                 }
                 portable.push(best);
@@ -542,7 +542,7 @@ fn speed(quick: bool, ours_only: bool) {
                             let mut best = f64::INFINITY;
                             for _ in 0..runs {
                                 let t0 = Instant::now();
-                                std::hint::black_box(render_with(&v, &rc, r, kernel));
+                                std::hint::black_box(render_with(&v, &rc, kernel));
                                 best = best.min(t0.elapsed().as_secs_f64());
                             }
                             per[ki].push(best);
@@ -568,7 +568,7 @@ fn speed(quick: bool, ours_only: bool) {
                 let t = Instant::now();
                 for _ in 0..runs {
                     views1.par_iter().for_each(|v| {
-                        std::hint::black_box(render(v, &rc, 1.0));
+                        std::hint::black_box(render(v, &rc));
                     });
                 }
                 let ours_vps = (runs * views1.len()) as f64 / t.elapsed().as_secs_f64();

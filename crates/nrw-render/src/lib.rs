@@ -10,6 +10,7 @@ mod simd;
 pub mod splat;
 pub mod verdict;
 pub mod view;
+mod zbuffer;
 
 pub use cloud::{Chunk, RenderCloud, CHUNK_POINTS};
 pub use splat::{render, render_with, DeepBuffer, Kernel};

@@ -7,8 +7,8 @@ use glam::DVec3;
 use nrw_colmap::CameraModel;
 
 use crate::cloud::Chunk;
-use crate::splat::{key, ZBuffer};
 use crate::view::View;
+use crate::zbuffer::{key, ZBuffer};
 
 /// Screen rectangles larger than this many pixels are not scanned: the scan would cost
 /// about what drawing the chunk does.

@@ -10,7 +10,7 @@ use glam::{Mat3, Vec3};
 use nrw_colmap::Projection;
 
 use crate::cloud::Span;
-use crate::splat::ZBuffer;
+use crate::zbuffer::ZBuffer;
 
 /// Widest square the AVX2 kernel draws: reach 32 (`nrw-etl`'s largest radius), 65 columns.
 const MAX_REACH: i64 = 32;
@@ -100,7 +100,7 @@ impl Splats for Batch {
     }
     #[inline(always)]
     fn key(&self, i: usize) -> f64 {
-        crate::splat::key(self.z[i], self.first + i)
+        crate::zbuffer::key(self.z[i], self.first + i)
     }
 }
 
@@ -255,7 +255,7 @@ mod x86 {
     use nrw_colmap::Projection;
 
     use super::{Batch, Placed, Span, Splats, MAX_VECTORS, SKIP};
-    use crate::splat::{keep_nearest, ZBuffer, SLACK};
+    use crate::zbuffer::{keep_nearest, ZBuffer, SLACK};
 
     /// `splat::project`, plus each square's position: floor(x) in f32 is exact and equals the
     /// portable `floor_f32` (coordinates are clamped to ±2^20 first, far outside any image).
@@ -334,7 +334,7 @@ mod x86 {
             );
             // SAFETY: integers within ±2^30, which i64 holds.
             let at: (i64, i64) = unsafe { (fx.to_int_unchecked(), fy.to_int_unchecked()) };
-            *o = Placed::new(z, (q.x, q.y), at, crate::splat::key(c.z, first + i));
+            *o = Placed::new(z, (q.x, q.y), at, crate::zbuffer::key(c.z, first + i));
             // Not drawn: all bits set, `SKIP`.
             o.at |= ((!valid | folded) as u32).wrapping_neg();
         }

@@ -47,18 +47,24 @@ pub struct View {
     pub bounds: Option<[f32; 4]>,
     /// (fx, fy, cx, cy) in f32 for lenses without distortion, which project in f32.
     pub pinhole: Option<[f32; 4]>,
+    /// The splat radius in output pixels that the bounds are padded for and `render` draws
+    /// with: one value, so a view cannot be drawn with splats its culling did not allow for.
+    radius: f32,
+    /// `bounds` before padding, and one pixel in normalised units (1 / the smaller focal).
+    unpadded: Option<[f64; 4]>,
+    pixel: f64,
 }
 
 impl View {
-    /// The view of `image` through `camera`, rendered at `width` × `height`, for a cloud
-    /// re-centred on `origin`. `pad_px` widens the culling bounds (use the splat radius).
+    /// The view of `image` through `camera`, rendered at `width` × `height` with splats of
+    /// `radius` output pixels, for a cloud re-centred on `origin`.
     pub fn new(
         image: &Image,
         camera: &Camera,
         origin: DVec3,
         width: u32,
         height: u32,
-        pad_px: f32,
+        radius: f32,
     ) -> View {
         let scale = DVec2::new(
             width as f64 / camera.width as f64,
@@ -102,15 +108,6 @@ impl View {
             }
         }
         let f = cam.focal();
-        let pad = (pad_px as f64 + 1.0) / f.x.min(f.y);
-        let bounds = bounded.then(|| {
-            [
-                (b[0] - pad) as f32,
-                (b[1] + pad) as f32,
-                (b[2] - pad) as f32,
-                (b[3] + pad) as f32,
-            ]
-        });
         let pinhole = (!cam.model.has_distortion()).then(|| {
             let (f, c) = (cam.focal(), cam.principal_point());
             [f.x as f32, f.y as f32, c.x as f32, c.y as f32]
@@ -125,9 +122,38 @@ impl View {
             translation: local.translation.as_vec3(),
             fold,
             check_fold,
-            bounds,
+            bounds: None,
             pinhole,
+            radius: 0.0,
+            unpadded: bounded.then_some(b),
+            pixel: 1.0 / f.x.min(f.y),
         }
+        .padded_for(radius)
+    }
+
+    /// The same view drawn with splats of another radius (bounds padded anew).
+    pub fn with_radius(&self, radius: f32) -> View {
+        self.clone().padded_for(radius)
+    }
+
+    /// The splat radius this view is drawn with.
+    pub fn radius(&self) -> f32 {
+        self.radius
+    }
+
+    /// Pad the frustum bounds by the splat radius plus one pixel, in normalised units.
+    fn padded_for(mut self, radius: f32) -> View {
+        self.radius = radius.max(0.0);
+        let pad = (self.radius as f64 + 1.0) * self.pixel;
+        self.bounds = self.unpadded.map(|b| {
+            [
+                (b[0] - pad) as f32,
+                (b[1] + pad) as f32,
+                (b[2] - pad) as f32,
+                (b[3] + pad) as f32,
+            ]
+        });
+        self
     }
 
     /// Pixel of a local-frame point by the same steps the splatter takes (f32 transform,

@@ -1,6 +1,9 @@
 //! Renders against ground truth (synthetic scenes), against COLMAP's own observations (real
 //! scene), and on the hard cases.
 
+#[path = "../../../tests/support/shared.rs"]
+mod shared;
+
 use std::path::{Path, PathBuf};
 
 use glam::{DQuat, DVec2, DVec3, Vec3};
@@ -38,7 +41,7 @@ fn depth_vs_truth(dir: &Path, r: f32, classes: &[u8]) -> (usize, usize, f64) {
     for img in rec.images.values() {
         let cam = &rec.cameras[&img.camera_id];
         let view = View::new(img, cam, origin, cam.width as u32, cam.height as u32, r);
-        let buf = render(&view, &rc, r);
+        let buf = render(&view, &rc);
         let stem = Path::new(&img.name).with_extension("");
         let truth = read_exr(
             &dir.join("ground_truth/depth")
@@ -110,7 +113,6 @@ fn a_georeferenced_scene_renders_like_the_centred_one() {
                 render(
                     &View::new(img, cam, origin, cam.width as u32, cam.height as u32, 1.0),
                     &rc,
-                    1.0,
                 )
             })
             .collect::<Vec<_>>()
@@ -146,7 +148,10 @@ fn a_georeferenced_scene_renders_like_the_centred_one() {
 
 #[test]
 fn projected_sparse_points_land_on_their_colmap_observations() {
-    let scene = root().join("../shared/data/sceaux_castle");
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    let scene = shared::shared_path("data/sceaux_castle");
     let rec = read_scene(&scene).unwrap();
     let origin = rec.scene_origin();
     let rc = RenderCloud::from_sparse(origin, &rec);
@@ -224,9 +229,12 @@ fn points_on_or_behind_the_camera_plane_are_never_drawn() {
         DVec3::new(0.0, 0.0, -1.0),
         DVec3::new(0.3, 0.2, -2.0),
     ];
-    let buf = render(&view, &cloud_of(&pts), 1.0);
+    let buf = render(&view.with_radius(1.0), &cloud_of(&pts));
     assert_eq!(buf.covered, 0);
-    let buf = render(&view, &cloud_of(&[DVec3::new(0.0, 0.0, 2.0)]), 0.0);
+    let buf = render(
+        &view.with_radius(0.0),
+        &cloud_of(&[DVec3::new(0.0, 0.0, 2.0)]),
+    );
     assert_eq!(buf.covered, 1);
     assert_eq!(buf.depth[24 * 64 + 32], 2.0);
 }
@@ -241,8 +249,14 @@ fn fisheye_points_beyond_90_degrees_are_not_drawn() {
         let a = deg.to_radians();
         DVec3::new(a.sin(), 0.0, a.cos()) * 3.0
     };
-    assert_eq!(render(&view, &cloud_of(&[at(95.0)]), 0.0).covered, 0);
-    assert_eq!(render(&view, &cloud_of(&[at(60.0)]), 0.0).covered, 1);
+    assert_eq!(
+        render(&view.with_radius(0.0), &cloud_of(&[at(95.0)])).covered,
+        0
+    );
+    assert_eq!(
+        render(&view.with_radius(0.0), &cloud_of(&[at(60.0)])).covered,
+        1
+    );
 }
 
 #[test]
@@ -257,7 +271,7 @@ fn a_negative_radial_lens_does_not_fold_far_points_into_the_image() {
             .is_some_and(|px| px.x > 0.0 && px.x < 64.0),
         "COLMAP's projection folds it in"
     );
-    assert_eq!(render(&view, &cloud_of(&[p]), 0.0).covered, 0);
+    assert_eq!(render(&view.with_radius(0.0), &cloud_of(&[p])).covered, 0);
 }
 
 #[test]
@@ -266,14 +280,14 @@ fn one_point_covers_its_splat_and_an_empty_cloud_covers_nothing() {
     // Projects onto the centre of pixel (32, 24): radius 1.2 covers it and its 4 neighbours
     // (the diagonal ones are √2 away).
     let p = DVec3::new(0.5 / 50.0, 0.5 / 50.0, 1.0);
-    let buf = render(&view, &cloud_of(&[p]), 1.2);
+    let buf = render(&view.with_radius(1.2), &cloud_of(&[p]));
     assert_eq!(buf.covered, 5);
     assert_eq!(buf.color.as_ref().unwrap()[24 * 64 + 32], [200, 100, 50]);
     assert!(
         buf.normal.is_none(),
         "a cloud without normals renders no normal channel"
     );
-    let buf = render(&view, &cloud_of(&[]), 1.0);
+    let buf = render(&view.with_radius(1.0), &cloud_of(&[]));
     assert_eq!((buf.covered, buf.empty_ratio()), (0, 1.0));
     // The cloud's channels are kept (black), so every row of a dataset has the same columns.
     let black = buf
@@ -363,7 +377,7 @@ fn assert_definition(view: &View, cloud: &RenderCloud, radii: &[f32]) {
     for &r in radii {
         let want = reference_winners(view, cloud, r as f64);
         for kernel in [Kernel::Auto, Kernel::Portable] {
-            let buf = render_with(view, cloud, r, kernel);
+            let buf = render_with(&view.with_radius(r), cloud, kernel);
             let color = buf.color.as_ref().unwrap();
             for (px, w_) in want.iter().enumerate() {
                 let got = (buf.depth[px] > 0.0).then(|| {
@@ -469,8 +483,8 @@ fn the_kernels_render_bit_for_bit_alike() {
         };
         for r in [0.0f32, 0.3, 0.6, 1.0, 1.3, 2.0, 3.0, 7.5, 32.0] {
             let view = View::new(&img, &cam, DVec3::ZERO, 320, 240, r);
-            let a = render_with(&view, &cloud, r, Kernel::Auto);
-            let b = render_with(&view, &cloud, r, Kernel::Portable);
+            let a = render_with(&view, &cloud, Kernel::Auto);
+            let b = render_with(&view, &cloud, Kernel::Portable);
             assert!(
                 a.covered > 1000,
                 "{model:?}, r = {r}: the scene covers the view"
@@ -491,7 +505,7 @@ fn nearest_point_wins_and_ties_go_to_the_lower_index() {
     ];
     let mut c = RenderCloud::new(DVec3::ZERO, &pts, Some(&colors), None);
     c.near = 1e-4;
-    let buf = render(&view, &c, 0.0);
+    let buf = render(&view.with_radius(0.0), &c);
     let got = buf.color.unwrap()[24 * 64 + 32];
     // Both depth-2 points tie; the Morton sort keeps input order for equal positions.
     assert_eq!(got, [2, 2, 2]);
@@ -515,7 +529,7 @@ fn chunk_culling_changes_nothing() {
             300 * cam.height as u32 / cam.width as u32,
             2.0,
         );
-        let (a, b) = (render(&v, &culled, 2.0), render(&v, &whole, 2.0));
+        let (a, b) = (render(&v, &culled), render(&v, &whole));
         assert!(a.chunks_visited < culled.chunks.len(), "some chunks culled");
         assert_eq!((a.depth, a.color), (b.depth, b.color));
     }
@@ -614,10 +628,10 @@ fn occlusion_culling_changes_nothing() {
         let whole = one_chunk(&cloud);
         for r in [0.0f32, 1.0, 1.5] {
             let view = View::new(&img, &cam, DVec3::ZERO, 64, 48, r);
-            let want = render_with(&view, &whole, r, Kernel::Portable);
+            let want = render_with(&view, &whole, Kernel::Portable);
             assert_eq!(want.points_hidden, 0);
             for kernel in [Kernel::Auto, Kernel::Portable] {
-                let got = render_with(&view, &cloud, r, kernel);
+                let got = render_with(&view, &cloud, kernel);
                 assert!(
                     got.points_hidden >= behind,
                     "{model:?}, r = {r}, {kernel:?}: the middle chunk is hidden ({} points)",

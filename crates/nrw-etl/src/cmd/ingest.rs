@@ -295,7 +295,7 @@ fn process(
     }
     let (w, h) = render_size(cam.width, cam.height, args.min_dim);
     let view = View::new(img, cam, cloud.origin, w, h, args.radius);
-    let buf = render(&view, cloud, args.radius);
+    let buf = render(&view, cloud);
     let empty = buf.empty_ratio();
     let verdict = filters.check_render(empty);
     let outcome = ImageOutcome {

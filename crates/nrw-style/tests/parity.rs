@@ -2,12 +2,15 @@
 //! matrix within 1e-4 relative to its largest entry, from the fixture's own preprocessed
 //! input and from the fixture PNG through our preprocessing.
 
-use std::path::{Path, PathBuf};
+#[path = "../../../tests/support/shared.rs"]
+mod shared;
+
+use std::path::PathBuf;
 
 use nrw_style::{grams, to_input, Parallelism, Preprocess, Vgg, STYLE_LAYERS};
 
 fn shared() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared")
+    shared::shared_dir()
 }
 
 fn tensor_f32(st: &safetensors::SafeTensors, name: &str) -> (Vec<usize>, Vec<f32>) {
@@ -33,6 +36,9 @@ fn tensor_f64(st: &safetensors::SafeTensors, name: &str) -> Vec<f64> {
 
 #[test]
 fn grams_match_pytorch_float64_on_both_fixtures() {
+    let Some(_) = shared::shared("fixtures") else {
+        return;
+    };
     let net = Vgg::load(&shared().join("weights/vgg16_imagenet.safetensors")).unwrap();
     for stem in ["100_7100_256x256", "02928139_3448003521_320x240"] {
         let bytes =

@@ -1106,6 +1106,7 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
         args.extend(["--dataset", d]);
     }
     let v = official_reader(&args);
+    eprintln!("official_reader.py: {v}");
     assert_eq!(
         v["official"],
         serde_json::json!({"train": 4, "val": 2}),

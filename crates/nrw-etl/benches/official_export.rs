@@ -7,9 +7,12 @@
 //!    sceaux_castle (every covered pixel; no labels there).
 //! 2. TFRecord throughput: `export --layout tfrecord` against the published Python path
 //!    (benches/tfrecord_python.py: cv2 reads of the same official PNGs, Example encoding,
-//!    TFRecord framing), same views, same machine, best of 3 rounds each.
+//!    TFRecord framing), same views, same machine, best of 5 alternating rounds.
 //!
 //! Needs `pip install numpy opencv-python-headless crc32c` for the Python peer.
+
+#[path = "../../../tests/support/cpu.rs"]
+mod cpu;
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -33,28 +36,6 @@ fn run(args: &[&str], threads: Option<usize>) -> f64 {
         String::from_utf8_lossy(&o.stderr)
     );
     t.elapsed().as_secs_f64()
-}
-
-/// CPU model and the SIMD flags the figures depend on.
-fn cpu() -> String {
-    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    let model = info
-        .lines()
-        .find(|l| l.starts_with("model name"))
-        .and_then(|l| l.split(':').nth(1))
-        .unwrap_or("?")
-        .trim()
-        .to_string();
-    let flags = info.lines().find(|l| l.starts_with("flags")).unwrap_or("");
-    let has: Vec<&str> = ["avx2", "fma", "avx512f", "avx512bw"]
-        .into_iter()
-        .filter(|f| flags.split_whitespace().any(|x| x == *f))
-        .collect();
-    format!(
-        "{model}; {} cores; flags: {}",
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
-        has.join(", ")
-    )
 }
 
 /// Per view: distinct levels and median relative depth error on `landmark` pixels.
@@ -131,7 +112,7 @@ fn main() {
     let tmp = tempfile::tempdir().unwrap();
     let t = tmp.path();
     let mut md = String::from("# The official export: depth levels and TFRecord throughput\n\n");
-    let _ = writeln!(md, "Regenerate: `cargo bench -p nrw-etl --bench official_export` (the Python peer needs `pip install numpy opencv-python-headless crc32c`).\n\nMachine: {}.\n\n## Depth levels\n\nThe published loaders read `NNNN_depth.png` as `level * 2/255 - 1`, so depth gets 255 levels (0 = empty). Both mappings span the dataset's nearest to farthest rendered depth, the same for every view (a per-view range would give one level different depths in different views).", cpu());
+    let _ = writeln!(md, "Regenerate: `cargo bench -p nrw-etl --bench official_export` (the Python peer needs `pip install numpy opencv-python-headless crc32c`).\n\nMachine: {}.\n\n## Depth levels\n\nThe published loaders read `NNNN_depth.png` as `level * 2/255 - 1`, so depth gets 255 levels (0 = empty). Both mappings span the dataset's nearest to farthest rendered depth, the same for every view (a per-view range would give one level different depths in different views).", cpu::describe());
     run(&["demo", "--out", t.to_str().unwrap()], None);
     let demo = t.join("dataset");
     let ds = Dataset::open(&demo).unwrap();
@@ -183,49 +164,58 @@ fn main() {
         None,
     );
     let n = ds.len();
-    let ours = |threads: Option<usize>| {
-        (0..3)
-            .map(|k| {
-                run(
-                    &[
-                        "export",
-                        d,
-                        "--layout",
-                        "tfrecord",
-                        "--out",
-                        t.join(format!("tfr{k}")).to_str().unwrap(),
-                        "--quiet",
-                    ],
-                    threads,
-                )
-            })
-            .fold(f64::INFINITY, f64::min)
+    // Each timed run starts from flushed page cache writes and an empty output (so earlier
+    // runs' dirty pages do not throttle it), and the three paths alternate round by round.
+    let settle = |dir: &Path| {
+        let _ = std::fs::remove_dir_all(dir);
+        let _ = Command::new("sync").status();
     };
-    let (both, one) = (ours(None), ours(Some(1)));
+    let tfr = t.join("tfr");
+    let ours = |threads: Option<usize>| {
+        settle(&tfr);
+        run(
+            &[
+                "export",
+                d,
+                "--layout",
+                "tfrecord",
+                "--out",
+                tfr.to_str().unwrap(),
+                "--quiet",
+            ],
+            threads,
+        )
+    };
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/tfrecord_python.py");
-    let py = (0..3)
-        .filter_map(|k| {
-            let o = Command::new("python3")
-                .arg(&script)
-                .arg(&off)
-                .arg(t.join(format!("py{k}")))
-                .arg("demo")
-                .output()
-                .ok()?;
-            if !o.status.success() {
-                eprintln!("python peer failed: {}", String::from_utf8_lossy(&o.stderr));
-                return None;
-            }
-            let v: serde_json::Value = serde_json::from_slice(&o.stdout).ok()?;
-            assert_eq!(v["views"].as_u64(), Some(n as u64));
-            v["seconds"].as_f64()
-        })
-        .fold(f64::INFINITY, f64::min);
+    let python = || -> Option<f64> {
+        let dir = t.join("py");
+        settle(&dir);
+        let o = Command::new("python3")
+            .arg(&script)
+            .arg(&off)
+            .arg(&dir)
+            .arg("demo")
+            .output()
+            .ok()?;
+        if !o.status.success() {
+            eprintln!("python peer failed: {}", String::from_utf8_lossy(&o.stderr));
+            return None;
+        }
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).ok()?;
+        assert_eq!(v["views"].as_u64(), Some(n as u64));
+        v["seconds"].as_f64()
+    };
+    let (mut both, mut one, mut py) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    for _ in 0..5 {
+        both = both.min(ours(None));
+        one = one.min(ours(Some(1)));
+        py = py.min(python().unwrap_or(f64::INFINITY));
+    }
     let (w, h) = {
         let v = ds.iter_split("train").unwrap().next().unwrap().unwrap();
         (v.width, v.height)
     };
-    let _ = writeln!(md, "\n## TFRecord throughput\n\n{n} demo views of about {w}×{h}, best of 3 rounds. Ours: the whole `nrw-etl export --layout tfrecord` process (opening the dataset, decoding the stored PNGs, mapping depth and colours, encoding, CRC-32C, writing). Published path: `AlignedRenderedDataset` + `_to_example` + `TFRecordWriter`, transcribed (cv2 reads of the same views' official PNGs, hand-encoded Example, crc32c package), one process as published; TensorFlow itself is not installed here.\n\n| path | seconds | views / s | ours vs published |\n|---|---|---|---|");
+    let _ = writeln!(md, "\n## TFRecord throughput\n\n{n} demo views of about {w}×{h}, best of 5 alternating rounds, each after `sync` into an empty folder. Ours: the whole `nrw-etl export --layout tfrecord` process (opening the dataset, decoding the stored PNGs, mapping depth and colours, encoding, CRC-32C, writing). Published path: `AlignedRenderedDataset` + `_to_example` + `TFRecordWriter`, transcribed (cv2 reads of the same views' official PNGs, hand-encoded Example, crc32c package), one process as published; TensorFlow itself is not installed here.\n\n| path | seconds | views / s | ours vs published |\n|---|---|---|---|");
     let _ = writeln!(
         md,
         "| published (Python, 1 thread) | {py:.2} | {:.1} | 1.0× |",

@@ -7,6 +7,9 @@
 //! Scenes: a synthetic scene with simulated times of day, and the real photos of
 //! ../shared/data. Writes docs/style-tiers.md and docs/style-tiers.svg.
 
+#[path = "../../../tests/support/cpu.rs"]
+mod cpu;
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -130,6 +133,7 @@ fn main() {
         "color-stats",
     ];
     let mut md = String::from("# Style descriptor tiers: accuracy versus time\n\n");
+    let _ = writeln!(md, "Machine: {}.\n", cpu::describe());
     let _ = writeln!(md, "Regenerate: `cargo bench -p nrw-etl --bench style_tiers`. Reference tier: VGG16 on a 512×512 centre crop, five layers (relu1_2 … relu5_2), the paper's choice. `official` is the paper's published distance (`style_loss.compute_pairwise_style_loss_v2`): a 512 × 512 centre crop without resizing, input v·2/255 − 1, each layer's squared Gram difference averaged over its C² entries (so relu1_2 weighs 64× more relative to relu5_2 than in the reference tier); `official-256` crops 256 × 256. Photos are stored with shorter side 600 px, as ingest stores them. Time: median per photo, one photo per core on 2 cores (wall time / photos × 2). Recall@k: the fraction of the reference's k nearest neighbours a tier also returns (k capped at N − 1). Class@5 (synthetic only): the fraction of a photo's 5 nearest neighbours with the same simulated time of day.\n");
     let mut points: Vec<(String, f64, f64)> = Vec::new();
     for scene in &scenes {

@@ -361,8 +361,9 @@ pub fn tfrecord_name(name: &str, split: &str, i: usize, n: usize) -> String {
     }
 }
 
-/// Views decoded and encoded in parallel this many at a time, then written in order.
-const BATCH: usize = 16;
+/// Views read, encoded in parallel and written in order this many at a time: small enough
+/// that reading, encoding and writing overlap, large enough to keep every core busy.
+const BATCH: usize = 8;
 
 /// Export `ds` as `cfg` says; `dist` gives the distance matrix of the official layout's
 /// train views, `tick` is called once per view done.
@@ -591,11 +592,29 @@ fn write_split(
             }
             sink.finish()
         });
+        // A reader thread streams the split's views (shard reads and payload copies), so
+        // reading, encoding and writing overlap.
+        let (rtx, rrx) = std::sync::mpsc::sync_channel::<Result<Vec<View>>>(2);
+        scope.spawn(move || {
+            let mut iter = match ds.iter_split(split) {
+                Ok(it) => it,
+                Err(e) => {
+                    let _ = rtx.send(Err(e));
+                    return;
+                }
+            };
+            loop {
+                let batch: Result<Vec<View>> = iter.by_ref().take(BATCH).collect();
+                let last = batch.as_ref().map_or(true, |b| b.is_empty());
+                if rtx.send(batch).is_err() || last {
+                    return;
+                }
+            }
+        });
         let produced = (|| -> Result<()> {
             let mut seen = 0usize; // views of the split read so far
-            let mut iter = ds.iter_split(split)?;
-            loop {
-                let batch: Vec<View> = iter.by_ref().take(BATCH).collect::<Result<_>>()?;
+            for batch in rrx {
+                let batch = batch?;
                 if batch.is_empty() {
                     return Ok(());
                 }
@@ -633,6 +652,7 @@ fn write_split(
                     return Ok(()); // the writer stopped on an error, which join returns
                 }
             }
+            Ok(())
         })();
         drop(tx);
         let written = writer.join().expect("writer thread does not panic");

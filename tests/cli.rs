@@ -488,6 +488,13 @@ fn interrupted_ingest_resumes_to_the_same_bytes_on_any_thread_count() {
 }
 
 #[test]
+fn the_renderers_kept_verdict_is_the_word_readers_look_for() {
+    // Ingest writes Verdict::name(); QA, split and the trainer compare with VERDICT_KEPT.
+    let kept = nrw_render::Verdict::Kept { empty_ratio: 0.5 };
+    assert_eq!(kept.name(), nrw_dataset::scene::VERDICT_KEPT);
+}
+
+#[test]
 fn a_scene_where_every_view_is_dropped_exits_3_with_every_verdict_recorded() {
     let Some(_) = shared::shared("data") else {
         return;

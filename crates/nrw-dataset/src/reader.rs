@@ -165,7 +165,7 @@ impl Dataset {
         let shards: Vec<String> = manifest
             .tables
             .iter()
-            .filter(|t| t.path.starts_with("shards/"))
+            .filter(|t| crate::views::is_shard(&t.path))
             .map(|t| t.path.clone())
             .collect();
         let mut index = HashMap::new();
@@ -214,6 +214,11 @@ impl Dataset {
             index,
             splits,
         })
+    }
+
+    /// Number of view shards.
+    pub fn shard_count(&self) -> usize {
+        self.shards.len()
     }
 
     /// Split names with their sizes (`all` when the dataset has not been split yet).

@@ -17,6 +17,10 @@ pub const CAMERAS_TABLE: &str = "scene/cameras.parquet";
 /// Table path of the images table inside a dataset.
 pub const IMAGES_TABLE: &str = "scene/images.parquet";
 
+/// The `verdict` of a view that entered the dataset (`scene/images.parquet`); every other
+/// verdict names why a photo was dropped. The renderer's `Verdict::Kept` writes this word.
+pub const VERDICT_KEPT: &str = "kept";
+
 fn list_of(item: DataType) -> DataType {
     DataType::List(Arc::new(Field::new("item", item, false)))
 }

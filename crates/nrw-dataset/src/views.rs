@@ -20,6 +20,36 @@ use crate::manifest::FileEntry;
 /// Rows per row group inside a shard: the unit of random access.
 pub const ROW_GROUP_ROWS: usize = 8;
 
+/// Folder of the view shards inside a dataset.
+pub const SHARDS_DIR: &str = "shards";
+
+/// Path of view shard `g`, relative to the dataset (as the manifest lists it).
+pub fn shard_path(g: usize) -> String {
+    format!("{SHARDS_DIR}/views-{g:05}.parquet")
+}
+
+/// Whether a dataset-relative path (a manifest entry) is a view shard.
+pub fn is_shard(rel: &str) -> bool {
+    rel.strip_prefix(SHARDS_DIR)
+        .is_some_and(|r| r.starts_with('/'))
+}
+
+/// Files in the dataset's shard folder that are none of `keep` (manifest entries): shards
+/// of an earlier run with other parameters.
+pub fn stale_shards(dir: &Path, keep: &[FileEntry]) -> Vec<std::path::PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir.join(SHARDS_DIR)) else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .filter(|e| {
+            let rel = format!("{SHARDS_DIR}/{}", e.file_name().to_string_lossy());
+            !keep.iter().any(|k| k.path == rel)
+        })
+        .map(|e| e.path())
+        .collect()
+}
+
 /// One kept view.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ViewRow {

@@ -76,7 +76,7 @@ pub fn render(inp: &Inputs) -> Result<String> {
     let stages = [
         ("registered", c.registered),
         ("rendered", c.rendered),
-        ("kept", c.kept),
+        (nrw_dataset::scene::VERDICT_KEPT, c.kept),
         ("train", c.train),
         ("val", c.val),
     ];
@@ -183,15 +183,23 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
         );
     }
     h.push_str("</table>");
-    let bars: Vec<(String, f64)> = std::iter::once(("kept".to_string(), f.counts.kept as f64))
-        .chain(f.drops.iter().map(|(r, n)| (r.clone(), *n as f64)))
-        .collect();
+    let bars: Vec<(String, f64)> = std::iter::once((
+        nrw_dataset::scene::VERDICT_KEPT.to_string(),
+        f.counts.kept as f64,
+    ))
+    .chain(f.drops.iter().map(|(r, n)| (r.clone(), *n as f64)))
+    .collect();
     h.push_str(&plots::bars("photos by verdict", &bars)?);
     h.push_str("</div>");
     // A few dropped photos with the measured value, from the scene's images when reachable.
     let images_dir = inp.manifest.scene.images_dir.as_deref().map(Path::new);
     let mut strip = String::new();
-    for r in inp.images.iter().filter(|r| r.verdict != "kept").take(6) {
+    for r in inp
+        .images
+        .iter()
+        .filter(|r| r.verdict != nrw_dataset::scene::VERDICT_KEPT)
+        .take(6)
+    {
         let measured = match r.verdict.as_str() {
             "too_sparse" => format!("{:.1}% empty", r.verdict_value * 100.0),
             "too_small" => format!("{:.0} px shorter side", r.verdict_value),
@@ -224,7 +232,10 @@ fn distributions(h: &mut String, inp: &Inputs) -> Result<()> {
         .iter()
         .filter_map(|r| Some(r.photo_width?.min(r.photo_height?) as f64))
         .collect();
-    let kept: Vec<&ImageRow> = im.iter().filter(|r| r.verdict == "kept").collect();
+    let kept: Vec<&ImageRow> = im
+        .iter()
+        .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)
+        .collect();
     let dmin: Vec<f64> = kept.iter().filter_map(|r| r.depth_min).collect();
     let dmax: Vec<f64> = kept.iter().filter_map(|r| r.depth_max).collect();
     let obs: Vec<f64> = im.iter().map(|r| r.num_observations as f64).collect();
@@ -266,7 +277,7 @@ fn contact_sheet(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<(
     let kept: Vec<u32> = inp
         .images
         .iter()
-        .filter(|r| r.verdict == "kept")
+        .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)
         .map(|r| r.image_id)
         .collect();
     let Some(ds) = ds.filter(|_| !kept.is_empty()) else {

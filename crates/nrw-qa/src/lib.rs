@@ -138,9 +138,15 @@ pub fn build(dir: &Path, out: &Path) -> Result<Written> {
         .ok()
         .and_then(|s| serde_json::from_str(&s).ok())
         .unwrap_or_default();
-    let kept: Vec<&ImageRow> = images.iter().filter(|r| r.verdict == "kept").collect();
+    let kept: Vec<&ImageRow> = images
+        .iter()
+        .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)
+        .collect();
     let mut drops = BTreeMap::new();
-    for r in images.iter().filter(|r| r.verdict != "kept") {
+    for r in images
+        .iter()
+        .filter(|r| r.verdict != nrw_dataset::scene::VERDICT_KEPT)
+    {
         *drops.entry(r.verdict.clone()).or_insert(0) += 1;
     }
     let counts = Counts {
@@ -269,8 +275,10 @@ fn warnings(images: &[ImageRow], counts: &Counts, max_empty: f64) -> Vec<Warning
         ),
         renorm,
     );
-    let edge =
-        names(&|r| r.verdict == "kept" && r.empty_ratio.is_some_and(|e| e > max_empty - 0.02));
+    let edge = names(&|r| {
+        r.verdict == nrw_dataset::scene::VERDICT_KEPT
+            && r.empty_ratio.is_some_and(|e| e > max_empty - 0.02)
+    });
     add(
         "coverage_near_threshold",
         format!(
@@ -280,7 +288,9 @@ fn warnings(images: &[ImageRow], counts: &Counts, max_empty: f64) -> Vec<Warning
         ),
         edge,
     );
-    let dense = names(&|r| r.verdict == "kept" && r.empty_ratio.is_some_and(|e| e < 0.01));
+    let dense = names(&|r| {
+        r.verdict == nrw_dataset::scene::VERDICT_KEPT && r.empty_ratio.is_some_and(|e| e < 0.01)
+    });
     add(
         "suspiciously_full_render",
         format!(

@@ -63,7 +63,7 @@ macro_rules! column {
 
 /// `scene/images.parquet` joined with `splits.parquet` (when the dataset has been split).
 pub fn images(dir: &Path) -> Result<Vec<ImageRow>> {
-    let path = dir.join("scene/images.parquet");
+    let path = dir.join(nrw_dataset::IMAGES_TABLE);
     let df = collect(
         &path,
         scan(&path)?.select([

@@ -204,7 +204,10 @@ pub fn appearance_labels(ds: &Dataset) -> Option<HashMap<u32, String>> {
     let names = nrw_dataset::scene::read_verdicts(&ds.dir).ok()?;
     let mut out = HashMap::new();
     for (id, name, verdict) in names {
-        if let (true, Some(l)) = (verdict == "kept", by_name.get(&name)) {
+        if let (true, Some(l)) = (
+            verdict == nrw_dataset::scene::VERDICT_KEPT,
+            by_name.get(&name),
+        ) {
             out.insert(id, l.clone());
         }
     }

@@ -56,10 +56,10 @@ pub struct IngestArgs {
     #[arg(long, default_value_t = 1.0)]
     pub radius: f32,
     /// Drop views whose render has more than this fraction of empty pixels (the paper: 0.85)
-    #[arg(long, default_value_t = 0.85)]
+    #[arg(long, default_value_t = nrw_render::Filters::default().max_empty_ratio)]
     pub max_empty: f64,
     /// Drop photos whose shorter side is under this many pixels (the paper: 450)
-    #[arg(long, default_value_t = 450)]
+    #[arg(long, default_value_t = nrw_render::Filters::default().min_photo_side)]
     pub min_photo_side: u32,
     /// Images per shard (one shard per group of this many images, in id order)
     #[arg(long, default_value_t = 64)]
@@ -90,8 +90,8 @@ impl IngestArgs {
             semantics: None,
             min_dim: 600,
             radius: 1.0,
-            max_empty: 0.85,
-            min_photo_side: 450,
+            max_empty: nrw_render::Filters::default().max_empty_ratio,
+            min_photo_side: nrw_render::Filters::default().min_photo_side,
             rows_per_shard: 64,
             threads: None,
             quiet: false,
@@ -511,7 +511,7 @@ fn run_stage(args: &IngestArgs) -> Result<IngestSummary> {
             })
             .collect::<Result<_>>()?;
         let rows: Vec<ViewRow> = results.iter().filter_map(|(_, r)| r.clone()).collect();
-        let rel = format!("shards/views-{g:05}.parquet");
+        let rel = nrw_dataset::views::shard_path(g);
         let shard = if rows.is_empty() {
             None
         } else {
@@ -552,14 +552,8 @@ fn run_stage(args: &IngestArgs) -> Result<IngestSummary> {
         .filter_map(|g| g.shard.clone())
         .collect();
     // Shards of an earlier run with other parameters must not linger next to these.
-    let shard_dir = args.out.join("shards");
-    if let Ok(entries) = std::fs::read_dir(&shard_dir) {
-        for e in entries.flatten() {
-            let name = format!("shards/{}", e.file_name().to_string_lossy());
-            if !shards.iter().any(|s| s.path == name) {
-                let _ = std::fs::remove_file(e.path());
-            }
-        }
+    for stale in nrw_dataset::views::stale_shards(&args.out, &shards) {
+        let _ = std::fs::remove_file(stale);
     }
     let mut tables = nrw_dataset::write_scene_tables(&args.out, &rec, &photos, &outcomes)?;
     tables.extend(shards.iter().cloned());
@@ -577,7 +571,11 @@ fn run_stage(args: &IngestArgs) -> Result<IngestSummary> {
         ));
     }
     let count = |v: &str| outcomes.values().filter(|o| o.verdict == v).count();
-    let (kept, too_small, too_sparse) = (count("kept"), count("too_small"), count("too_sparse"));
+    let (kept, too_small, too_sparse) = (
+        count(nrw_dataset::scene::VERDICT_KEPT),
+        count("too_small"),
+        count("too_sparse"),
+    );
     let manifest = Manifest {
         schema_version: SCHEMA_VERSION,
         tool: Tool {

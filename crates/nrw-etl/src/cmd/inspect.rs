@@ -55,15 +55,7 @@ fn inspect_dataset(args: &InspectArgs) -> Result<()> {
     for (k, n) in &counts {
         println!("  {k:<10} {n}");
     }
-    println!(
-        "views        {} in {} shards",
-        ds.len(),
-        ds.manifest
-            .tables
-            .iter()
-            .filter(|t| t.path.starts_with("shards/"))
-            .count()
-    );
+    println!("views        {} in {} shards", ds.len(), ds.shard_count());
     for (k, n) in &splits {
         println!("split {k:<6} {n}");
     }

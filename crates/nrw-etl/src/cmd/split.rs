@@ -30,7 +30,7 @@ fn run_stage(args: &SplitArgs) -> Result<()> {
     let mut manifest = Manifest::read(&args.dataset)?;
     let kept: Vec<(u32, String)> = nrw_dataset::scene::read_verdicts(&args.dataset)?
         .into_iter()
-        .filter(|(_, _, v)| v == "kept")
+        .filter(|(_, _, v)| v == nrw_dataset::scene::VERDICT_KEPT)
         .map(|(id, name, _)| (id, name))
         .collect();
     let previous = read_splits(&args.dataset)?;

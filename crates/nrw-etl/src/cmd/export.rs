@@ -6,7 +6,6 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
 use nrw_dataset::export::official::DepthMapping;
 use nrw_dataset::export::{ExportConfig, ExportSummary, Layout as DsLayout};
 
@@ -123,17 +122,7 @@ fn run_stage(args: &ExportArgs) -> Result<ExportSummary> {
         shards: args.shards,
     };
     let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(total as u64).with_style(
-            ProgressStyle::with_template(
-                "{msg:>10} [{bar:30}] {pos}/{len} views {elapsed} (eta {eta})",
-            )
-            .expect("template")
-            .progress_chars("=> "),
-        )
-    };
+    let bar = super::progress_bar(total, "views", args.quiet);
     bar.set_message("export");
     let dist =
         |ids: &[u32]| super::triplets::official_distance_matrix(&args.dataset, ids, cfg.crop);

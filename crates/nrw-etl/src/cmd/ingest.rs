@@ -11,7 +11,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use nrw_colmap::{read_ply, Reconstruction};
 use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
@@ -477,17 +476,7 @@ fn run_stage(args: &IngestArgs) -> Result<IngestSummary> {
         .filter(|(g, _)| !progress.groups.contains_key(g))
         .map(|(_, ids)| ids.len())
         .sum();
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(todo as u64).with_style(
-            ProgressStyle::with_template(
-                "{msg:>10} [{bar:30}] {pos}/{len} views {elapsed} (eta {eta})",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        )
-    };
+    let bar = super::progress_bar(todo, "views", args.quiet);
     bar.set_message("rendering");
     let mut written = 0usize;
     for (g, group) in groups.iter().enumerate() {

@@ -68,3 +68,18 @@ pub fn describe(rec: &nrw_colmap::Reconstruction) -> (&'static str, &'static str
     };
     (enc, layout)
 }
+
+/// A stage's progress bar over `len` items called `unit` (views, photos), with its ETA;
+/// hidden with `--quiet`.
+pub fn progress_bar(len: usize, unit: &str, quiet: bool) -> indicatif::ProgressBar {
+    if quiet {
+        return indicatif::ProgressBar::hidden();
+    }
+    indicatif::ProgressBar::new(len as u64).with_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{{msg:>10}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{elapsed}} (eta {{eta}})"
+        ))
+        .expect("valid template")
+        .progress_chars("=> "),
+    )
+}

@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
 use nrw_dataset::descriptors::{
     part_path, read_part, write_part, DescriptorKind, DescriptorRow, DESCRIPTORS_DIR,
 };
@@ -163,17 +162,7 @@ fn run_stage(args: &StyleArgs) -> Result<()> {
         .collect();
     ids.sort_unstable();
     let groups: Vec<&[u32]> = ids.chunks(PART_PHOTOS).collect();
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(ids.len() as u64).with_style(
-            ProgressStyle::with_template(
-                "{msg:>10} [{bar:30}] {pos}/{len} photos {elapsed} (eta {eta})",
-            )
-            .expect("template")
-            .progress_chars("=> "),
-        )
-    };
+    let bar = super::progress_bar(ids.len(), "photos", args.quiet);
     bar.set_message(tier.name());
     let (mut done, mut skipped) = (0usize, 0usize);
     for (k, group) in groups.iter().enumerate() {

@@ -74,6 +74,17 @@ pub fn encode_rgb(name: &str, img: &RgbImage) -> Result<Vec<u8>> {
     )
 }
 
+/// PNG of an RGBA8 image.
+pub fn encode_rgba(name: &str, img: &image::RgbaImage) -> Result<Vec<u8>> {
+    png(
+        name,
+        img.width(),
+        img.height(),
+        img.as_raw(),
+        image::ExtendedColorType::Rgba8,
+    )
+}
+
 /// PNG RGBA of a colour render: alpha 255 where a point was drawn, 0 elsewhere.
 pub fn encode_color_render(
     name: &str,

@@ -219,24 +219,13 @@ struct OfficialView {
     seg: Option<RgbImage>,
 }
 
-fn png_err(name: &str, what: &str) -> impl Fn(image::ImageError) -> DatasetError {
-    let (name, what) = (name.to_string(), what.to_string());
-    move |e| DatasetError::Schema {
-        path: PathBuf::from(&name),
-        problem: format!("cannot encode {what}: {e}"),
+/// The published colour coding of a view's labels, or None with `--no-semantics`.
+fn official_seg(v: &View, cfg: &ExportConfig) -> Result<Option<RgbImage>> {
+    if !cfg.semantics {
+        return Ok(None);
     }
-}
-
-fn png<P, C>(img: &image::ImageBuffer<P, C>, name: &str, what: &str) -> Result<Vec<u8>>
-where
-    P: image::PixelWithColorType,
-    [P::Subpixel]: image::EncodableLayout,
-    C: std::ops::Deref<Target = [P::Subpixel]>,
-{
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png)
-        .map_err(png_err(name, what))?;
-    Ok(out.into_inner())
+    let labels = v.labels()?.ok_or_else(|| no_semantics(v))?;
+    Ok(Some(official_seg_rgb(&labels)))
 }
 
 fn official_view(v: &View, cfg: &ExportConfig, scale: &DepthScale) -> Result<OfficialView> {
@@ -245,12 +234,7 @@ fn official_view(v: &View, cfg: &ExportConfig, scale: &DepthScale) -> Result<Off
         reference: v.photo()?,
         color: v.color()?,
         depth: scale.image(v.width, v.height, &depth.data),
-        seg: if cfg.semantics {
-            let labels = v.labels()?.ok_or_else(|| no_semantics(v))?;
-            Some(official_seg_rgb(&labels))
-        } else {
-            None
-        },
+        seg: official_seg(v, cfg)?,
     };
     if let Some(c) = cfg.crop {
         let (x, y) = (crop_start(v.width, c), crop_start(v.height, c));
@@ -281,18 +265,37 @@ fn encode_official(
     scale: &DepthScale,
     stem: &str,
 ) -> Result<Encoded> {
-    let o = official_view(v, cfg, scale)?;
+    use crate::codec::{encode_gray, encode_rgb, encode_rgba};
     let name = &v.name;
-    let mut files = vec![
-        (
-            format!("{stem}_reference.png"),
-            png(&o.reference, name, "reference")?,
+    let (reference, color, depth, seg) = match cfg.crop {
+        // Uncropped, the stored photo and render PNGs are the files already: no decode, no
+        // re-encode.
+        None => (
+            v.photo_png.clone(),
+            v.color_png.clone(),
+            scale.image(v.width, v.height, &v.depth()?.data),
+            official_seg(v, cfg)?,
         ),
-        (format!("{stem}_color.png"), png(&o.color, name, "color")?),
-        (format!("{stem}_depth.png"), png(&o.depth, name, "depth")?),
+        Some(_) => {
+            let o = official_view(v, cfg, scale)?;
+            (
+                encode_rgb(name, &o.reference)?,
+                encode_rgba(name, &o.color)?,
+                o.depth,
+                o.seg,
+            )
+        }
+    };
+    let mut files = vec![
+        (format!("{stem}_reference.png"), reference),
+        (format!("{stem}_color.png"), color),
+        (
+            format!("{stem}_depth.png"),
+            encode_gray(name, depth.width(), depth.height(), depth.as_raw())?,
+        ),
     ];
-    if let Some(s) = &o.seg {
-        files.push((format!("{stem}_seg_rgb.png"), png(s, name, "seg_rgb")?));
+    if let Some(s) = &seg {
+        files.push((format!("{stem}_seg_rgb.png"), encode_rgb(name, s)?));
     }
     Ok(files)
 }

@@ -1,7 +1,11 @@
 //! End-to-end tests of the `nrw-etl` binary on the real scenes in ../shared/data.
 
+#[path = "support/python.rs"]
+mod python;
 #[path = "support/shared.rs"]
 mod shared;
+
+use python::python_has;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -1000,22 +1004,6 @@ fn reader_streams_a_split_and_crops_every_channel_at_one_place() {
         e.contains("schema version 7") && e.contains("re-run ingest"),
         "{e}"
     );
-}
-
-/// Whether the Python oracles `deps` import; a skip is refused under NRW_REQUIRE_PY_ORACLES=1.
-fn python_has(deps: &str) -> bool {
-    let have = Command::new("python3")
-        .args(["-c", deps])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !have {
-        assert!(
-            std::env::var("NRW_REQUIRE_PY_ORACLES").map_or(true, |v| v != "1"),
-            "NRW_REQUIRE_PY_ORACLES=1 but `python3 -c '{deps}'` fails"
-        );
-        eprintln!("python oracles ({deps}) not installed: skipped (CI requires them)");
-    }
-    have
 }
 
 /// Run tests/official_reader.py (the published code's reading, transcribed) and parse its JSON.

@@ -2,6 +2,8 @@
 //! float64 on the published code's input (centre crop, v·2/255 − 1) after checking itself
 //! against the PyTorch float64 fixtures in ../shared/fixtures/vgg16.
 
+#[path = "../../../tests/support/python.rs"]
+mod python;
 #[path = "../../../tests/support/shared.rs"]
 mod shared;
 
@@ -19,16 +21,7 @@ fn official_grams_match_a_float64_vgg16_that_matches_pytorch() {
     let Some(_) = shared::shared("fixtures") else {
         return;
     };
-    let have = Command::new("python3")
-        .args(["-c", "import numpy, PIL"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !have {
-        assert!(
-            std::env::var("NRW_REQUIRE_PY_ORACLES").map_or(true, |v| v != "1"),
-            "NRW_REQUIRE_PY_ORACLES=1 but numpy / Pillow are missing"
-        );
-        eprintln!("numpy / Pillow not installed: skipped (CI requires them)");
+    if !python::python_has("import numpy, PIL") {
         return;
     }
     let weights = shared().join("weights/vgg16_imagenet.safetensors");

@@ -1289,6 +1289,13 @@ fn official_export_refuses_bad_requests_and_never_leaves_stale_files() {
     );
     // ... and the earlier export is still there, whole.
     assert_eq!(listing(&out), files);
+    // The files layout keeps views whole: a crop is refused, not ignored.
+    let e = fails(&["export", p, "--out", o, "--layout", "files", "--crop", "64"]);
+    assert!(
+        e.contains("--crop applies to the official and tfrecord layouts"),
+        "{e}"
+    );
+    assert_eq!(listing(&out), files);
     // A crop that fits: every channel cropped, export.json says so.
     ok(&[
         "export",

@@ -391,6 +391,13 @@ pub fn export(
     if cfg.crop.is_some_and(|c| c == 0) || cfg.shards == 0 {
         return Err(refuse(&cfg.out, "--crop and --shards must be at least 1"));
     }
+    if !paper && cfg.crop.is_some() {
+        // The files layout keeps every payload as stored; a crop would be silently ignored.
+        return Err(refuse(
+            &cfg.out,
+            "--crop applies to the official and tfrecord layouts; the files layout keeps views whole",
+        ));
+    }
     let scale = if paper {
         let (near, far) = crate::scene::read_depth_range(&ds.dir)?.unwrap_or((1.0, 1.0));
         Some(DepthScale {

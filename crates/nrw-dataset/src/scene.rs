@@ -301,14 +301,6 @@ pub fn read_depth_range(dir: &Path) -> Result<Option<(f64, f64)>> {
 
 /// The largest rendered depth over the kept views (from `depth_max`), if any view was kept.
 pub fn read_depth_max(dir: &Path) -> Result<Option<f64>> {
-    use crate::parquet_io::column;
-    let path = dir.join(IMAGES_TABLE);
-    let mut max: Option<f64> = None;
-    for b in crate::parquet_io::read_batches(&path, Some(&["depth_max"]))? {
-        let d = column::<Float64Array>(&b, "depth_max", &path)?;
-        for v in d.iter().flatten() {
-            max = Some(max.map_or(v, |m: f64| m.max(v)));
-        }
-    }
-    Ok(max)
+    // Ingest writes depth_min and depth_max together (both or neither per view).
+    Ok(read_depth_range(dir)?.map(|(_, far)| far))
 }

@@ -83,7 +83,7 @@ impl ExportArgs {
             no_semantics: false,
             depth: Depth::Linear,
             shards: 1,
-            quiet: true,
+            quiet: false,
         }
     }
 }

@@ -4,6 +4,8 @@
 mod python;
 #[path = "support/shared.rs"]
 mod shared;
+#[path = "units.rs"]
+mod units;
 
 use python::python_has;
 

@@ -55,6 +55,12 @@ pub fn part_path(k: usize) -> String {
     format!("{DESCRIPTORS_DIR}/part-{k:05}.parquet")
 }
 
+/// Whether a dataset-relative path (a manifest entry) is a descriptor part.
+pub fn is_part(rel: &str) -> bool {
+    rel.strip_prefix(DESCRIPTORS_DIR)
+        .is_some_and(|r| r.starts_with("/part-"))
+}
+
 /// Write one part atomically.
 pub fn write_part(
     dir: &Path,

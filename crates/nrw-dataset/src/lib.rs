@@ -15,7 +15,9 @@ pub mod scene;
 pub mod schema;
 pub mod semantics;
 pub mod split;
+pub mod timings;
 pub mod triplets;
+pub mod units;
 pub mod views;
 
 pub use error::{DatasetError, Result};

@@ -106,6 +106,17 @@ impl Manifest {
         write_bytes_atomic(&path, text.as_bytes())
     }
 
+    /// List `entry` in place of any earlier entry with its path.
+    pub fn replace_table(&mut self, entry: FileEntry) {
+        self.tables.retain(|t| t.path != entry.path);
+        self.tables.push(entry);
+    }
+
+    /// Drop every table whose path `gone` accepts (e.g. a stage's outputs made stale).
+    pub fn remove_tables(&mut self, gone: impl Fn(&str) -> bool) {
+        self.tables.retain(|t| !gone(&t.path));
+    }
+
     /// Read a dataset's manifest, refusing other schema versions.
     pub fn read(dir: &Path) -> Result<Manifest> {
         let path = dir.join(Self::FILE);

@@ -51,6 +51,8 @@ enum Command {
     Qa(cmd::qa::QaArgs),
     /// Run the stages a pipeline file lists (pipelines/paper.toml: the paper's settings)
     Run(cmd::run::RunArgs),
+    /// Merge the work units (`ingest --shard I/N`, `style --shard I/N`) into the dataset's tables and manifest
+    Finalize(cmd::finalize::FinalizeArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -71,24 +73,25 @@ fn main() -> std::process::ExitCode {
         Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Split(a) => cmd::split::run(a),
-        Command::Export(a) => cmd::export::run(a).map(|_| ()),
+        Command::Export(a) => cmd::export::run(a),
+        Command::Finalize(a) => cmd::finalize::run(a),
         Command::Style(a) => cmd::style::run(a),
         Command::Triplets(a) => cmd::triplets::run(a),
-        Command::Qa(a) => cmd::qa::run(a).map(|_| ()),
+        Command::Qa(a) => cmd::qa::run(a),
         Command::Run(a) => cmd::run::run(a).map(|kept| {
             if !kept {
                 std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);
             }
         }),
-        Command::Ingest(a) => cmd::ingest::run(a).map(|s| {
-            if s.kept == 0 {
+        Command::Ingest(a) => cmd::ingest::run(a).map(|kept| {
+            if !kept {
                 std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);
             }
         }),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e @ error::EtlError::Interrupted(_)) => {
+        Err(e) if e.interrupted() => {
             eprintln!("{e}");
             std::process::ExitCode::from(130)
         }

@@ -106,21 +106,12 @@ pub struct Written {
     pub figures: Figures,
 }
 
-/// Name of the per-stage timing log inside a dataset (not part of the reproducible dataset:
-/// times differ between runs, so they stay out of manifest.json).
-pub const TIMINGS_FILE: &str = "timings.json";
+/// Name of the per-stage timing log inside a dataset (owned by nrw-dataset).
+pub use nrw_dataset::timings::TIMINGS_FILE;
 
-/// Record how long a stage took in `DATASET/timings.json` (atomic read-modify-write).
+/// Record how long a stage took in `DATASET/timings.json`.
 pub fn record_timing(dir: &Path, stage: &str, seconds: f64) -> Result<()> {
-    let path = dir.join(TIMINGS_FILE);
-    let mut t: BTreeMap<String, f64> = std::fs::read_to_string(&path)
-        .ok()
-        .and_then(|s| serde_json::from_str(&s).ok())
-        .unwrap_or_default();
-    t.insert(stage.to_string(), seconds);
-    let text = serde_json::to_string_pretty(&t).expect("map of numbers");
-    nrw_dataset::atomic::write_bytes_atomic(&path, text.as_bytes())?;
-    Ok(())
+    Ok(nrw_dataset::timings::record(dir, stage, seconds)?)
 }
 
 fn param_f64(p: &serde_json::Map<String, serde_json::Value>, key: &str, default: f64) -> f64 {
@@ -134,10 +125,7 @@ pub fn build(dir: &Path, out: &Path) -> Result<Written> {
     let triplets = tables::triplets(dir, 3)?;
     let shard_rows = tables::shard_rows(dir)?;
     let descriptors = nrw_dataset::descriptors::read_all(dir)?;
-    let timings: BTreeMap<String, f64> = std::fs::read_to_string(dir.join(TIMINGS_FILE))
-        .ok()
-        .and_then(|s| serde_json::from_str(&s).ok())
-        .unwrap_or_default();
+    let timings = nrw_dataset::timings::read(dir);
     let kept: Vec<&ImageRow> = images
         .iter()
         .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)

@@ -135,7 +135,7 @@ pub fn splits(dir: &Path) -> Result<Vec<(u32, String)>> {
 
 /// Rows in the view shards (every kept view has one), counted without reading image bytes.
 pub fn shard_rows(dir: &Path) -> Result<u64> {
-    let shards = dir.join("shards");
+    let shards = dir.join(nrw_dataset::views::SHARDS_DIR);
     if !shards.is_dir() {
         return Ok(0);
     }

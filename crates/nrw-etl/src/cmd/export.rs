@@ -71,48 +71,18 @@ pub struct ExportArgs {
     pub quiet: bool,
 }
 
-impl ExportArgs {
-    /// The paper's official layout of `dataset` into `out`, with every default.
-    pub fn official(dataset: PathBuf, out: PathBuf) -> Self {
-        ExportArgs {
-            dataset,
-            layout: Layout::Official,
-            out,
-            name: None,
-            crop: None,
-            no_semantics: false,
-            depth: Depth::Linear,
-            shards: 1,
-            quiet: false,
-        }
-    }
-}
-
 /// Run `export`.
-pub fn run(args: &ExportArgs) -> Result<ExportSummary> {
-    super::qa::timed(Some(args.dataset.as_path()), "export", || run_stage(args))
-}
-
-fn default_name(dataset: &std::path::Path) -> String {
-    std::fs::canonicalize(dataset)
-        .ok()
-        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .unwrap_or_else(|| "dataset".into())
-}
-
-fn run_stage(args: &ExportArgs) -> Result<ExportSummary> {
-    let ds = super::require_views(&args.dataset)?;
+pub fn run(args: &ExportArgs) -> Result<()> {
     let cfg = ExportConfig {
         layout: match args.layout {
             Layout::Official => DsLayout::Official,
             Layout::Tfrecord => DsLayout::Tfrecord,
             Layout::Files => DsLayout::Files,
         },
-        out: args.out.clone(),
         name: args
             .name
             .clone()
-            .unwrap_or_else(|| default_name(&args.dataset)),
+            .unwrap_or_else(|| nrw_pipeline::export::default_name(&args.dataset)),
         crop: args.crop,
         semantics: !args.no_semantics,
         depth: match args.depth {
@@ -120,21 +90,17 @@ fn run_stage(args: &ExportArgs) -> Result<ExportSummary> {
             Depth::Linear => DepthMapping::Linear,
         },
         shards: args.shards,
+        ..nrw_pipeline::export::official(&args.dataset, &args.out)
     };
-    let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-    let bar = super::progress_bar(total, "views", args.quiet);
-    bar.set_message("export");
-    let dist =
-        |ids: &[u32]| super::triplets::official_distance_matrix(&args.dataset, ids, cfg.crop);
-    let summary = nrw_dataset::export::export(&ds, &cfg, &dist, &|| bar.inc(1))?;
-    bar.finish_and_clear();
+    let summary = nrw_pipeline::export::export(&args.dataset, &cfg, &super::Bars::new(args.quiet))?;
     if !args.quiet {
-        print_summary(args, &summary);
+        print_summary(&args.dataset, &args.out, &summary);
     }
-    Ok(summary)
+    Ok(())
 }
 
-fn print_summary(args: &ExportArgs, s: &ExportSummary) {
+/// What was exported, what was skipped, and the style distances.
+pub fn print_summary(dataset: &std::path::Path, out: &std::path::Path, s: &ExportSummary) {
     let per: Vec<String> = s
         .splits
         .iter()
@@ -144,9 +110,9 @@ fn print_summary(args: &ExportArgs, s: &ExportSummary) {
         "exported {} views ({}) of {} to {} ({:?} layout)",
         s.views(),
         per.join(", "),
-        args.dataset.display(),
-        args.out.display(),
-        args.layout
+        dataset.display(),
+        out.display(),
+        s.layout
     );
     for k in &s.skipped {
         eprintln!(
@@ -160,8 +126,8 @@ fn print_summary(args: &ExportArgs, s: &ExportSummary) {
         );
     }
     match &s.dist_pickle {
-        Some(p) => println!("style distances: {} (pretrain_appearance loads it)", args.out.join(p).display()),
-        None if args.layout == Layout::Official => eprintln!(
+        Some(p) => println!("style distances: {} (pretrain_appearance loads it)", out.join(p).display()),
+        None if s.layout == DsLayout::Official => eprintln!(
             "no dist_NAME.pckl: the dataset has no official style descriptors (`nrw-etl style DATASET --tier official --weights VGG16`)"
         ),
         None => {}

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use clap::Args;
 use serde_json::json;
 
-use super::{describe, load_model, Encoding};
+use nrw_pipeline::ingest::{describe, load_model};
+
+use super::Encoding;
 use crate::error::Result;
 
 /// Arguments of `inspect`.
@@ -67,7 +69,7 @@ pub fn run(args: &InspectArgs) -> Result<()> {
     if args.scene.join(nrw_dataset::Manifest::FILE).is_file() {
         return inspect_dataset(args);
     }
-    let (dir, rec) = load_model(&args.scene, args.format)?;
+    let (dir, rec) = load_model(&args.scene, args.format.map(Into::into))?;
     let stats = nrw_colmap::reprojection_stats(&rec);
     let (enc, layout) = describe(&rec);
     let warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();

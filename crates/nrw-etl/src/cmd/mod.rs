@@ -1,7 +1,9 @@
-//! One module per subcommand.
+//! One module per subcommand: each turns its arguments into a stage's config, calls the
+//! stage in nrw-pipeline, and prints what it did.
 
 pub mod demo;
 pub mod export;
+pub mod finalize;
 pub mod ingest;
 pub mod inspect;
 pub mod qa;
@@ -11,9 +13,10 @@ pub mod style;
 pub mod synth;
 pub mod triplets;
 
-use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
-use clap::ValueEnum;
+use clap::{Args, ValueEnum};
+use nrw_pipeline::{Progress, Unit};
 
 /// `--format` values: which encoding of the model to read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -33,53 +36,83 @@ impl From<Encoding> for nrw_colmap::Format {
     }
 }
 
-/// Find and read the model of a scene folder (or a model folder itself).
-pub fn load_model(
-    scene: &Path,
-    format: Option<Encoding>,
-) -> crate::error::Result<(PathBuf, nrw_colmap::Reconstruction)> {
-    let dir = nrw_colmap::find_model_dir(scene)?;
-    let rec = nrw_colmap::read_model(&dir, format.map(Into::into))?;
-    Ok((dir, rec))
+/// `--shard`/`--shard-count`: run one work unit of a stage instead of the whole stage.
+#[derive(Debug, Clone, Default, Args)]
+pub struct ShardArgs {
+    /// Do only work unit I of N (0-based), e.g. 2/8, then `nrw-etl finalize DATASET` once
+    /// every unit has run. `auto` reads Slurm array (SLURM_ARRAY_TASK_ID/COUNT) or Kubernetes
+    /// Indexed Job (JOB_COMPLETION_INDEX, with --shard-count) variables
+    #[arg(long, value_name = "I/N|auto")]
+    pub shard: Option<String>,
+    /// Unit count for --shard auto when the scheduler does not export it (Kubernetes)
+    #[arg(long, value_name = "N")]
+    pub shard_count: Option<usize>,
 }
 
-/// Refuse stages that need views when ingest kept none, saying so (rather than pointing at a
-/// missing earlier stage).
-pub fn require_views(dataset: &Path) -> crate::error::Result<nrw_dataset::reader::Dataset> {
-    let ds = nrw_dataset::reader::Dataset::open(dataset)?;
-    if ds.is_empty() {
-        let registered = nrw_dataset::scene::read_verdicts(dataset)?.len();
-        return Err(crate::error::EtlError::Usage(format!(
-            "{}: no kept view: ingest dropped all {registered} registered photos (`nrw-etl inspect {}` shows why)",
-            dataset.display(),
-            dataset.display()
-        )));
+impl ShardArgs {
+    /// The unit asked for, or `None` for the whole stage.
+    pub fn unit(&self) -> crate::error::Result<Option<Unit>> {
+        let Some(text) = &self.shard else {
+            return Ok(None);
+        };
+        Ok(Some(Unit::parse(text, self.shard_count, &|k| {
+            std::env::var(k).ok()
+        })?))
     }
-    Ok(ds)
 }
 
-/// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
-pub fn describe(rec: &nrw_colmap::Reconstruction) -> (&'static str, &'static str) {
-    let enc = rec.format.map_or("?", |f| f.ext());
-    let layout = if rec.is_colmap4() {
-        "colmap4"
-    } else {
-        "colmap3"
-    };
-    (enc, layout)
+/// A stage's progress as a terminal bar with its ETA (hidden with `--quiet`), and its
+/// warnings on stderr.
+pub struct Bars {
+    quiet: bool,
+    bar: Mutex<Option<indicatif::ProgressBar>>,
 }
 
-/// A stage's progress bar over `len` items called `unit` (views, photos), with its ETA;
-/// hidden with `--quiet`.
-pub fn progress_bar(len: usize, unit: &str, quiet: bool) -> indicatif::ProgressBar {
-    if quiet {
-        return indicatif::ProgressBar::hidden();
+impl Bars {
+    /// Bars that draw unless `quiet`.
+    pub fn new(quiet: bool) -> Bars {
+        Bars {
+            quiet,
+            bar: Mutex::new(None),
+        }
     }
-    indicatif::ProgressBar::new(len as u64).with_style(
-        indicatif::ProgressStyle::with_template(&format!(
-            "{{msg:>10}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{elapsed}} (eta {{eta}})"
-        ))
-        .expect("valid template")
-        .progress_chars("=> "),
-    )
+
+    fn with(&self, f: impl FnOnce(&indicatif::ProgressBar)) {
+        if let Some(b) = self.bar.lock().expect("bar lock").as_ref() {
+            f(b)
+        }
+    }
+}
+
+impl Progress for Bars {
+    fn start(&self, what: &str, len: u64, unit: &str) {
+        if self.quiet {
+            return;
+        }
+        let b = indicatif::ProgressBar::new(len).with_style(
+            indicatif::ProgressStyle::with_template(&format!(
+                "{{msg:>10}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{elapsed}} (eta {{eta}})"
+            ))
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        b.set_message(what.to_string());
+        *self.bar.lock().expect("bar lock") = Some(b);
+    }
+
+    fn inc(&self, n: u64) {
+        self.with(|b| b.inc(n));
+    }
+
+    fn finish(&self) {
+        if let Some(b) = self.bar.lock().expect("bar lock").take() {
+            b.finish_and_clear();
+        }
+    }
+
+    fn warn(&self, message: &str) {
+        if !self.quiet {
+            eprintln!("warning: {message}");
+        }
+    }
 }

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use crate::error::{EtlError, Result};
+use crate::error::Result;
 
 /// Arguments of `qa`.
 #[derive(Debug, Args)]
@@ -16,13 +16,18 @@ pub struct QaArgs {
     pub out: Option<PathBuf>,
 }
 
-/// Run `qa`; returns the report's path.
-pub fn run(args: &QaArgs) -> Result<PathBuf> {
-    let out = args.out.clone().unwrap_or_else(|| args.dataset.join("qa"));
-    let w = nrw_qa::build(&args.dataset, &out).map_err(|e| match e {
-        nrw_qa::QaError::Dataset(d) => EtlError::Dataset(d),
-        other => EtlError::Usage(other.to_string()),
+/// Run `qa`.
+pub fn run(args: &QaArgs) -> Result<()> {
+    let w = nrw_pipeline::qa::qa(&nrw_pipeline::qa::QaConfig {
+        dataset: args.dataset.clone(),
+        out: args.out.clone(),
     })?;
+    print_summary(&w);
+    Ok(())
+}
+
+/// The report's counts, and where it is.
+pub fn print_summary(w: &nrw_qa::Written) {
     let c = &w.figures.counts;
     eprintln!(
         "QA: {} registered → {} rendered → {} kept → {} train / {} val; {} warning(s)",
@@ -34,22 +39,4 @@ pub fn run(args: &QaArgs) -> Result<PathBuf> {
         w.figures.warnings.len()
     );
     println!("{}", w.report.display());
-    Ok(w.report)
-}
-
-/// Run a stage and, when it succeeds on a dataset, record its duration in the dataset's
-/// timings.json (shown by the report); failing to record is only worth a warning.
-pub fn timed<T>(
-    dataset: Option<&std::path::Path>,
-    stage: &str,
-    run: impl FnOnce() -> Result<T>,
-) -> Result<T> {
-    let started = std::time::Instant::now();
-    let r = run();
-    if let (Ok(_), Some(dir)) = (&r, dataset) {
-        if let Err(e) = nrw_qa::record_timing(dir, stage, started.elapsed().as_secs_f64()) {
-            eprintln!("warning: could not record {stage}'s time: {e}");
-        }
-    }
-    r
 }

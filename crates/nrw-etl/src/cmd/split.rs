@@ -1,12 +1,11 @@
-//! `nrw-etl split`: a reproducible, incremental train/validation assignment of the kept photos.
+//! `nrw-etl split`: arguments → `nrw_pipeline::split`, and the assignment, printed.
 
 use std::path::PathBuf;
 
 use clap::Args;
-use nrw_dataset::split::{assign, read_splits, write_splits, SPLITS_TABLE};
-use nrw_dataset::Manifest;
+use nrw_pipeline::split::{SplitConfig, SplitSummary};
 
-use crate::error::{EtlError, Result};
+use crate::error::Result;
 
 /// Arguments of `split`.
 #[derive(Debug, Args)]
@@ -23,39 +22,29 @@ pub struct SplitArgs {
 
 /// Run `split`.
 pub fn run(args: &SplitArgs) -> Result<()> {
-    super::qa::timed(Some(args.dataset.as_path()), "split", || run_stage(args))
+    let cfg = SplitConfig {
+        val: args.val,
+        seed: args.seed,
+        ..SplitConfig::new(&args.dataset)
+    };
+    print_summary(&cfg, &nrw_pipeline::split::split(&cfg)?);
+    Ok(())
 }
 
-fn run_stage(args: &SplitArgs) -> Result<()> {
-    let mut manifest = Manifest::read(&args.dataset)?;
-    let kept: Vec<(u32, String)> = nrw_dataset::scene::read_verdicts(&args.dataset)?
-        .into_iter()
-        .filter(|(_, _, v)| v == nrw_dataset::scene::VERDICT_KEPT)
-        .map(|(id, name, _)| (id, name))
-        .collect();
-    let previous = read_splits(&args.dataset)?;
-    let (rows, change) = assign(&kept, &previous, args.val, args.seed)
-        .map_err(|e| EtlError::Usage(format!("{}: {e}", args.dataset.display())))?;
-    let entry = write_splits(&args.dataset, &rows)?;
-    manifest.tables.retain(|t| t.path != SPLITS_TABLE);
-    manifest.tables.push(entry);
-    manifest
-        .parameters
-        .insert("split_val".into(), args.val.into());
-    manifest.write(&args.dataset)?;
-    for g in &change.gone {
+/// What split assigned, and photos that left the split.
+pub fn print_summary(cfg: &SplitConfig, s: &SplitSummary) {
+    for g in &s.gone {
         eprintln!(
             "warning: {g} was assigned earlier but is no longer kept; removed from the split"
         );
     }
-    let val = rows.iter().filter(|a| a.split == "val").count();
     println!(
-        "split {}: {} train, {val} val ({} kept as before, {} newly assigned with seed {})",
-        args.dataset.display(),
-        rows.len() - val,
-        change.kept_train + change.kept_val,
-        change.new_train + change.new_val,
-        args.seed
+        "split {}: {} train, {} val ({} kept as before, {} newly assigned with seed {})",
+        cfg.dataset.display(),
+        s.train,
+        s.val,
+        s.kept,
+        s.new,
+        cfg.seed
     );
-    Ok(())
 }

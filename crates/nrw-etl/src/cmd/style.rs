@@ -1,17 +1,13 @@
-//! `nrw-etl style`: style descriptors of a dataset's kept photos (parallel over photos,
-//! progress bar, resumable by part), or the exact Gram matrices of one image (`--image`) so
-//! anyone can check parity against another implementation without writing code.
+//! `nrw-etl style`: arguments → `nrw_pipeline::style` (a dataset's descriptors, whole or one
+//! unit), or the exact Gram matrices of one image (`--image`).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use nrw_dataset::descriptors::{
-    part_path, read_part, write_part, DescriptorKind, DescriptorRow, DESCRIPTORS_DIR,
-};
-use nrw_dataset::reader::Dataset;
-use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg};
-use rayon::prelude::*;
+use nrw_pipeline::style::StyleConfig;
+use nrw_style::{Preprocess, Tier};
 
+use super::{Bars, ShardArgs};
 use crate::error::{EtlError, Result};
 
 /// `--preprocess` values.
@@ -23,8 +19,14 @@ pub enum Pre {
     MinusOneToOne,
 }
 
-/// Photos per descriptor part: the unit of resumption.
-pub const PART_PHOTOS: usize = 64;
+impl From<Pre> for Preprocess {
+    fn from(p: Pre) -> Self {
+        match p {
+            Pre::Imagenet => Preprocess::Imagenet,
+            Pre::MinusOneToOne => Preprocess::MinusOneToOne,
+        }
+    }
+}
 
 /// Arguments of `style`.
 #[derive(Debug, Args)]
@@ -52,62 +54,24 @@ pub struct StyleArgs {
     /// Network input scaling: torchvision's ImageNet mean/std, or the official code's v/127.5 − 1 (recorded with the descriptors; the official tier always uses the latter)
     #[arg(long, value_enum, default_value = "imagenet")]
     pub preprocess: Pre,
+    /// Photos per descriptor part (the unit of resumption and of --shard work units)
+    #[arg(long, default_value_t = nrw_pipeline::style::PART_PHOTOS)]
+    pub photos_per_part: usize,
+    #[command(flatten)]
+    pub shard: ShardArgs,
     /// No progress bar
     #[arg(long)]
     pub quiet: bool,
 }
 
-fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
-    match (tier.needs_weights(), path) {
-        (false, _) => Ok(None),
-        (true, None) => Err(EtlError::Usage(format!(
-            "--weights FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); --tier color-stats is the explicit non-neural fallback",
-            tier.name()
-        ))),
-        (true, Some(p)) => {
-            let net = Vgg::load(p).map_err(|e| EtlError::Usage(e.to_string()))?;
-            if let Some(arch) = tier.arch() {
-                if net.arch != arch {
-                    return Err(EtlError::Usage(format!(
-                        "{}: these are {} weights but tier {} needs {}",
-                        p.display(),
-                        net.arch.name(),
-                        tier.name(),
-                        arch.name()
-                    )));
-                }
-            }
-            Ok(Some(net))
-        }
-    }
-}
-
 /// Run `style`.
 pub fn run(args: &StyleArgs) -> Result<()> {
-    super::qa::timed(
-        args.dataset.as_deref().filter(|_| args.image.is_none()),
-        "style",
-        || run_stage(args),
-    )
-}
-
-fn run_stage(args: &StyleArgs) -> Result<()> {
-    let pre = match args.preprocess {
-        Pre::Imagenet => Preprocess::Imagenet,
-        Pre::MinusOneToOne => Preprocess::MinusOneToOne,
-    };
     if let Some(image) = &args.image {
-        // Exact mode runs whichever VGG the weights are.
-        let net = load_weights(args.weights.as_deref(), &Tier::reference())
-            .or_else(|_| {
-                load_weights(
-                    args.weights.as_deref(),
-                    &Tier::parse("vgg19-512").expect("valid tier"),
-                )
-            })?
-            .expect("VGG tier");
-        let bytes = nrw_style::image_grams_safetensors(&net, image, pre, Parallelism::Rayon(0))
-            .map_err(|e| EtlError::Usage(e.to_string()))?;
+        let bytes = nrw_pipeline::style::image_grams(
+            args.weights.as_deref(),
+            image,
+            args.preprocess.into(),
+        )?;
         let out = args.out.as_ref().expect("clap requires --out with --image");
         nrw_dataset::atomic::write_bytes_atomic(out, &bytes)?;
         println!("{}", out.display());
@@ -120,93 +84,43 @@ fn run_stage(args: &StyleArgs) -> Result<()> {
     };
     let tier = Tier::parse(&args.tier).ok_or_else(|| {
         EtlError::Usage(format!(
-            "--tier {:?} is not a tier (vgg16-512, vgg16-256-l12, vgg16-full, color-stats, …)",
+            "--tier {:?} is not a tier (vgg16-512, vgg16-256-l12, vgg16-full, official, color-stats, …)",
             args.tier
         ))
     })?;
-    let net = load_weights(args.weights.as_deref(), &tier)?;
-    let pre = tier.preprocess(pre);
-    let kind = DescriptorKind {
-        tier: tier.name(),
-        weights_sha256: net.as_ref().map_or(String::new(), |n| n.sha256.clone()),
-        // color-stats ignores the network's input scaling, so it never tells descriptors apart
-        preprocess: if tier.needs_weights() {
-            format!("{pre:?}")
-        } else {
-            String::new()
-        },
+    let cfg = StyleConfig {
+        tier,
+        weights: args.weights.clone(),
+        overwrite: args.overwrite,
+        preprocess: args.preprocess.into(),
+        photos_per_part: args.photos_per_part,
+        ..StyleConfig::new(dir)
     };
-    let ds = Dataset::open(dir)?;
-    // Existing parts of another kind are never mixed with new ones.
-    if let Ok(entries) = std::fs::read_dir(dir.join(DESCRIPTORS_DIR)) {
-        for e in entries.flatten() {
-            let (k, _) = read_part(&e.path())?;
-            if k.as_ref().is_some_and(|k| *k != kind) {
-                if !args.overwrite {
-                    return Err(EtlError::Usage(format!(
-                        "{}: holds descriptors of {:?}, not {:?}; pass --overwrite to replace them",
-                        e.path().display(),
-                        k.expect("some"),
-                        kind
-                    )));
-                }
-                std::fs::remove_file(e.path())
-                    .map_err(|err| nrw_dataset::DatasetError::io(e.path(), err))?;
-            }
-        }
-    }
-    let mut ids: Vec<u32> = ds
-        .splits()
-        .iter()
-        .flat_map(|(s, _)| ds.ids(s).expect("listed split").to_vec())
-        .collect();
-    ids.sort_unstable();
-    let groups: Vec<&[u32]> = ids.chunks(PART_PHOTOS).collect();
-    let bar = super::progress_bar(ids.len(), "photos", args.quiet);
-    bar.set_message(tier.name());
-    let (mut done, mut skipped) = (0usize, 0usize);
-    for (k, group) in groups.iter().enumerate() {
-        let path = dir.join(part_path(k));
-        if path.is_file() {
-            let (pk, rows) = read_part(&path)?;
-            if pk.as_ref() == Some(&kind)
-                && rows.iter().map(|r| r.image_id).eq(group.iter().copied())
-            {
-                bar.inc(group.len() as u64);
-                skipped += 1;
-                continue;
-            }
-        }
-        // Read the group's photos a row group at a time (sequential I/O), then describe them
-        // in parallel.
-        let views: Vec<_> = ds.iter_ids(group)?.collect::<std::result::Result<_, _>>()?;
-        let mut rows: Vec<DescriptorRow> = views
-            .par_iter()
-            .map(|v| {
-                let d = describe(&tier, net.as_ref(), &v.photo()?, pre, Parallelism::None)
-                    .map_err(|e| {
-                        EtlError::Usage(format!("photo {} (image {}): {e}", v.name, v.image_id))
-                    })?;
-                bar.inc(1);
-                Ok(DescriptorRow {
-                    image_id: v.image_id,
-                    name: v.name.clone(),
-                    descriptor: d,
-                })
-            })
-            .collect::<Result<_>>()?;
-        rows.sort_by_key(|r| r.image_id);
-        write_part(dir, k, &kind, &rows)?;
-        done += 1;
-    }
-    bar.finish_and_clear();
+    let bars = Bars::new(args.quiet);
+    let s = match args.shard.unit()? {
+        Some(unit) => nrw_pipeline::style::style_unit(&cfg, unit, &bars)?,
+        None => nrw_pipeline::style::style(&cfg, &bars)?,
+    };
     if !args.quiet {
-        eprintln!(
-            "described {} photos with {} into {} ({done} parts written, {skipped} already there)",
-            ids.len(),
-            tier.name(),
-            dir.join(DESCRIPTORS_DIR).display()
-        );
+        print_summary(&s);
     }
     Ok(())
+}
+
+/// The summary line of a style run or unit.
+pub fn print_summary(s: &nrw_pipeline::style::StyleSummary) {
+    let unit = if s.unit == "0/1" {
+        String::new()
+    } else {
+        format!(" (unit {})", s.unit)
+    };
+    eprintln!(
+        "described {} photos with {} into {}/{}{unit} ({} parts written, {} already there)",
+        s.photos,
+        s.tier,
+        s.dataset,
+        nrw_dataset::descriptors::DESCRIPTORS_DIR,
+        s.parts_written,
+        s.parts_skipped
+    );
 }

@@ -1,0 +1,81 @@
+//! The stages' error: a lower crate's typed error, or a named problem with a configuration
+//! value, an input file or the work units of a dataset.
+
+use std::path::PathBuf;
+
+/// Everything a stage can fail with; each message names the file, setting or unit involved.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Colmap(#[from] nrw_colmap::ColmapError),
+    #[error(transparent)]
+    Dataset(#[from] nrw_dataset::DatasetError),
+    #[error(transparent)]
+    Synth(#[from] nrw_synth::SynthError),
+    #[error(transparent)]
+    Qa(#[from] nrw_qa::QaError),
+    /// Weights or an image the style stage could not use.
+    #[error(transparent)]
+    StyleInput(#[from] nrw_style::StyleError),
+    #[error("{}: cannot read the photo's size: {source}", path.display())]
+    Photo {
+        path: PathBuf,
+        #[source]
+        source: image::ImageError,
+    },
+    /// A setting outside what the stage accepts (`setting` is the CLI flag or pipeline key).
+    #[error("{setting} {problem}")]
+    Config { setting: String, problem: String },
+    /// An input file or folder that cannot serve (missing, inconsistent with the model, …).
+    #[error("{}: {problem}", path.display())]
+    Input { path: PathBuf, problem: String },
+    /// A stage needs an earlier stage's output, or a non-empty dataset.
+    #[error("{}: {problem}", dataset.display())]
+    NotReady { dataset: PathBuf, problem: String },
+    /// Work units that cannot be merged (missing, or run with other parameters).
+    #[error("{}: {problem}", dataset.display())]
+    Units { dataset: PathBuf, problem: String },
+    /// Style descriptors could not be computed for a photo.
+    #[error("photo {name} (image {image_id}): {source}")]
+    Style {
+        name: String,
+        image_id: u32,
+        #[source]
+        source: nrw_style::StyleError,
+    },
+    /// The weights file cannot serve the requested tier.
+    #[error("{}: {problem}", path.display())]
+    Weights { path: PathBuf, problem: String },
+    /// Stopped on request before the end; running the same stage again resumes.
+    #[error("interrupted: {0}")]
+    Interrupted(String),
+}
+
+/// Result alias for the stages.
+pub type Result<T, E = PipelineError> = std::result::Result<T, E>;
+
+impl PipelineError {
+    /// A configuration value out of range.
+    pub fn config(setting: &str, problem: impl Into<String>) -> Self {
+        PipelineError::Config {
+            setting: setting.into(),
+            problem: problem.into(),
+        }
+    }
+
+    /// A problem with an input file or folder.
+    pub fn input(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
+        PipelineError::Input {
+            path: path.into(),
+            problem: problem.into(),
+        }
+    }
+
+    /// A dataset that lacks what the stage needs.
+    pub fn dataset(dataset: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
+        PipelineError::NotReady {
+            dataset: dataset.into(),
+            problem: problem.into(),
+        }
+    }
+}

@@ -1,0 +1,624 @@
+//! Ingest: read and validate a scene, render every registered photo's view of the cloud,
+//! apply the paper's filters, and write shards; [`crate::finalize`] then writes the scene
+//! tables and the manifest.
+//!
+//! Work goes in groups of `rows_per_shard` images in id order; each group becomes one shard,
+//! written atomically, then recorded in `.units/ingest/group-NNNNN.json`. A rerun (or unit)
+//! skips groups whose record matches its inputs and parameters, so an interrupted run resumes,
+//! and the result is byte-identical on any thread count and any number of units.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nrw_colmap::{read_ply, Format, Reconstruction};
+use nrw_dataset::codec::{
+    encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
+};
+use nrw_dataset::units::{self, GroupImage, GroupRecord, UnitRecord};
+use nrw_dataset::{FileEntry, ImageOutcome, SceneSource, ViewRow};
+use nrw_render::{render, render_size, Filters, RenderCloud, Verdict, View};
+use rayon::prelude::*;
+
+use crate::error::{PipelineError, Result};
+use crate::{Progress, Unit};
+
+/// Largest splat radius accepted: wider splats smear a render into a few blobs, and each
+/// point would touch thousands of pixels.
+pub const MAX_RADIUS: f32 = 32.0;
+
+/// Ingest's settings; [`IngestConfig::new`] fills in the paper's.
+#[derive(Debug, Clone)]
+pub struct IngestConfig {
+    /// Scene folder (COLMAP layout) or a model folder itself.
+    pub scene: PathBuf,
+    /// Dataset folder to write.
+    pub out: PathBuf,
+    /// Photo folder [default: images/ next to the model].
+    pub images: Option<PathBuf>,
+    /// Model encoding to read [default: bin when present].
+    pub format: Option<Format>,
+    /// Point cloud [default: dense/fused.ply, else the sparse points].
+    pub points: Option<PathBuf>,
+    /// Folder of per-photo ADE20K label maps.
+    pub semantics: Option<PathBuf>,
+    /// Shorter side of a render in pixels (the paper: 600).
+    pub min_dim: u32,
+    /// Splat radius in render pixels (the paper: 1).
+    pub radius: f32,
+    /// The paper's filters: 85% empty, 450 px.
+    pub filters: Filters,
+    /// Images per shard (the unit of resumption and of work units).
+    pub rows_per_shard: usize,
+    /// Stop after this many groups, as an interruption would (resume tests).
+    pub stop_after_groups: Option<usize>,
+    /// Sleep this long after each group (so tests can kill a unit mid-way).
+    pub pause_after_group: Option<std::time::Duration>,
+}
+
+impl IngestConfig {
+    /// The paper's settings for a scene and a dataset folder.
+    pub fn new(scene: impl Into<PathBuf>, out: impl Into<PathBuf>) -> IngestConfig {
+        IngestConfig {
+            scene: scene.into(),
+            out: out.into(),
+            images: None,
+            format: None,
+            points: None,
+            semantics: None,
+            min_dim: 600,
+            radius: 1.0,
+            filters: Filters::default(),
+            rows_per_shard: 64,
+            stop_after_groups: None,
+            pause_after_group: None,
+        }
+    }
+}
+
+/// What a unit of ingest did.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct UnitSummary {
+    pub dataset: String,
+    pub unit: String,
+    /// Groups (shards) this unit owns, of all groups.
+    pub groups_owned: usize,
+    pub groups_total: usize,
+    /// Groups found done from an earlier (interrupted) run.
+    pub resumed_groups: usize,
+    pub views: usize,
+    pub point_source: String,
+    pub points: usize,
+    pub warnings: Vec<String>,
+    pub seconds: f64,
+}
+
+/// Everything a unit derives from the inputs before rendering (every unit derives the same).
+struct Prepared {
+    rec: Reconstruction,
+    photos_dir: PathBuf,
+    photos: BTreeMap<u32, (u32, u32)>,
+    cloud: RenderCloud,
+    source: String,
+    record: UnitRecord,
+}
+
+fn check_config(cfg: &IngestConfig) -> Result<()> {
+    if cfg.rows_per_shard == 0 {
+        return Err(PipelineError::config(
+            "--rows-per-shard",
+            "must be at least 1",
+        ));
+    }
+    if !(0.0..=MAX_RADIUS).contains(&cfg.radius) {
+        return Err(PipelineError::config(
+            "--radius",
+            format!(
+                "{} is outside 0..={MAX_RADIUS} render pixels (the paper uses 1)",
+                cfg.radius
+            ),
+        ));
+    }
+    if !(0.0..=1.0).contains(&cfg.filters.max_empty_ratio) {
+        return Err(PipelineError::config(
+            "--max-empty",
+            format!(
+                "{} is not a fraction in 0..=1 (the paper drops views above 0.85)",
+                cfg.filters.max_empty_ratio
+            ),
+        ));
+    }
+    if let Some(d) = cfg.semantics.as_ref().filter(|d| !d.is_dir()) {
+        return Err(PipelineError::input(d, "--semantics is not a folder"));
+    }
+    Ok(())
+}
+
+/// Find and read the model of a scene folder (or a model folder itself).
+pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(PathBuf, Reconstruction)> {
+    let dir = nrw_colmap::find_model_dir(scene)?;
+    let rec = nrw_colmap::read_model(&dir, format)?;
+    Ok((dir, rec))
+}
+
+/// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
+pub fn describe(rec: &Reconstruction) -> (&'static str, &'static str) {
+    let enc = rec.format.map_or("?", |f| f.ext());
+    let layout = if rec.is_colmap4() {
+        "colmap4"
+    } else {
+        "colmap3"
+    };
+    (enc, layout)
+}
+
+/// The photo folder: given, or `images/` next to the model as COLMAP lays scenes out.
+fn images_dir(cfg: &IngestConfig, model_dir: &Path) -> Result<PathBuf> {
+    if let Some(d) = &cfg.images {
+        if !d.is_dir() {
+            return Err(PipelineError::input(d, "--images is not a folder"));
+        }
+        return Ok(d.clone());
+    }
+    let mut tried = vec![cfg.scene.join("images")];
+    for up in model_dir.ancestors().skip(1).take(2) {
+        tried.push(up.join("images"));
+    }
+    tried.iter().find(|d| d.is_dir()).cloned().ok_or_else(|| {
+        PipelineError::input(
+            &cfg.scene,
+            format!(
+                "no photo folder found (tried {}); pass --images DIR",
+                tried
+                    .iter()
+                    .map(|d| d.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })
+}
+
+/// One photo's size from its header (no pixel decoded).
+fn header_size(path: &Path) -> Result<(u32, u32)> {
+    image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| PipelineError::Photo {
+            path: path.into(),
+            source: image::ImageError::IoError(e),
+        })?
+        .into_dimensions()
+        .map_err(|e| PipelineError::Photo {
+            path: path.into(),
+            source: e,
+        })
+}
+
+/// Photo sizes from file headers, with warnings for size mismatches.
+fn photo_sizes(
+    rec: &Reconstruction,
+    dir: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<BTreeMap<u32, (u32, u32)>> {
+    let mut photos = BTreeMap::new();
+    let mut missing = Vec::new();
+    for img in rec.images.values() {
+        let path = dir.join(&img.name);
+        if !path.is_file() {
+            missing.push(img.name.clone());
+            continue;
+        }
+        let (w, h) = header_size(&path)?;
+        let cam = &rec.cameras[&img.camera_id];
+        if (w as u64, h as u64) != (cam.width, cam.height) {
+            // Same aspect ratio (to a pixel): the photo is rescaled to the render size like
+            // any other. Otherwise the camera does not describe this photo.
+            let aspect_ok =
+                ((w as f64 / h as f64) * cam.height as f64 - cam.width as f64).abs() <= 1.0;
+            let sizes = format!(
+                "photo is {w}x{h} but camera {} is {}x{}",
+                cam.id, cam.width, cam.height
+            );
+            if !aspect_ok {
+                return Err(PipelineError::input(
+                    &path,
+                    format!(
+                        "{sizes} (another aspect ratio): the model does not describe this photo"
+                    ),
+                ));
+            }
+            warnings.push(format!(
+                "{}: {sizes}; same aspect ratio, rescaled",
+                path.display()
+            ));
+        }
+        photos.insert(img.id, (w, h));
+    }
+    if !missing.is_empty() {
+        let shown: Vec<_> = missing.iter().take(5).cloned().collect();
+        return Err(PipelineError::input(
+            dir,
+            format!(
+                "{} of {} registered photos are missing ({}{})",
+                missing.len(),
+                rec.images.len(),
+                shown.join(", "),
+                if missing.len() > 5 { ", …" } else { "" }
+            ),
+        ));
+    }
+    Ok(photos)
+}
+
+/// Which cloud to render, what it is called, and the file it came from (if any).
+fn point_source(
+    cfg: &IngestConfig,
+    model_dir: &Path,
+    rec: &Reconstruction,
+) -> Result<(RenderCloud, String, Option<PathBuf>)> {
+    let origin = rec.scene_origin();
+    let candidate = cfg.points.clone().or_else(|| {
+        std::iter::once(cfg.scene.join("dense/fused.ply"))
+            .chain(
+                model_dir
+                    .ancestors()
+                    .skip(1)
+                    .take(2)
+                    .map(|d| d.join("dense/fused.ply")),
+            )
+            .find(|p| p.is_file())
+    });
+    match candidate {
+        Some(p) => {
+            let cloud = read_ply(&p)?;
+            Ok((RenderCloud::from_ply(origin, &cloud), "ply".into(), Some(p)))
+        }
+        None if !rec.points.is_empty() => {
+            Ok((RenderCloud::from_sparse(origin, rec), "sparse".into(), None))
+        }
+        None => Err(PipelineError::input(
+            model_dir,
+            "nothing to render: no dense/fused.ply, no --points FILE, and the model has no 3D points",
+        )),
+    }
+}
+
+/// Inputs with their hashes, sorted by path.
+fn hashed_inputs(files: impl Iterator<Item = PathBuf>) -> Result<Vec<FileEntry>> {
+    let mut inputs = files
+        .map(|p| {
+            let (bytes, sha256) = nrw_dataset::manifest::sha256_file(&p)?;
+            Ok(FileEntry {
+                path: p.display().to_string(),
+                bytes,
+                sha256,
+                rows: None,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    inputs.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(inputs)
+}
+
+/// SHA-256 (hex) of the inputs and parameters: what makes two runs' outputs interchangeable.
+pub fn fingerprint(
+    inputs: &[FileEntry],
+    parameters: &serde_json::Map<String, serde_json::Value>,
+) -> String {
+    let mut text = serde_json::to_string(inputs).expect("json");
+    text.push_str(&serde_json::to_string(parameters).expect("json"));
+    crate::sha256_hex(text.as_bytes())
+}
+
+fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
+    check_config(cfg)?;
+    let (model_dir, rec) = load_model(&cfg.scene, cfg.format)?;
+    let photos_dir = images_dir(cfg, &model_dir)?;
+    let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
+    let photos = photo_sizes(&rec, &photos_dir, &mut warnings)?;
+    let (cloud, source, source_path) = point_source(cfg, &model_dir, &rec)?;
+    let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
+    let (enc, layout) = describe(&rec);
+    let mut parameters = serde_json::Map::new();
+    parameters.insert("format".into(), enc.into());
+    parameters.insert("point_source".into(), source.clone().into());
+    parameters.insert("points".into(), cloud.len().into());
+    parameters.insert("min_dim".into(), cfg.min_dim.into());
+    parameters.insert("radius".into(), (cfg.radius as f64).into());
+    parameters.insert("max_empty".into(), cfg.filters.max_empty_ratio.into());
+    parameters.insert("min_photo_side".into(), cfg.filters.min_photo_side.into());
+    parameters.insert("rows_per_shard".into(), cfg.rows_per_shard.into());
+    if let Some(d) = &cfg.semantics {
+        parameters.insert("semantics".into(), d.display().to_string().into());
+    }
+    let record = UnitRecord {
+        stage: units::INGEST.into(),
+        index: unit.index,
+        count: unit.count,
+        fingerprint: fingerprint(&inputs, &parameters),
+        parameters,
+        inputs,
+        scene: Some(SceneSource {
+            scene_dir: cfg.scene.display().to_string(),
+            model_dir: model_dir.display().to_string(),
+            images_dir: Some(photos_dir.display().to_string()),
+            encoding: enc.into(),
+            layout: layout.into(),
+        }),
+        warnings,
+        groups: rec.images.len().div_ceil(cfg.rows_per_shard),
+        seconds: 0.0,
+    };
+    Ok(Prepared {
+        rec,
+        photos_dir,
+        photos,
+        cloud,
+        source,
+        record,
+    })
+}
+
+/// A group's record if it is done with these inputs and parameters and its shard is intact.
+fn done_group(out: &Path, g: usize, fingerprint: &str) -> Option<GroupRecord> {
+    let r: GroupRecord =
+        units::read_record(out, &units::group_record_path(units::INGEST, g)).ok()??;
+    let intact = r.fingerprint == fingerprint
+        && r.shard.as_ref().is_none_or(|e| {
+            nrw_dataset::manifest::sha256_file(&out.join(&e.path)).is_ok_and(|(_, h)| h == e.sha256)
+        });
+    intact.then_some(r)
+}
+
+fn outcome(verdict: &Verdict, empty: Option<f64>, size: Option<(u32, u32)>) -> ImageOutcome {
+    ImageOutcome {
+        verdict: verdict.name().into(),
+        verdict_value: verdict.value(),
+        empty_ratio: empty,
+        render_size: size,
+        shard: None,
+        depth_range: None,
+    }
+}
+
+/// Smallest and largest rendered depth (0 = empty).
+fn depth_range(depth: &[f32]) -> Option<(f64, f64)> {
+    depth.iter().filter(|d| **d > 0.0).fold(None, |r, &d| {
+        let d = d as f64;
+        Some(r.map_or((d, d), |(lo, hi): (f64, f64)| (lo.min(d), hi.max(d))))
+    })
+}
+
+type LabelPngs = (Option<Vec<u8>>, Option<Vec<u8>>, Option<Vec<u8>>);
+
+/// The view's label maps (colour-coded, transient mask, class ids), when ingest has them.
+fn label_pngs(
+    cfg: &IngestConfig,
+    name: &str,
+    photo: &str,
+    size: (u32, u32),
+    w: u32,
+    h: u32,
+) -> Result<LabelPngs> {
+    let Some(dir) = &cfg.semantics else {
+        return Ok((None, None, None));
+    };
+    let path = dir.join(Path::new(photo).with_extension("png"));
+    let labels = nrw_dataset::semantics::load_labels(&path, size.0, size.1)?;
+    let ids = nrw_dataset::semantics::resize_labels(&labels, w, h);
+    let (rgb, mask) = nrw_dataset::semantics::colorize(&ids);
+    Ok((
+        Some(nrw_dataset::codec::encode_rgb_bytes(name, w, h, &rgb)?),
+        Some(nrw_dataset::codec::encode_gray(name, w, h, &mask)?),
+        Some(nrw_dataset::codec::encode_gray(name, w, h, ids.as_raw())?),
+    ))
+}
+
+/// Render one image and, if kept, encode its row.
+fn process(
+    cfg: &IngestConfig,
+    p: &Prepared,
+    image_id: u32,
+) -> Result<(ImageOutcome, Option<ViewRow>)> {
+    let img = &p.rec.images[&image_id];
+    let cam = &p.rec.cameras[&img.camera_id];
+    let size = p.photos[&image_id];
+    if let Some(v) = cfg.filters.check_size(size.0 as u64, size.1 as u64) {
+        return Ok((outcome(&v, None, None), None));
+    }
+    let (w, h) = render_size(cam.width, cam.height, cfg.min_dim);
+    let view = View::new(img, cam, p.cloud.origin, w, h, cfg.radius);
+    let buf = render(&view, &p.cloud);
+    let empty = buf.empty_ratio();
+    let verdict = cfg.filters.check_render(empty);
+    let o = outcome(&verdict, Some(empty), Some((w, h)));
+    if !matches!(verdict, Verdict::Kept { .. }) {
+        return Ok((o, None));
+    }
+    // Kept: record its depth range (export's depth scale and QA's depth plots read it).
+    let o = ImageOutcome {
+        depth_range: depth_range(&buf.depth),
+        ..o
+    };
+    let photo = resize_photo(&load_photo(&p.photos_dir.join(&img.name))?, w, h);
+    let name = format!("image {}", img.id);
+    let (semantics_png, transient_png, labels_png) = label_pngs(cfg, &name, &img.name, size, w, h)?;
+    let row = ViewRow {
+        image_id: img.id,
+        name: img.name.clone(),
+        camera_id: cam.id,
+        model: cam.model.name().into(),
+        width: w,
+        height: h,
+        scale_x: view.scale.x,
+        scale_y: view.scale.y,
+        params: view.camera.params.clone(),
+        qvec: img.cam_from_world.qvec(),
+        tvec: img.cam_from_world.translation.to_array(),
+        empty_ratio: empty,
+        photo_png: encode_rgb(&name, &photo)?,
+        color_png: encode_color_render(&name, w, h, buf.color.as_deref(), &buf.depth)?,
+        depth_exr: nrw_dataset::depth::encode_exr(&nrw_dataset::depth::DepthMap {
+            width: w as usize,
+            height: h as usize,
+            data: buf.depth.clone(),
+        })?,
+        normal_png: match &buf.normal {
+            Some(n) => Some(encode_normals(&name, w, h, n, &buf.depth)?),
+            None => None,
+        },
+        semantics_png,
+        transient_png,
+        labels_png,
+    };
+    Ok((o, Some(row)))
+}
+
+/// Render one group, write its shard, then its record.
+fn run_group(
+    cfg: &IngestConfig,
+    p: &Prepared,
+    g: usize,
+    ids: &[u32],
+    progress: &dyn Progress,
+) -> Result<usize> {
+    let results: Vec<(ImageOutcome, Option<ViewRow>)> = ids
+        .par_iter()
+        .map(|id| {
+            let r = process(cfg, p, *id);
+            progress.inc(1);
+            r
+        })
+        .collect::<Result<_>>()?;
+    let rows: Vec<ViewRow> = results.iter().filter_map(|(_, r)| r.clone()).collect();
+    let rel = nrw_dataset::views::shard_path(g);
+    let shard = if rows.is_empty() {
+        None
+    } else {
+        Some(nrw_dataset::write_shard(&cfg.out, &rel, &rows)?)
+    };
+    let images = ids
+        .iter()
+        .zip(results)
+        .map(|(id, (mut o, row))| {
+            if row.is_some() {
+                o.shard = Some(rel.clone());
+            }
+            GroupImage {
+                image_id: *id,
+                photo_size: Some(p.photos[id]),
+                outcome: o,
+            }
+        })
+        .collect();
+    let record = GroupRecord {
+        fingerprint: p.record.fingerprint.clone(),
+        shard,
+        images,
+    };
+    units::write_record(
+        &cfg.out,
+        &units::group_record_path(units::INGEST, g),
+        &record,
+    )?;
+    Ok(rows.len())
+}
+
+/// Run one unit of ingest: render the groups `unit` owns (skipping those already done) and
+/// record the unit as done. Writes only this unit's shards and records; deletes nothing.
+pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> Result<UnitSummary> {
+    let t0 = Instant::now();
+    let mut p = prepare(cfg, unit)?;
+    std::fs::create_dir_all(&cfg.out).map_err(|e| nrw_dataset::DatasetError::io(&cfg.out, e))?;
+    let ids: Vec<u32> = p.rec.images.keys().copied().collect();
+    let groups: Vec<(usize, &[u32])> = ids
+        .chunks(cfg.rows_per_shard)
+        .enumerate()
+        .filter(|(g, _)| unit.owns(*g))
+        .collect();
+    let todo: Vec<&(usize, &[u32])> = groups
+        .iter()
+        .filter(|(g, _)| done_group(&cfg.out, *g, &p.record.fingerprint).is_none())
+        .collect();
+    let resumed = groups.len() - todo.len();
+    progress.start(
+        "rendering",
+        todo.iter().map(|(_, ids)| ids.len() as u64).sum(),
+        "views",
+    );
+    let mut views = 0;
+    for (written, (g, group)) in todo.iter().enumerate() {
+        views += run_group(cfg, &p, *g, group, progress)?;
+        if let Some(d) = cfg.pause_after_group {
+            std::thread::sleep(d);
+        }
+        if cfg.stop_after_groups.is_some_and(|n| written + 1 >= n) && written + 1 < todo.len() {
+            progress.finish();
+            return Err(PipelineError::Interrupted(format!(
+                "stopped after {} groups as asked; run the same command again to resume",
+                written + 1
+            )));
+        }
+    }
+    progress.finish();
+    p.record.seconds = t0.elapsed().as_secs_f64();
+    let rel = units::unit_record_path(units::INGEST, unit.index, unit.count);
+    units::write_record(&cfg.out, &rel, &p.record)?;
+    Ok(UnitSummary {
+        dataset: cfg.out.display().to_string(),
+        unit: unit.to_string(),
+        groups_owned: groups.len(),
+        groups_total: p.record.groups,
+        resumed_groups: resumed,
+        views,
+        point_source: p.source,
+        points: p.cloud.len(),
+        warnings: p.record.warnings,
+        seconds: p.record.seconds,
+    })
+}
+
+/// What a whole ingest produced (printed with `--json`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct IngestSummary {
+    pub dataset: String,
+    pub registered: usize,
+    pub rendered: usize,
+    pub kept: usize,
+    pub too_small: usize,
+    pub too_sparse: usize,
+    pub shards: usize,
+    pub point_source: String,
+    pub points: usize,
+    pub resumed_groups: usize,
+    /// Empty ratio of the least empty render (what the filter would have to allow).
+    pub least_empty: Option<f64>,
+    pub warnings: Vec<String>,
+    pub seconds: f64,
+}
+
+/// Ingest the whole scene in this process: one unit of one, then finalize. Unit records of
+/// earlier unfinished unit runs are cleared first (this run owns the dataset); their group
+/// records are reused when they match.
+pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSummary> {
+    let t0 = Instant::now();
+    check_config(cfg)?;
+    units::remove_unit_records(&cfg.out, units::INGEST, None)?;
+    let u = ingest_unit(cfg, Unit::WHOLE, progress)?;
+    let f = crate::finalize::finalize_ingest(&cfg.out)?;
+    Ok(IngestSummary {
+        dataset: u.dataset,
+        registered: f.registered,
+        rendered: f.kept + f.too_sparse,
+        kept: f.kept,
+        too_small: f.too_small,
+        too_sparse: f.too_sparse,
+        shards: f.shards,
+        point_source: u.point_source,
+        points: u.points,
+        resumed_groups: u.resumed_groups,
+        least_empty: f.least_empty,
+        warnings: f.warnings,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,34 @@
+//! The stages of nrw-etl as functions over plain configuration structs: ingest, finalize,
+//! split, style, triplets, export and qa, plus the pipeline runner that chains them. Each
+//! config's `Default` (or `new`) is the paper's settings; each stage returns a typed summary
+//! or a typed error and reports progress through [`Progress`], so the library never prints.
+//!
+//! Ingest and style also run as independent work units (`Unit`, `--shard I/N`): each unit
+//! does the groups it owns and writes only its own files; [`finalize::finalize`] merges the
+//! units into the same bytes a single process writes.
+
+pub mod error;
+pub mod export;
+pub mod finalize;
+pub mod ingest;
+pub mod progress;
+pub mod qa;
+pub mod runner;
+pub mod split;
+pub mod style;
+pub mod synth;
+pub mod triplets;
+pub mod units;
+
+pub use error::{PipelineError, Result};
+pub use progress::{Progress, Silent};
+pub use units::Unit;
+
+/// SHA-256 of bytes as lower-case hex (fingerprints of inputs and parameters).
+pub fn sha256_hex(data: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(data)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}

@@ -1,0 +1,333 @@
+//! The pipeline runner: the stages a pipeline file lists, in order (`nrw-etl run`), and the
+//! demo's pipeline on the embedded synthetic scene (`nrw-etl demo`).
+
+use std::path::{Path, PathBuf};
+
+use nrw_dataset::export::{ExportConfig, ExportSummary};
+use serde::Deserialize;
+
+use crate::error::{PipelineError, Result};
+use crate::ingest::{IngestConfig, IngestSummary};
+use crate::split::{SplitConfig, SplitSummary};
+use crate::style::{StyleConfig, StyleSummary};
+use crate::triplets::{TripletsConfig, TripletsSummary};
+use crate::Progress;
+
+/// A pipeline file: each table present is a stage to run, with its parameters.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pipeline {
+    pub name: String,
+    pub ingest: Option<IngestStage>,
+    pub split: Option<SplitStage>,
+    pub style: Option<StyleStage>,
+    pub triplets: Option<TripletsStage>,
+    pub export: Option<ExportStage>,
+    pub qa: Option<QaStage>,
+}
+
+/// `[ingest]`: render and filter.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IngestStage {
+    pub min_dim: u32,
+    pub radius: f32,
+    pub max_empty: f64,
+    pub min_photo_side: u32,
+    pub rows_per_shard: usize,
+    /// Folder of ADE20K label maps, relative to the scene folder.
+    pub semantics: Option<PathBuf>,
+}
+
+/// `[split]`: validation photos (a count, or a fraction of the kept photos) and seed.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SplitStage {
+    pub val: Option<usize>,
+    pub val_fraction: Option<f64>,
+    pub seed: u64,
+}
+
+/// `[style]`: the descriptor tier (weights come from the command line).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StyleStage {
+    pub tier: String,
+}
+
+/// `[triplets]`: neighbours per anchor (lowered, with a warning, to what the scope holds).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TripletsStage {
+    pub k: usize,
+}
+
+/// `[export]`: the layout to write into DIR/export.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExportStage {
+    pub layout: String,
+    /// false: export without semantics (train with --use_semantic=False)
+    #[serde(default = "yes")]
+    pub semantics: bool,
+}
+
+/// `[qa]`: the report into DIR/qa.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QaStage {}
+
+fn yes() -> bool {
+    true
+}
+
+impl Pipeline {
+    /// Parse a pipeline file, naming the file in errors.
+    pub fn load(path: &Path) -> Result<Pipeline> {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| PipelineError::input(path, e.to_string()))?;
+        toml::from_str(&text).map_err(|e| PipelineError::input(path, e.to_string()))
+    }
+
+    /// The demo's pipeline: the paper's settings, the synthetic scene's ground-truth labels
+    /// standing in for a segmentation model, a fifth of the few photos held out, and the
+    /// colour-statistics tier unless VGG16 weights are given.
+    pub fn demo(weights: bool) -> Pipeline {
+        let paper = IngestConfig::new("", "");
+        Pipeline {
+            name: "demo".into(),
+            ingest: Some(IngestStage {
+                min_dim: paper.min_dim,
+                radius: paper.radius,
+                max_empty: paper.filters.max_empty_ratio,
+                min_photo_side: paper.filters.min_photo_side,
+                rows_per_shard: paper.rows_per_shard,
+                semantics: Some("ground_truth/semantics".into()),
+            }),
+            split: Some(SplitStage {
+                val: None,
+                val_fraction: Some(0.2),
+                seed: 0,
+            }),
+            style: Some(StyleStage {
+                tier: if weights { "vgg16-512" } else { "color-stats" }.into(),
+            }),
+            triplets: Some(TripletsStage { k: 20 }),
+            export: Some(ExportStage {
+                layout: "official".into(),
+                semantics: true,
+            }),
+            qa: Some(QaStage {}),
+        }
+    }
+}
+
+/// A stage the runner finished, with its summary (for the caller to show).
+#[derive(Debug)]
+pub enum StageDone<'a> {
+    Ingest(&'a IngestSummary),
+    Split(&'a SplitSummary),
+    Style(&'a StyleSummary),
+    Triplets(&'a TripletsSummary),
+    Export(&'a Path, &'a ExportSummary),
+    Qa(&'a nrw_qa::Written),
+}
+
+/// Where a pipeline run left its results.
+#[derive(Debug, Clone)]
+pub struct RunOutcome {
+    /// false when ingest kept no view (later stages were skipped).
+    pub kept: bool,
+    pub dataset: PathBuf,
+    pub export: Option<PathBuf>,
+    pub report: Option<PathBuf>,
+}
+
+fn export_config(
+    p: &Pipeline,
+    e: &ExportStage,
+    dataset: &Path,
+    out: &Path,
+) -> Result<ExportConfig> {
+    let layout = match e.layout.as_str() {
+        "official" => nrw_dataset::export::Layout::Official,
+        "tfrecord" => nrw_dataset::export::Layout::Tfrecord,
+        "files" => nrw_dataset::export::Layout::Files,
+        other => {
+            return Err(PipelineError::config(
+                "export.layout",
+                format!(
+                    "{other:?} of pipeline {} is not official, tfrecord or files",
+                    p.name
+                ),
+            ))
+        }
+    };
+    Ok(ExportConfig {
+        layout,
+        semantics: e.semantics,
+        ..crate::export::official(dataset, out)
+    })
+}
+
+fn style_config(s: &StyleStage, dataset: &Path, weights: Option<&Path>) -> Result<StyleConfig> {
+    let tier = nrw_style::Tier::parse(&s.tier).ok_or_else(|| {
+        PipelineError::config("style.tier", format!("{:?} is not a tier", s.tier))
+    })?;
+    if tier.needs_weights() && weights.is_none() {
+        return Err(PipelineError::config("--weights", format!(
+            "FILE is required: the pipeline's style tier {} runs VGG (the tool never downloads weights)",
+            s.tier
+        )));
+    }
+    Ok(StyleConfig {
+        tier,
+        weights: weights.map(Into::into),
+        overwrite: true,
+        ..StyleConfig::new(dataset)
+    })
+}
+
+/// Run every stage `p` lists on `scene` into the dataset `out` (the export into
+/// `export_dir`, the report into out/qa). Settings are checked before the first stage runs.
+pub fn run(
+    p: &Pipeline,
+    scene: &Path,
+    out: &Path,
+    export_dir: &Path,
+    weights: Option<&Path>,
+    progress: &dyn Progress,
+    done: &mut dyn FnMut(StageDone),
+) -> Result<RunOutcome> {
+    let style = p
+        .style
+        .as_ref()
+        .map(|s| style_config(s, out, weights))
+        .transpose()?;
+    let export = p
+        .export
+        .as_ref()
+        .map(|e| export_config(p, e, out, export_dir))
+        .transpose()?;
+    let mut outcome = RunOutcome {
+        kept: true,
+        dataset: out.into(),
+        export: None,
+        report: None,
+    };
+    if let Some(i) = &p.ingest {
+        let mut c = IngestConfig::new(scene, out);
+        c.min_dim = i.min_dim;
+        c.radius = i.radius;
+        c.filters.max_empty_ratio = i.max_empty;
+        c.filters.min_photo_side = i.min_photo_side;
+        c.rows_per_shard = i.rows_per_shard;
+        c.semantics = i.semantics.as_ref().map(|s| scene.join(s));
+        let s = crate::ingest::ingest(&c, progress)?;
+        done(StageDone::Ingest(&s));
+        outcome.kept = s.kept > 0;
+    }
+    if !outcome.kept {
+        progress.warn(&format!(
+            "pipeline {}: no view kept, later stages skipped",
+            p.name
+        ));
+        return Ok(outcome);
+    }
+    if let Some(s) = &p.split {
+        let kept = nrw_dataset::reader::Dataset::open(out)?.len();
+        let val = match (s.val, s.val_fraction) {
+            (Some(v), None) => v,
+            (None, Some(f)) if (0.0..1.0).contains(&f) => ((kept as f64 * f) as usize).max(1),
+            _ => {
+                return Err(PipelineError::config(
+                    "split",
+                    format!(
+                "of pipeline {}: give exactly one of val (a count) and val_fraction (0 to 1)",
+                p.name
+            ),
+                ))
+            }
+        };
+        let r = crate::split::split(&SplitConfig {
+            val,
+            seed: s.seed,
+            ..SplitConfig::new(out)
+        })?;
+        done(StageDone::Split(&r));
+    }
+    if let Some(c) = &style {
+        let r = crate::style::style(c, progress)?;
+        done(StageDone::Style(&r));
+    }
+    if let Some(t) = &p.triplets {
+        let r = crate::triplets::triplets(&TripletsConfig {
+            k: capped_k(t.k, out, progress)?,
+            ..TripletsConfig::new(out)
+        })?;
+        done(StageDone::Triplets(&r));
+    }
+    if let Some(c) = &export {
+        let r = crate::export::export(out, c, progress)?;
+        done(StageDone::Export(export_dir, &r));
+        outcome.export = Some(export_dir.into());
+    }
+    if p.qa.is_some() {
+        let w = crate::qa::qa(&crate::qa::QaConfig {
+            dataset: out.into(),
+            out: None,
+        })?;
+        done(StageDone::Qa(&w));
+        outcome.report = Some(w.report.clone());
+    }
+    Ok(outcome)
+}
+
+/// `k`, lowered to the training photos minus the anchor when there are fewer (with a warning).
+fn capped_k(k: usize, dataset: &Path, progress: &dyn Progress) -> Result<usize> {
+    let splits = nrw_dataset::split::read_splits(dataset)?;
+    let scope = if splits.is_empty() {
+        nrw_dataset::reader::Dataset::open(dataset)?.len()
+    } else {
+        splits.iter().filter(|a| a.split == "train").count()
+    };
+    let cap = scope.saturating_sub(1).max(1);
+    if k > cap {
+        progress.warn(&format!(
+            "triplets: k lowered from {k} to {cap}: the scope holds {scope} photos"
+        ));
+    }
+    Ok(k.min(cap))
+}
+
+/// Synthesise the demo scene (or `spec`) into `dir/scene` and run the demo pipeline into
+/// `dir/dataset`.
+pub fn demo(
+    dir: &Path,
+    spec: Option<&Path>,
+    seed: Option<u64>,
+    weights: Option<&Path>,
+    progress: &dyn Progress,
+    done: &mut dyn FnMut(StageDone),
+) -> Result<(nrw_synth::SynthReport, RunOutcome)> {
+    let spec = crate::synth::load_spec(spec, seed)?;
+    let scene = dir.join("scene");
+    let report = crate::synth::generate(&spec, &scene, progress)?;
+    let pipeline = Pipeline::demo(weights.is_some());
+    let out = run(
+        &pipeline,
+        &scene,
+        &dir.join("dataset"),
+        &dir.join("export"),
+        weights,
+        progress,
+        done,
+    )?;
+    if !out.kept {
+        return Err(PipelineError::dataset(
+            &out.dataset,
+            "the demo scene kept no view: this is a bug",
+        ));
+    }
+    Ok((report, out))
+}

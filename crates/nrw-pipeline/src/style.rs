@@ -1,0 +1,342 @@
+//! Style: descriptors of a dataset's kept photos into `descriptors/part-NNNNN.parquet`, in
+//! parts of [`PART_PHOTOS`] photos in id order (the unit of resumption and of work units),
+//! parallel over photos; or the exact Gram matrices of one image ([`image_grams`]).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nrw_dataset::descriptors::{
+    part_path, read_part, write_part, DescriptorKind, DescriptorRow, DESCRIPTORS_DIR,
+};
+use nrw_dataset::reader::Dataset;
+use nrw_dataset::units::{self, UnitRecord};
+use nrw_dataset::Manifest;
+use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg};
+use rayon::prelude::*;
+
+use crate::error::{PipelineError, Result};
+use crate::{Progress, Unit};
+
+/// Photos per descriptor part by default.
+pub const PART_PHOTOS: usize = 64;
+
+/// Style's settings; [`StyleConfig::new`] is the paper's reference tier.
+#[derive(Debug, Clone)]
+pub struct StyleConfig {
+    pub dataset: PathBuf,
+    pub tier: Tier,
+    /// VGG weights (safetensors, torchvision names); required by the VGG tiers.
+    pub weights: Option<PathBuf>,
+    /// Replace descriptors of another kind instead of refusing.
+    pub overwrite: bool,
+    /// Network input scaling asked for (the official tier always uses its own).
+    pub preprocess: Preprocess,
+    /// Photos per descriptor part (the unit of resumption and of work units).
+    pub photos_per_part: usize,
+}
+
+impl StyleConfig {
+    /// The reference tier (VGG16, 512² crop) with ImageNet scaling.
+    pub fn new(dataset: impl Into<PathBuf>) -> StyleConfig {
+        StyleConfig {
+            dataset: dataset.into(),
+            tier: Tier::reference(),
+            weights: None,
+            overwrite: false,
+            preprocess: Preprocess::Imagenet,
+            photos_per_part: PART_PHOTOS,
+        }
+    }
+}
+
+/// What a style run (or unit) did.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct StyleSummary {
+    pub dataset: String,
+    pub unit: String,
+    pub tier: String,
+    pub photos: usize,
+    pub parts_written: usize,
+    pub parts_skipped: usize,
+    pub seconds: f64,
+}
+
+/// Load the weights a tier needs, refusing a missing file or another architecture.
+pub fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
+    match (tier.needs_weights(), path) {
+        (false, _) => Ok(None),
+        (true, None) => Err(PipelineError::config("--weights", format!(
+            "FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); --tier color-stats is the explicit non-neural fallback",
+            tier.name()
+        ))),
+        (true, Some(p)) => {
+            let net = Vgg::load(p)?;
+            if let Some(arch) = tier.arch().filter(|a| *a != net.arch) {
+                return Err(PipelineError::Weights {
+                    path: p.into(),
+                    problem: format!(
+                        "these are {} weights but tier {} needs {}",
+                        net.arch.name(),
+                        tier.name(),
+                        arch.name()
+                    ),
+                });
+            }
+            Ok(Some(net))
+        }
+    }
+}
+
+/// The five Gram matrices of one image as given, as safetensors bytes (whichever VGG the
+/// weights are).
+pub fn image_grams(weights: Option<&Path>, image: &Path, pre: Preprocess) -> Result<Vec<u8>> {
+    let net = load_weights(weights, &Tier::reference())
+        .or_else(|_| load_weights(weights, &Tier::parse("vgg19-512").expect("valid tier")))?
+        .expect("VGG tier");
+    Ok(nrw_style::image_grams_safetensors(
+        &net,
+        image,
+        pre,
+        Parallelism::Rayon(0),
+    )?)
+}
+
+fn kind(cfg: &StyleConfig, net: Option<&Vgg>) -> DescriptorKind {
+    DescriptorKind {
+        tier: cfg.tier.name(),
+        weights_sha256: net.map_or(String::new(), |n| n.sha256.clone()),
+        // color-stats ignores the network's input scaling, so it never tells descriptors apart
+        preprocess: if cfg.tier.needs_weights() {
+            format!("{:?}", cfg.tier.preprocess(cfg.preprocess))
+        } else {
+            String::new()
+        },
+    }
+}
+
+/// The descriptor kind a style unit record describes.
+pub(crate) fn kind_of(r: &UnitRecord) -> DescriptorKind {
+    let s = |k: &str| {
+        r.parameters
+            .get(k)
+            .and_then(|v| v.as_str())
+            .unwrap_or_default()
+            .to_string()
+    };
+    DescriptorKind {
+        tier: s("tier"),
+        weights_sha256: s("weights_sha256"),
+        preprocess: s("preprocess"),
+    }
+}
+
+/// Remove parts of another kind among `parts` (or refuse without `overwrite`).
+fn clear_other_kinds(
+    cfg: &StyleConfig,
+    kind: &DescriptorKind,
+    parts: impl Iterator<Item = usize>,
+) -> Result<()> {
+    for k in parts {
+        let path = cfg.dataset.join(part_path(k));
+        if !path.is_file() {
+            continue;
+        }
+        let (pk, _) = read_part(&path)?;
+        if pk.as_ref().is_some_and(|p| p != kind) {
+            if !cfg.overwrite {
+                return Err(PipelineError::input(
+                    &path,
+                    format!(
+                        "holds descriptors of {:?}, not {kind:?}; pass --overwrite to replace them",
+                        pk.expect("some")
+                    ),
+                ));
+            }
+            std::fs::remove_file(&path).map_err(|e| nrw_dataset::DatasetError::io(&path, e))?;
+        }
+    }
+    Ok(())
+}
+
+/// Every existing part index in the dataset.
+fn existing_parts(dataset: &Path) -> Vec<usize> {
+    let Ok(entries) = std::fs::read_dir(dataset.join(DESCRIPTORS_DIR)) else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .filter_map(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            n.strip_prefix("part-")?
+                .strip_suffix(".parquet")?
+                .parse()
+                .ok()
+        })
+        .collect()
+}
+
+/// List parts `0..groups` in the manifest and remove parts past them (of a larger earlier run).
+pub(crate) fn list_parts(dataset: &Path, manifest: &mut Manifest, groups: usize) -> Result<()> {
+    for k in existing_parts(dataset).into_iter().filter(|k| *k >= groups) {
+        let path = dataset.join(part_path(k));
+        std::fs::remove_file(&path).map_err(|e| nrw_dataset::DatasetError::io(&path, e))?;
+    }
+    manifest.remove_tables(nrw_dataset::descriptors::is_part);
+    for k in 0..groups {
+        manifest.replace_table(nrw_dataset::FileEntry::of(dataset, &part_path(k))?);
+    }
+    Ok(())
+}
+
+/// Whether part `k` is already done for these photos and this kind.
+fn part_done(dataset: &Path, k: usize, kind: &DescriptorKind, ids: &[u32]) -> Result<bool> {
+    let path = dataset.join(part_path(k));
+    if !path.is_file() {
+        return Ok(false);
+    }
+    let (pk, rows) = read_part(&path)?;
+    Ok(pk.as_ref() == Some(kind) && rows.iter().map(|r| r.image_id).eq(ids.iter().copied()))
+}
+
+/// Describe one group of photos into part `k`.
+#[allow(clippy::too_many_arguments)]
+fn describe_part(
+    cfg: &StyleConfig,
+    ds: &Dataset,
+    net: Option<&Vgg>,
+    kind: &DescriptorKind,
+    k: usize,
+    ids: &[u32],
+    progress: &dyn Progress,
+) -> Result<()> {
+    let pre = cfg.tier.preprocess(cfg.preprocess);
+    // Read the group's photos a row group at a time (sequential I/O), then describe them in
+    // parallel.
+    let views: Vec<_> = ds.iter_ids(ids)?.collect::<std::result::Result<_, _>>()?;
+    let mut rows: Vec<DescriptorRow> = views
+        .par_iter()
+        .map(|v| {
+            let d = describe(&cfg.tier, net, &v.photo()?, pre, Parallelism::None).map_err(|e| {
+                PipelineError::Style {
+                    name: v.name.clone(),
+                    image_id: v.image_id,
+                    source: e,
+                }
+            })?;
+            progress.inc(1);
+            Ok(DescriptorRow {
+                image_id: v.image_id,
+                name: v.name.clone(),
+                descriptor: d,
+            })
+        })
+        .collect::<Result<_>>()?;
+    rows.sort_by_key(|r| r.image_id);
+    write_part(&cfg.dataset, k, kind, &rows)?;
+    Ok(())
+}
+
+/// Run one unit of style: describe the parts `unit` owns (skipping those done) and record
+/// the unit. Writes only its own parts; with `overwrite` removes only its own stale parts.
+pub fn style_unit(cfg: &StyleConfig, unit: Unit, progress: &dyn Progress) -> Result<StyleSummary> {
+    let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
+    run_unit(cfg, unit, net.as_ref(), progress)
+}
+
+fn run_unit(
+    cfg: &StyleConfig,
+    unit: Unit,
+    net: Option<&Vgg>,
+    progress: &dyn Progress,
+) -> Result<StyleSummary> {
+    let t0 = Instant::now();
+    if cfg.photos_per_part == 0 {
+        return Err(PipelineError::config(
+            "--photos-per-part",
+            "must be at least 1",
+        ));
+    }
+    let kind = kind(cfg, net);
+    let ds = Dataset::open(&cfg.dataset)?;
+    let mut ids: Vec<u32> = ds
+        .splits()
+        .iter()
+        .flat_map(|(s, _)| ds.ids(s).expect("listed split").to_vec())
+        .collect();
+    ids.sort_unstable();
+    let groups: Vec<(usize, &[u32])> = ids
+        .chunks(cfg.photos_per_part)
+        .enumerate()
+        .filter(|(k, _)| unit.owns(*k))
+        .collect();
+    // A whole run owns every part: it refuses (or clears) other kinds anywhere; a unit only
+    // among its own parts.
+    if unit.is_whole() {
+        clear_other_kinds(cfg, &kind, existing_parts(&cfg.dataset).into_iter())?;
+    } else {
+        clear_other_kinds(cfg, &kind, groups.iter().map(|(k, _)| *k))?;
+    }
+    let mut todo = Vec::new();
+    for (k, g) in &groups {
+        if !part_done(&cfg.dataset, *k, &kind, g)? {
+            todo.push((*k, *g));
+        }
+    }
+    progress.start(
+        &kind.tier,
+        todo.iter().map(|(_, g)| g.len() as u64).sum(),
+        "photos",
+    );
+    for (k, g) in &todo {
+        describe_part(cfg, &ds, net, &kind, *k, g, progress)?;
+    }
+    progress.finish();
+    let mut parameters = serde_json::Map::new();
+    parameters.insert("tier".into(), kind.tier.clone().into());
+    parameters.insert("weights_sha256".into(), kind.weights_sha256.clone().into());
+    parameters.insert("preprocess".into(), kind.preprocess.clone().into());
+    parameters.insert("photos".into(), ids.len().into());
+    parameters.insert("photos_per_part".into(), cfg.photos_per_part.into());
+    let ids_entry = nrw_dataset::FileEntry {
+        path: "kept image ids".into(),
+        bytes: ids.len() as u64,
+        sha256: crate::sha256_hex(&ids.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<_>>()),
+        rows: None,
+    };
+    let record = UnitRecord {
+        stage: units::STYLE.into(),
+        index: unit.index,
+        count: unit.count,
+        fingerprint: crate::ingest::fingerprint(std::slice::from_ref(&ids_entry), &parameters),
+        parameters,
+        inputs: vec![ids_entry],
+        scene: None,
+        warnings: Vec::new(),
+        groups: ids.len().div_ceil(cfg.photos_per_part),
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    units::write_record(
+        &cfg.dataset,
+        &units::unit_record_path(units::STYLE, unit.index, unit.count),
+        &record,
+    )?;
+    Ok(StyleSummary {
+        dataset: cfg.dataset.display().to_string(),
+        unit: unit.to_string(),
+        tier: kind.tier,
+        photos: groups.iter().map(|(_, g)| g.len()).sum(),
+        parts_written: todo.len(),
+        parts_skipped: groups.len() - todo.len(),
+        seconds: record.seconds,
+    })
+}
+
+/// Describe every kept photo in this process, then list the parts in the manifest. Parts
+/// of another kind are replaced only with `overwrite`.
+pub fn style(cfg: &StyleConfig, progress: &dyn Progress) -> Result<StyleSummary> {
+    units::remove_unit_records(&cfg.dataset, units::STYLE, None)?;
+    let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
+    let s = run_unit(cfg, Unit::WHOLE, net.as_ref(), progress)?;
+    crate::finalize::finalize_style(&cfg.dataset)?;
+    Ok(s)
+}

@@ -1,0 +1,222 @@
+//! Triplets: for each anchor photo, its k nearest and k furthest photos under the style
+//! distance, from the descriptors style wrote; and the official export's distance matrix.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use nrw_dataset::triplets::{write_triplets, TripletInfo, TripletRow};
+use nrw_dataset::Manifest;
+
+use crate::error::{PipelineError, Result};
+
+/// Triplets' settings; `new` is the paper's (k = 20, exact, training split).
+#[derive(Debug, Clone)]
+pub struct TripletsConfig {
+    pub dataset: PathBuf,
+    /// Neighbours per anchor, nearest and furthest.
+    pub k: usize,
+    /// Anchors and neighbours from every split, not only training.
+    pub all_splits: bool,
+    /// Approximate through a PCA projection to this many dimensions, re-ranked exactly.
+    pub pca: Option<usize>,
+    /// Measure the approximate path's recall against the exact one up to this many photos.
+    pub check_up_to: usize,
+}
+
+impl TripletsConfig {
+    /// The paper's triplets of a dataset.
+    pub fn new(dataset: impl Into<PathBuf>) -> TripletsConfig {
+        TripletsConfig {
+            dataset: dataset.into(),
+            k: 20,
+            all_splits: false,
+            pca: None,
+            check_up_to: 20_000,
+        }
+    }
+}
+
+/// What triplets wrote.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TripletsSummary {
+    pub anchors: usize,
+    pub k: usize,
+    pub tier: String,
+    pub scope: String,
+    pub method: String,
+    /// Recall (nearest, furthest) of the approximate path against the exact one.
+    pub recall: Option<(f64, f64)>,
+}
+
+/// Refuse stages that need views when ingest kept none, saying so.
+pub fn require_views(dataset: &Path) -> Result<nrw_dataset::reader::Dataset> {
+    let ds = nrw_dataset::reader::Dataset::open(dataset)?;
+    if ds.is_empty() {
+        let registered = nrw_dataset::scene::read_verdicts(dataset)?.len();
+        return Err(PipelineError::dataset(dataset, format!(
+            "no kept view: ingest dropped all {registered} registered photos (`nrw-etl inspect {}` shows why)",
+            dataset.display()
+        )));
+    }
+    Ok(ds)
+}
+
+/// The photos in scope: the training split unless `all_splits` (or no split yet).
+fn in_scope(
+    cfg: &TripletsConfig,
+    ids: &BTreeSet<u32>,
+) -> Result<(&'static str, Option<BTreeSet<u32>>)> {
+    let splits = nrw_dataset::split::read_splits(&cfg.dataset)?;
+    if cfg.all_splits || splits.is_empty() {
+        return Ok(("all", None));
+    }
+    let train: BTreeSet<u32> = splits
+        .iter()
+        .filter(|a| a.split == "train")
+        .map(|a| a.image_id)
+        .collect();
+    if let Some(missing) = train.iter().find(|id| !ids.contains(id)) {
+        return Err(PipelineError::dataset(
+            &cfg.dataset,
+            format!("training photo {missing} has no descriptor; run `nrw-etl style` again"),
+        ));
+    }
+    Ok(("train", Some(train)))
+}
+
+/// Compute and write the triplet table.
+pub fn triplets(cfg: &TripletsConfig) -> Result<TripletsSummary> {
+    crate::qa::timed(&cfg.dataset, "triplets", || run(cfg))
+}
+
+fn run(cfg: &TripletsConfig) -> Result<TripletsSummary> {
+    require_views(&cfg.dataset)?;
+    let mut manifest = Manifest::read(&cfg.dataset)?;
+    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(&cfg.dataset)? else {
+        return Err(PipelineError::dataset(
+            &cfg.dataset,
+            format!(
+                "no descriptors; run `nrw-etl style {}` first",
+                cfg.dataset.display()
+            ),
+        ));
+    };
+    let described: BTreeSet<u32> = rows.iter().map(|r| r.image_id).collect();
+    let (scope, allowed) = in_scope(cfg, &described)?;
+    let rows: Vec<_> = rows
+        .into_iter()
+        .filter(|r| allowed.as_ref().is_none_or(|a| a.contains(&r.image_id)))
+        .collect();
+    if cfg.k + 1 > rows.len() {
+        return Err(PipelineError::config("--k", format!(
+            "{} needs at least {} photos in scope {scope}, found {}; use --k {} or fewer (dataset {})",
+            cfg.k,
+            cfg.k + 1,
+            rows.len(),
+            rows.len().saturating_sub(1),
+            cfg.dataset.display()
+        )));
+    }
+    let desc: Vec<Vec<f32>> = rows.iter().map(|r| r.descriptor.clone()).collect();
+    let name_err = |e: nrw_knn::KnnError| match e {
+        nrw_knn::KnnError::NotFinite { row, index, value } => PipelineError::dataset(
+            &cfg.dataset,
+            format!(
+                "descriptor of photo {} (image {}) has value {value} at {index}: not finite",
+                rows[row].name, rows[row].image_id
+            ),
+        ),
+        other => PipelineError::dataset(&cfg.dataset, other.to_string()),
+    };
+    let (found, method, recall) = match cfg.pca {
+        None => (
+            nrw_knn::exact(&desc, cfg.k).map_err(name_err)?,
+            "exact".to_string(),
+            None,
+        ),
+        Some(rank) => {
+            let approx =
+                nrw_knn::approx::approximate(&desc, cfg.k, rank, 3, 0).map_err(name_err)?;
+            let recall = (desc.len() <= cfg.check_up_to)
+                .then(|| nrw_knn::exact(&desc, cfg.k).map(|e| nrw_knn::approx::recall(&e, &approx)))
+                .transpose()
+                .map_err(name_err)?;
+            (approx, format!("pca-{rank}"), recall)
+        }
+    };
+    let table: Vec<TripletRow> = rows
+        .iter()
+        .zip(&found)
+        .map(|(r, n)| TripletRow {
+            anchor_id: r.image_id,
+            anchor_name: r.name.clone(),
+            nearest_ids: n.nearest.iter().map(|p| rows[p.0].image_id).collect(),
+            nearest_d2: n.nearest.iter().map(|p| p.1).collect(),
+            furthest_ids: n.furthest.iter().map(|p| rows[p.0].image_id).collect(),
+            furthest_d2: n.furthest.iter().map(|p| p.1).collect(),
+        })
+        .collect();
+    let info = TripletInfo {
+        tier: kind.tier.clone(),
+        method: method.clone(),
+        scope: scope.into(),
+        recall,
+    };
+    manifest.replace_table(write_triplets(&cfg.dataset, &info, &table)?);
+    manifest
+        .parameters
+        .insert("triplets_k".into(), cfg.k.into());
+    manifest.write(&cfg.dataset)?;
+    Ok(TripletsSummary {
+        anchors: table.len(),
+        k: cfg.k,
+        tier: kind.tier,
+        scope: scope.into(),
+        method,
+        recall,
+    })
+}
+
+/// The style distance matrix of the given views in that order, from the dataset's `official`
+/// descriptors (`dist_<name>.pckl` of the official export), or None when the dataset holds
+/// descriptors of another tier or none. `crop` is the export's: a crop smaller than the
+/// descriptors' would make the published code crop the exported photos differently.
+pub fn official_distance_matrix(
+    dataset: &Path,
+    ids: &[u32],
+    crop: Option<u32>,
+) -> nrw_dataset::Result<Option<Vec<f64>>> {
+    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(dataset)? else {
+        return Ok(None);
+    };
+    let Some(nrw_style::Tier::Official { crop: tier_crop }) = nrw_style::Tier::parse(&kind.tier)
+    else {
+        return Ok(None);
+    };
+    let field = |problem: String| nrw_dataset::DatasetError::Value {
+        path: dataset.join(nrw_dataset::descriptors::DESCRIPTORS_DIR),
+        record: format!("tier {}", kind.tier),
+        field: "descriptor".into(),
+        problem,
+    };
+    if let Some(c) = crop.filter(|&c| c < tier_crop) {
+        return Err(field(format!(
+            "the descriptors are of a {tier_crop}×{tier_crop} crop but the export crops to {c}×{c}; describe with --tier official-{c} or export with a larger --crop"
+        )));
+    }
+    let by_id: BTreeMap<u32, &[f32]> = rows
+        .iter()
+        .map(|r| (r.image_id, r.descriptor.as_slice()))
+        .collect();
+    let picked: Vec<&[f32]> = ids
+        .iter()
+        .map(|id| {
+            by_id.get(id).copied().ok_or_else(|| {
+                field(format!(
+                    "image {id} has no descriptor; rerun `nrw-etl style` on the dataset"
+                ))
+            })
+        })
+        .collect::<nrw_dataset::Result<_>>()?;
+    Ok(Some(nrw_knn::distance_matrix(&picked)))
+}

@@ -1,0 +1,168 @@
+//! Work units: unit `I` of `N` does the groups `g` with `g mod N = I` of a stage whose work is
+//! cut into groups (ingest: one group per shard; style: one per descriptor part).
+//!
+//! The groups themselves never depend on `N` — they are the same consecutive runs of image
+//! ids a single process makes — so any number of units writes exactly the files one process
+//! writes, and `finalize` only has to list them. Every machine derives the same groups from
+//! the same model, so units agree without talking.
+
+use std::fmt;
+
+use crate::error::{PipelineError, Result};
+
+/// One unit of a stage's work, or the whole stage (`0/1`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unit {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl fmt::Display for Unit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl Unit {
+    /// The whole stage in one process.
+    pub const WHOLE: Unit = Unit { index: 0, count: 1 };
+
+    /// Whether this unit does group `g`.
+    pub fn owns(&self, g: usize) -> bool {
+        g % self.count == self.index
+    }
+
+    /// Whether this is the whole stage.
+    pub fn is_whole(&self) -> bool {
+        self.count == 1
+    }
+
+    /// Parse `I/N` (0 ≤ I < N), or `auto`: the index and count from the scheduler's
+    /// environment (`env` looks a variable up; the CLI passes `std::env::var`).
+    ///
+    /// `auto` reads Slurm array jobs (`SLURM_ARRAY_TASK_ID` minus `SLURM_ARRAY_TASK_MIN`, of
+    /// `SLURM_ARRAY_TASK_COUNT`) or Kubernetes Indexed Jobs (`JOB_COMPLETION_INDEX`, of
+    /// `count`, which Kubernetes does not export: pass the Job's `completions`).
+    pub fn parse(
+        text: &str,
+        count: Option<usize>,
+        env: &dyn Fn(&str) -> Option<String>,
+    ) -> Result<Unit> {
+        let bad = |problem: String| PipelineError::config("--shard", problem);
+        let num = |name: &str, v: &str| {
+            v.trim()
+                .parse::<usize>()
+                .map_err(|_| bad(format!("{name}={v:?} is not a non-negative integer")))
+        };
+        let unit = if text == "auto" {
+            if let Some(id) = env("SLURM_ARRAY_TASK_ID") {
+                let id = num("SLURM_ARRAY_TASK_ID", &id)?;
+                let min = env("SLURM_ARRAY_TASK_MIN")
+                    .map(|m| num("SLURM_ARRAY_TASK_MIN", &m))
+                    .transpose()?
+                    .unwrap_or(0);
+                let n = match (count, env("SLURM_ARRAY_TASK_COUNT")) {
+                    (Some(n), _) => n,
+                    (None, Some(c)) => num("SLURM_ARRAY_TASK_COUNT", &c)?,
+                    (None, None) => {
+                        return Err(bad(
+                            "auto: SLURM_ARRAY_TASK_COUNT is not set; pass --shard-count N".into(),
+                        ))
+                    }
+                };
+                Unit {
+                    index: id.checked_sub(min).ok_or_else(|| {
+                        bad(format!(
+                            "auto: SLURM_ARRAY_TASK_ID {id} is below SLURM_ARRAY_TASK_MIN {min}"
+                        ))
+                    })?,
+                    count: n,
+                }
+            } else if let Some(idx) = env("JOB_COMPLETION_INDEX") {
+                let n = count.ok_or_else(|| {
+                    bad("auto: JOB_COMPLETION_INDEX is set but Kubernetes does not export the Job's completions; pass --shard-count N".into())
+                })?;
+                Unit {
+                    index: num("JOB_COMPLETION_INDEX", &idx)?,
+                    count: n,
+                }
+            } else {
+                return Err(bad(
+                    "auto: neither SLURM_ARRAY_TASK_ID (Slurm array job) nor JOB_COMPLETION_INDEX (Kubernetes Indexed Job) is set; give I/N".into(),
+                ));
+            }
+        } else {
+            let (i, n) = text
+                .split_once('/')
+                .ok_or_else(|| bad(format!("{text:?} is not I/N (e.g. 0/4) or auto")))?;
+            Unit {
+                index: num("I", i)?,
+                count: num("N", n)?,
+            }
+        };
+        if unit.count == 0 || unit.index >= unit.count {
+            return Err(bad(format!(
+                "{unit}: the index must be below the count (units are numbered 0 to N-1)"
+            )));
+        }
+        Ok(unit)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn env(vars: &'static [(&'static str, &'static str)]) -> impl Fn(&str) -> Option<String> {
+        move |k| {
+            vars.iter()
+                .find(|(n, _)| *n == k)
+                .map(|(_, v)| v.to_string())
+        }
+    }
+
+    #[test]
+    fn explicit_units_parse_and_own_their_groups() {
+        let u = Unit::parse("2/3", None, &env(&[])).unwrap();
+        assert_eq!(u, Unit { index: 2, count: 3 });
+        assert_eq!(
+            (0..9).filter(|g| u.owns(*g)).collect::<Vec<_>>(),
+            vec![2, 5, 8]
+        );
+        for bad in ["3/3", "0/0", "x/2", "2", "-1/2"] {
+            let e = Unit::parse(bad, None, &env(&[])).unwrap_err().to_string();
+            assert!(e.starts_with("--shard "), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn auto_reads_slurm_arrays_and_kubernetes_indexed_jobs() {
+        let slurm = env(&[
+            ("SLURM_ARRAY_TASK_ID", "5"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "8"),
+        ]);
+        assert_eq!(
+            Unit::parse("auto", None, &slurm).unwrap(),
+            Unit { index: 4, count: 8 }
+        );
+        let k8s = env(&[("JOB_COMPLETION_INDEX", "3")]);
+        assert_eq!(
+            Unit::parse("auto", Some(4), &k8s).unwrap(),
+            Unit { index: 3, count: 4 }
+        );
+        let e = Unit::parse("auto", None, &k8s).unwrap_err().to_string();
+        assert!(e.contains("--shard-count"), "{e}");
+        let e = Unit::parse("auto", None, &env(&[]))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("SLURM_ARRAY_TASK_ID") && e.contains("JOB_COMPLETION_INDEX"),
+            "{e}"
+        );
+        let e = Unit::parse("auto", Some(4), &env(&[("JOB_COMPLETION_INDEX", "4")]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("4/4"), "{e}");
+    }
+}

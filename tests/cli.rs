@@ -1588,7 +1588,9 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
     let tmp = tempfile::tempdir().unwrap();
     let pipelines = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines");
     let paper = pipelines.join("paper.toml");
-    // sceaux_castle keeps its 11 views, then split asks for the paper's 100: a clear error.
+    let weights = shared::shared_path("weights/vgg16_imagenet.safetensors");
+    let weights = weights.to_str().unwrap();
+    // The style stage's VGG tier needs weights: refused before any stage runs.
     let out = tmp.path().join("sceaux");
     let err = fails(&[
         "run",
@@ -1596,6 +1598,21 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         data().join("sceaux_castle").to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("--weights") && err.contains("vgg16-512"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing ran");
+    // sceaux_castle keeps its 11 views, then split asks for the paper's 100: a clear error.
+    let err = fails(&[
+        "run",
+        paper.to_str().unwrap(),
+        data().join("sceaux_castle").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--weights",
+        weights,
     ]);
     assert!(err.contains("--val 100") && err.contains("11"), "{err}");
     assert!(
@@ -1609,21 +1626,35 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         std::fs::read_to_string(&paper)
             .unwrap()
             .replace("val = 100", "val = 2")
-            .replace("min_dim = 600", "min_dim = 200"),
+            .replace("min_dim = 600", "min_dim = 200")
+            .replace("\"vgg16-512\"", "\"color-stats\""),
     )
     .unwrap();
     let out = tmp.path().join("sceaux2");
-    ok(&[
+    let o = nrw(&[
         "run",
         small.to_str().unwrap(),
         data().join("sceaux_castle").to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("k lowered from 20 to 8"),
+        "9 training photos: {err}"
+    );
     assert_eq!(
         std::fs::read_dir(out.join("export/val")).unwrap().count(),
         2 * 3
     );
+    // Every stage ran: descriptors and triplets are listed, the report exists.
+    let m = std::fs::read_to_string(out.join("manifest.json")).unwrap();
+    assert!(
+        m.contains("descriptors/part-00000.parquet") && m.contains("triplets.parquet"),
+        "{m}"
+    );
+    assert!(out.join("qa/report.html").is_file());
     // sacre_coeur keeps nothing: exit 3, later stages skipped.
     let o = nrw(&[
         "run",
@@ -1631,6 +1662,8 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         data().join("sacre_coeur").to_str().unwrap(),
         "--out",
         tmp.path().join("sc").to_str().unwrap(),
+        "--weights",
+        weights,
     ]);
     assert_eq!(o.status.code(), Some(3));
     // A typo in a pipeline is an error, not a silent default.

@@ -21,6 +21,11 @@ pub mod units;
 pub mod views;
 
 pub use error::{DatasetError, Result};
+
+/// Folder of the QA report inside a dataset by default (derived, not listed in the manifest).
+pub const QA_DIR: &str = "qa";
+/// Folder the pipeline runner exports into inside a dataset (derived, not listed).
+pub const EXPORT_DIR: &str = "export";
 pub use manifest::{FileEntry, Manifest, SceneSource, Tool, SCHEMA_VERSION};
 pub use scene::{
     cameras_schema, images_schema, write_scene_tables, ImageOutcome, CAMERAS_TABLE, IMAGES_TABLE,

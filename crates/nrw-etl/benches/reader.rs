@@ -5,30 +5,32 @@
 //! bound) in the same run, on the demo scene's dataset. Writes docs/bench/reader.md.
 
 use std::path::Path;
-use std::process::Command;
 use std::time::Instant;
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let tmp = tempfile::tempdir().unwrap();
-    let exe = env!("CARGO_BIN_EXE_nrw-etl");
-    let run = |args: &[&str]| {
-        let o = Command::new(exe).args(args).output().unwrap();
-        assert!(
-            o.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-    };
-    run(&["demo", "--out", tmp.path().to_str().unwrap()]);
+    nrw_pipeline::runner::demo(
+        tmp.path(),
+        None,
+        None,
+        None,
+        &nrw_pipeline::Silent,
+        &mut |_| {},
+    )
+    .expect("the demo pipeline");
     let ds_dir = tmp.path().join("dataset");
-    run(&["split", ds_dir.to_str().unwrap(), "--val", "0"]);
+    nrw_pipeline::split::split(&nrw_pipeline::split::SplitConfig {
+        val: 0,
+        ..nrw_pipeline::split::SplitConfig::new(&ds_dir)
+    })
+    .expect("split");
     let ds = nrw_dataset::reader::Dataset::open(&ds_dir).unwrap();
     let shards: Vec<_> = ds
         .manifest
         .tables
         .iter()
-        .filter(|t| t.path.starts_with("shards/"))
+        .filter(|t| nrw_dataset::views::is_shard(&t.path))
         .map(|t| ds_dir.join(&t.path))
         .collect();
     let n = ds.len();

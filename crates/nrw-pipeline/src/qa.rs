@@ -13,7 +13,10 @@ pub struct QaConfig {
 
 /// Write report.html and qa.json; returns where they went and the figures.
 pub fn qa(cfg: &QaConfig) -> Result<nrw_qa::Written> {
-    let out = cfg.out.clone().unwrap_or_else(|| cfg.dataset.join("qa"));
+    let out = cfg
+        .out
+        .clone()
+        .unwrap_or_else(|| cfg.dataset.join(nrw_dataset::QA_DIR));
     Ok(nrw_qa::build(&cfg.dataset, &out)?)
 }
 

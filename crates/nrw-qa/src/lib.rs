@@ -114,8 +114,17 @@ pub fn record_timing(dir: &Path, stage: &str, seconds: f64) -> Result<()> {
     Ok(nrw_dataset::timings::record(dir, stage, seconds)?)
 }
 
-fn param_f64(p: &serde_json::Map<String, serde_json::Value>, key: &str, default: f64) -> f64 {
-    p.get(key).and_then(|v| v.as_f64()).unwrap_or(default)
+/// A numeric ingest parameter of the manifest (ingest always records them; the filters'
+/// defaults live in nrw-render alone, so a missing one is an error, not a guess).
+fn param_f64(dir: &Path, p: &serde_json::Map<String, serde_json::Value>, key: &str) -> Result<f64> {
+    p.get(key).and_then(|v| v.as_f64()).ok_or_else(|| {
+        QaError::Dataset(nrw_dataset::DatasetError::Value {
+            path: dir.join(nrw_dataset::Manifest::FILE),
+            record: "parameters".into(),
+            field: key.into(),
+            problem: "missing or not a number; re-run ingest".into(),
+        })
+    })
 }
 
 /// Compute the figures and write `report.html` and `qa.json` into `out`.
@@ -154,7 +163,7 @@ pub fn build(dir: &Path, out: &Path) -> Result<Written> {
         descriptors: descriptors.as_ref().map_or(0, |d| d.1.len()),
     };
     let p = &manifest.parameters;
-    let max_empty = param_f64(p, "max_empty", 0.85);
+    let max_empty = param_f64(dir, p, "max_empty")?;
     let short = |r: &ImageRow| match (r.photo_width, r.photo_height) {
         (Some(w), Some(h)) => Some(w.min(h) as f64),
         _ => None,
@@ -208,7 +217,7 @@ pub fn build(dir: &Path, out: &Path) -> Result<Written> {
         triplets: triplets.as_ref(),
         descriptors: descriptors.as_ref().map(|d| &d.1),
         max_empty,
-        min_side: param_f64(p, "min_photo_side", 450.0),
+        min_side: param_f64(dir, p, "min_photo_side")?,
     })?;
     std::fs::create_dir_all(out).map_err(|source| QaError::Io {
         path: out.to_path_buf(),

@@ -3,10 +3,9 @@
 //! Which one limits training: batches per second of the loader alone (decode + crop +
 //! normalise, parallel over the batch) against training steps per second (forward, backward,
 //! Adam) at the paper's 256² crops, 8 triplets (24 views) per batch. Without DATASET, runs
-//! `nrw-etl demo` first (release build). Writes docs/bench/trainer.md.
+//! the demo pipeline first (through nrw-pipeline). Writes docs/bench/trainer.md.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Instant;
 
 use nrw_trainer::model::{input, triplet_loss, Encoder};
@@ -19,21 +18,8 @@ fn main() {
         Some(d) => PathBuf::from(d),
         None => {
             let demo = root.join("target/bench-demo");
-            let st = Command::new(env!("CARGO"))
-                .args([
-                    "run",
-                    "--release",
-                    "-q",
-                    "-p",
-                    "nrw-etl",
-                    "--",
-                    "demo",
-                    "--out",
-                ])
-                .arg(&demo)
-                .status()
-                .expect("cargo run nrw-etl demo");
-            assert!(st.success(), "nrw-etl demo failed");
+            nrw_pipeline::runner::demo(&demo, None, None, None, &nrw_pipeline::Silent, &mut |_| {})
+                .expect("the demo pipeline");
             demo.join("dataset")
         }
     };

@@ -56,7 +56,7 @@ pub fn run(args: &RunArgs) -> Result<bool> {
         &p,
         &args.scene,
         &args.out,
-        &args.out.join("export"),
+        &args.out.join(nrw_dataset::EXPORT_DIR),
         args.weights.as_deref(),
         &Bars::new(false),
         &mut |d| print_stage(&args.out, d),

@@ -2,6 +2,8 @@
 
 #[path = "support/python.rs"]
 mod python;
+#[path = "s3.rs"]
+mod s3;
 #[path = "support/shared.rs"]
 mod shared;
 #[path = "units.rs"]
@@ -345,8 +347,8 @@ fn demo_builds_the_embedded_scene_and_runs_every_stage() {
         .unwrap();
     assert_eq!(images["rows"], spec.cameras.count);
     // Split and export ran too: the official layout holds every kept view.
-    let split = nrw_dataset::split::read_splits(&dataset).unwrap();
-    let kept = nrw_dataset::scene::read_verdicts(&dataset)
+    let split = nrw_dataset::split::read_splits(&nrw_dataset::Store::from(&dataset)).unwrap();
+    let kept = nrw_dataset::scene::read_verdicts(&nrw_dataset::Store::from(&dataset))
         .unwrap()
         .iter()
         .filter(|v| v.2 == "kept")
@@ -360,7 +362,7 @@ fn demo_builds_the_embedded_scene_and_runs_every_stage() {
     assert_eq!(exported, kept);
     assert!(stdout.contains("export:  "), "{stdout}");
     // Style descriptors and triplets ran too, on the training photos.
-    let (kind, desc) = nrw_dataset::descriptors::read_all(&dataset)
+    let (kind, desc) = nrw_dataset::descriptors::read_all(&nrw_dataset::Store::from(&dataset))
         .unwrap()
         .unwrap();
     assert_eq!((kind.tier.as_str(), desc.len()), ("color-stats", kept));
@@ -868,7 +870,7 @@ fn small_dataset(tmp: &Path, n: usize, semantics: bool) -> PathBuf {
 }
 
 fn split_of(ds: &Path) -> std::collections::BTreeMap<String, String> {
-    nrw_dataset::split::read_splits(ds)
+    nrw_dataset::split::read_splits(&nrw_dataset::Store::from(ds))
         .unwrap()
         .into_iter()
         .map(|a| (a.name, a.split))
@@ -1159,7 +1161,7 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
     assert_eq!(meta["depth"]["mapping"], "linear");
     assert_eq!(
         Some((near, far)),
-        nrw_dataset::scene::read_depth_range(&ds_dir).unwrap()
+        nrw_dataset::scene::read_depth_range(&nrw_dataset::Store::from(&ds_dir)).unwrap()
     );
     let step = (far - near) / 254.0;
     let mut levels = std::collections::BTreeSet::new();
@@ -1471,7 +1473,9 @@ fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
     );
     let o = nrw(&["style", d, "--tier", "color-stats"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let (kind, rows) = nrw_dataset::descriptors::read_all(&ds).unwrap().unwrap();
+    let (kind, rows) = nrw_dataset::descriptors::read_all(&nrw_dataset::Store::from(&ds))
+        .unwrap()
+        .unwrap();
     assert_eq!(
         (kind.tier.as_str(), rows.len(), rows[0].descriptor.len()),
         ("color-stats", 5, 9)
@@ -1500,7 +1504,9 @@ fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
         "--overwrite",
         "--quiet",
     ]);
-    let (kind, rows) = nrw_dataset::descriptors::read_all(&ds).unwrap().unwrap();
+    let (kind, rows) = nrw_dataset::descriptors::read_all(&nrw_dataset::Store::from(&ds))
+        .unwrap()
+        .unwrap();
     assert_eq!(kind.tier, "vgg16-128");
     assert_eq!(kind.weights_sha256.len(), 64);
     assert_eq!(
@@ -1557,7 +1563,9 @@ fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
         "{err}"
     );
     ok(&with("minus-one-to-one", true));
-    let (kind, rows) = nrw_dataset::descriptors::read_all(&ds).unwrap().unwrap();
+    let (kind, rows) = nrw_dataset::descriptors::read_all(&nrw_dataset::Store::from(&ds))
+        .unwrap()
+        .unwrap();
     assert_eq!(kind.preprocess, "MinusOneToOne");
     let img = nrw_style::descriptor::prepare(
         &reader.get(rows[0].image_id).unwrap().photo().unwrap(),
@@ -1698,19 +1706,25 @@ fn triplets_come_from_the_training_split_in_exact_order() {
         "{err}"
     );
     ok(&["triplets", d, "--k", "6"]);
-    let val: Vec<u32> = nrw_dataset::split::read_splits(&ds)
+    let val: Vec<u32> = nrw_dataset::split::read_splits(&nrw_dataset::Store::from(&ds))
         .unwrap()
         .iter()
         .filter(|a| a.split == "val")
         .map(|a| a.image_id)
         .collect();
-    let (_, desc) = nrw_dataset::descriptors::read_all(&ds).unwrap().unwrap();
+    let (_, desc) = nrw_dataset::descriptors::read_all(&nrw_dataset::Store::from(&ds))
+        .unwrap()
+        .unwrap();
     let by_id: std::collections::BTreeMap<u32, Vec<f32>> = desc
         .into_iter()
         .map(|r| (r.image_id, r.descriptor))
         .collect();
-    let batches =
-        nrw_dataset::parquet_io::read_batches(&ds.join("triplets.parquet"), None).unwrap();
+    let batches = nrw_dataset::parquet_io::read_batches(
+        &nrw_dataset::Store::from(&ds),
+        "triplets.parquet",
+        None,
+    )
+    .unwrap();
     let mut anchors = 0;
     for b in &batches {
         let a = column::<UInt32Array>(b, "anchor_id");
@@ -1764,13 +1778,23 @@ fn approximate_triplets_store_their_measured_recall() {
     ok(&["split", d, "--val", "0"]);
     ok(&["style", d, "--tier", "color-stats", "--quiet"]);
     ok(&["triplets", d, "--k", "3", "--pca", "9"]);
-    let b = &nrw_dataset::parquet_io::read_batches(&ds.join("triplets.parquet"), None).unwrap()[0];
+    let b = &nrw_dataset::parquet_io::read_batches(
+        &nrw_dataset::Store::from(&ds),
+        "triplets.parquet",
+        None,
+    )
+    .unwrap()[0];
     assert_eq!(column::<StringArray>(b, "method").value(0), "pca-9");
     // PCA to the full 9 dimensions loses nothing: recall is exactly 1 and was stored.
     assert_eq!(column::<Float64Array>(b, "recall_nearest").value(0), 1.0);
     assert_eq!(column::<Float64Array>(b, "recall_furthest").value(0), 1.0);
     ok(&["triplets", d, "--k", "3"]);
-    let b = &nrw_dataset::parquet_io::read_batches(&ds.join("triplets.parquet"), None).unwrap()[0];
+    let b = &nrw_dataset::parquet_io::read_batches(
+        &nrw_dataset::Store::from(&ds),
+        "triplets.parquet",
+        None,
+    )
+    .unwrap()[0];
     assert_eq!(column::<StringArray>(b, "method").value(0), "exact");
     assert!(arrow_array::Array::is_null(
         column::<Float64Array>(b, "recall_nearest"),
@@ -1841,7 +1865,7 @@ fn hard_case_scenes_go_through_every_later_stage() {
         }
         ok(&["split", d, "--val", if kept > 2 { "1" } else { "0" }]);
         ok(&["style", d, "--tier", "color-stats", "--quiet"]);
-        let train = nrw_dataset::split::read_splits(&ds)
+        let train = nrw_dataset::split::read_splits(&nrw_dataset::Store::from(&ds))
             .unwrap()
             .iter()
             .filter(|a| a.split == "train")
@@ -1915,12 +1939,12 @@ fn the_generator_works_with_every_camera_model() {
 
 /// qa.json's counts, recomputed from the tables with the Arrow reader (not polars).
 fn independent_counts(ds: &Path) -> (usize, usize, usize, usize, usize, usize) {
-    let v = nrw_dataset::scene::read_verdicts(ds).unwrap();
+    let v = nrw_dataset::scene::read_verdicts(&nrw_dataset::Store::from(ds)).unwrap();
     let kept = v.iter().filter(|r| r.2 == "kept").count();
     let small = v.iter().filter(|r| r.2 == "too_small").count();
     let sparse = v.iter().filter(|r| r.2 == "too_sparse").count();
     let splits = if ds.join("splits.parquet").is_file() {
-        nrw_dataset::split::read_splits(ds).unwrap()
+        nrw_dataset::split::read_splits(&nrw_dataset::Store::from(ds)).unwrap()
     } else {
         Vec::new()
     };
@@ -2153,7 +2177,7 @@ fn trainer_loader_crops_align_cover_every_row_once_repeat_under_a_seed_and_stay_
     seen.sort_unstable();
     assert_eq!(seen, ds.ids("train").unwrap());
     // Every channel of a crop is the same window of its view (photo, render, depth, semantics).
-    let scale = nrw_dataset::scene::read_depth_max(&ds_dir)
+    let scale = nrw_dataset::scene::read_depth_max(&nrw_dataset::Store::from(&ds_dir))
         .unwrap()
         .unwrap() as f32;
     let s = 48usize;

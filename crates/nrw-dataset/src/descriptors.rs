@@ -3,7 +3,7 @@
 //! different kinds can never be mixed silently; parts are written atomically and a rerun
 //! with the same settings skips the parts already there.
 
-use std::path::Path;
+use crate::store::Store;
 use std::sync::Arc;
 
 use arrow_array::builder::{Float32Builder, ListBuilder};
@@ -63,7 +63,7 @@ pub fn is_part(rel: &str) -> bool {
 
 /// Write one part atomically.
 pub fn write_part(
-    dir: &Path,
+    dir: &Store,
     k: usize,
     kind: &DescriptorKind,
     rows: &[DescriptorRow],
@@ -103,10 +103,11 @@ pub fn write_part(
 }
 
 /// Read a part: its kind (all rows must agree) and rows.
-pub fn read_part(path: &Path) -> Result<(Option<DescriptorKind>, Vec<DescriptorRow>)> {
+pub fn read_part(dir: &Store, rel: &str) -> Result<(Option<DescriptorKind>, Vec<DescriptorRow>)> {
+    let path = &dir.name(rel);
     let mut kind: Option<DescriptorKind> = None;
     let mut rows = Vec::new();
-    for b in read_batches(path, None)? {
+    for b in read_batches(dir, rel, None)? {
         let ids = column::<UInt32Array>(&b, "image_id", path)?;
         let names = column::<StringArray>(&b, "name", path)?;
         let (tier, sha, pre) = (
@@ -152,25 +153,22 @@ pub fn read_part(path: &Path) -> Result<(Option<DescriptorKind>, Vec<DescriptorR
 }
 
 /// Every descriptor of a dataset, refusing mixed kinds; `None` when there are none.
-pub fn read_all(dir: &Path) -> Result<Option<(DescriptorKind, Vec<DescriptorRow>)>> {
-    let d = dir.join(DESCRIPTORS_DIR);
-    let Ok(entries) = std::fs::read_dir(&d) else {
-        return Ok(None);
-    };
-    let mut parts: Vec<_> = entries
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "parquet"))
+/// Only the parts the manifest lists count (parts of unfinished style units do not).
+pub fn read_all(dir: &Store) -> Result<Option<(DescriptorKind, Vec<DescriptorRow>)>> {
+    let parts: Vec<String> = crate::Manifest::read(dir)?
+        .tables
+        .into_iter()
+        .map(|t| t.path)
+        .filter(|p| is_part(p))
         .collect();
-    parts.sort();
     let mut kind: Option<DescriptorKind> = None;
     let mut rows = Vec::new();
     for p in parts {
-        let (k, r) = read_part(&p)?;
+        let (k, r) = read_part(dir, &p)?;
         if let Some(k) = k {
             if kind.as_ref().is_some_and(|prev| *prev != k) {
                 return Err(DatasetError::Value {
-                    path: p,
+                    path: dir.name(&p),
                     record: "part".into(),
                     field: "tier".into(),
                     problem: format!(

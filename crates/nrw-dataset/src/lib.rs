@@ -15,12 +15,14 @@ pub mod scene;
 pub mod schema;
 pub mod semantics;
 pub mod split;
+pub mod store;
 pub mod timings;
 pub mod triplets;
 pub mod units;
 pub mod views;
 
 pub use error::{DatasetError, Result};
+pub use store::Store;
 
 /// Folder of the QA report inside a dataset by default (derived, not listed in the manifest).
 pub const QA_DIR: &str = "qa";

@@ -7,8 +7,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::atomic::write_bytes_atomic;
 use crate::error::{DatasetError, Result};
+use crate::store::Store;
 
 /// Bumped whenever a table's schema changes incompatibly.
 pub const SCHEMA_VERSION: u32 = 2;
@@ -25,16 +25,19 @@ pub struct FileEntry {
 }
 
 impl FileEntry {
-    /// Size and SHA-256 of `base/rel`, recorded under the name `rel`.
-    pub fn of(base: &Path, rel: &str) -> Result<FileEntry> {
-        let path = base.join(rel);
-        let (bytes, sha256) = sha256_file(&path)?;
-        Ok(FileEntry {
+    /// Size and SHA-256 of a dataset's file `rel`, recorded under the name `rel`.
+    pub fn of(store: &Store, rel: &str) -> Result<FileEntry> {
+        Ok(FileEntry::of_bytes(rel, &store.read(rel)?))
+    }
+
+    /// Size and SHA-256 of bytes about to be written as `rel`.
+    pub fn of_bytes(rel: &str, data: &[u8]) -> FileEntry {
+        FileEntry {
             path: rel.to_string(),
-            bytes,
-            sha256,
+            bytes: data.len() as u64,
+            sha256: hex(&Sha256::digest(data)),
             rows: None,
-        })
+        }
     }
 }
 
@@ -96,14 +99,14 @@ impl Manifest {
     pub const FILE: &'static str = "manifest.json";
 
     /// Write `manifest.json` atomically, pretty-printed for people.
-    pub fn write(&self, dir: &Path) -> Result<()> {
-        let path = dir.join(Self::FILE);
+    pub fn write(&self, store: &Store) -> Result<()> {
+        let path = store.name(Self::FILE);
         let mut text = serde_json::to_string_pretty(self).map_err(|e| DatasetError::Json {
             path: path.clone(),
             source: e,
         })?;
         text.push('\n');
-        write_bytes_atomic(&path, text.as_bytes())
+        store.write(Self::FILE, text.into_bytes())
     }
 
     /// List `entry` in place of any earlier entry with its path.
@@ -118,10 +121,10 @@ impl Manifest {
     }
 
     /// Read a dataset's manifest, refusing other schema versions.
-    pub fn read(dir: &Path) -> Result<Manifest> {
-        let path = dir.join(Self::FILE);
-        let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, e))?;
-        let m: Manifest = serde_json::from_str(&text).map_err(|e| DatasetError::Json {
+    pub fn read(store: &Store) -> Result<Manifest> {
+        let path = store.name(Self::FILE);
+        let text = store.read(Self::FILE)?;
+        let m: Manifest = serde_json::from_slice(&text).map_err(|e| DatasetError::Json {
             path: path.clone(),
             source: e,
         })?;

@@ -1,4 +1,5 @@
-//! Parquet writing with the dataset's settings (zstd, deterministic bytes, atomic rename).
+//! Parquet writing and reading with the dataset's settings (zstd, deterministic bytes),
+//! through the dataset's [`Store`].
 
 use std::path::Path;
 
@@ -7,9 +8,9 @@ use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::properties::WriterProperties;
 
-use crate::atomic::write_atomic;
 use crate::error::{DatasetError, Result};
 use crate::manifest::FileEntry;
+use crate::store::Store;
 
 /// Writer settings shared by every table: zstd level 3, statistics on, no timestamps.
 pub fn writer_properties(max_row_group_rows: usize) -> WriterProperties {
@@ -22,41 +23,50 @@ pub fn writer_properties(max_row_group_rows: usize) -> WriterProperties {
         .build()
 }
 
-/// Write one batch as a Parquet file at `dir/rel` with `props`, atomically, and describe it
-/// for the manifest.
+/// Encode one batch as Parquet bytes with `props`.
+pub fn encode_batch(name: &Path, batch: &RecordBatch, props: WriterProperties) -> Result<Vec<u8>> {
+    let perr = |e| DatasetError::Parquet {
+        path: name.to_path_buf(),
+        source: e,
+    };
+    let mut out = Vec::new();
+    let mut w = ArrowWriter::try_new(&mut out, batch.schema(), Some(props)).map_err(perr)?;
+    w.write(batch).map_err(perr)?;
+    w.close().map_err(perr)?;
+    Ok(out)
+}
+
+/// Write one batch as the Parquet file `rel` of the dataset with `props`, atomically, and
+/// describe it for the manifest.
 pub fn write_batch(
-    dir: &Path,
+    store: &Store,
     rel: &str,
     batch: &RecordBatch,
     props: WriterProperties,
 ) -> Result<FileEntry> {
-    let path = dir.join(rel);
-    let perr = |e| DatasetError::Parquet {
-        path: path.clone(),
-        source: e,
-    };
-    write_atomic(&path, |f| {
-        let mut w = ArrowWriter::try_new(f, batch.schema(), Some(props)).map_err(perr)?;
-        w.write(batch).map_err(perr)?;
-        w.close().map_err(perr)?;
-        Ok(())
-    })?;
-    let mut entry = FileEntry::of(dir, rel)?;
+    let bytes = encode_batch(&store.name(rel), batch, props)?;
+    let mut entry = FileEntry::of_bytes(rel, &bytes);
     entry.rows = Some(batch.num_rows() as u64);
+    store.write(rel, bytes)?;
     Ok(entry)
 }
 
 /// Write one batch as a table with the dataset's default settings.
-pub fn write_table(dir: &Path, rel: &str, batch: &RecordBatch) -> Result<FileEntry> {
-    write_batch(dir, rel, batch, writer_properties(65_536))
+pub fn write_table(store: &Store, rel: &str, batch: &RecordBatch) -> Result<FileEntry> {
+    write_batch(store, rel, batch, writer_properties(65_536))
 }
 
-/// Every batch of a Parquet file, optionally only some columns.
-pub fn read_batches(path: &Path, columns: Option<&[&str]>) -> Result<Vec<RecordBatch>> {
+/// Every batch of a dataset's Parquet file, optionally only some columns.
+pub fn read_batches(
+    store: &Store,
+    rel: &str,
+    columns: Option<&[&str]>,
+) -> Result<Vec<RecordBatch>> {
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-    let f = std::fs::File::open(path).map_err(|e| DatasetError::io(path, e))?;
+    let path = store.name(rel);
+    let f = store.chunks(rel)?;
     let perr = |e| DatasetError::Parquet {
-        path: path.to_path_buf(),
+        path: path.clone(),
         source: e,
     };
     let mut b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(perr)?;

@@ -7,8 +7,9 @@
 //! before any PNG or EXR is decoded.
 
 use std::collections::{BTreeMap, HashMap};
-use std::fs::File;
 use std::path::{Path, PathBuf};
+
+use crate::store::Store;
 
 use arrow_array::{
     Array, BinaryArray, Float64Array, ListArray, RecordBatch, StringArray, UInt32Array,
@@ -141,7 +142,10 @@ struct Location {
 /// An opened dataset.
 #[derive(Debug)]
 pub struct Dataset {
+    /// Where the dataset is (a folder or a URL), to show.
     pub dir: PathBuf,
+    /// Its files.
+    pub store: Store,
     pub manifest: Manifest,
     shards: Vec<String>,
     index: HashMap<u32, Location>,
@@ -160,7 +164,9 @@ use crate::parquet_io::column;
 
 impl Dataset {
     /// Open a dataset folder: manifest (schema version checked), shard index, splits.
-    pub fn open(dir: &Path) -> Result<Dataset> {
+    pub fn open(store: impl Into<Store>) -> Result<Dataset> {
+        let store: Store = store.into();
+        let dir = &store;
         let manifest = Manifest::read(dir)?;
         let shards: Vec<String> = manifest
             .tables
@@ -170,8 +176,8 @@ impl Dataset {
             .collect();
         let mut index = HashMap::new();
         for (s, rel) in shards.iter().enumerate() {
-            let path = dir.join(rel);
-            let f = File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
+            let path = dir.name(rel);
+            let f = dir.chunks(rel)?;
             let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
             let mask = ProjectionMask::columns(b.parquet_schema(), ["image_id"]);
             let mut row = 0;
@@ -208,7 +214,8 @@ impl Dataset {
             v.sort_unstable();
         }
         Ok(Dataset {
-            dir: dir.to_path_buf(),
+            dir: store.root(),
+            store: store.clone(),
             manifest,
             shards,
             index,
@@ -256,8 +263,8 @@ impl Dataset {
     /// Read the given rows of one shard (rows in increasing order).
     fn read_rows(&self, shard: usize, rows: &[usize]) -> Result<Vec<View>> {
         let rel = &self.shards[shard];
-        let path = self.dir.join(rel);
-        let f = File::open(&path).map_err(|e| DatasetError::io(&path, e))?;
+        let path = self.store.name(rel);
+        let f = self.store.chunks(rel)?;
         let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
         let total = b.metadata().file_metadata().num_rows() as usize;
         // Read only the row groups that hold wanted rows, and within them only those rows.
@@ -310,7 +317,7 @@ impl Dataset {
         self.read_rows(loc.shard, &[loc.row])?
             .pop()
             .ok_or_else(|| DatasetError::Schema {
-                path: self.dir.join(&self.shards[loc.shard]),
+                path: self.store.name(&self.shards[loc.shard]),
                 problem: format!("row {} for image {image_id} is missing", loc.row),
             })
     }

@@ -1,8 +1,8 @@
 //! The scene tables: `scene/cameras.parquet` and `scene/images.parquet`, one row per COLMAP
 //! camera and per registered image. Later stages join on `camera_id` and `image_id`.
 
+use crate::store::Store;
 use std::collections::BTreeMap;
-use std::path::Path;
 use std::sync::Arc;
 
 use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
@@ -250,7 +250,7 @@ pub fn images_batch(
 
 /// Write both scene tables into `dir`; returns their manifest entries.
 pub fn write_scene_tables(
-    dir: &Path,
+    dir: &Store,
     rec: &Reconstruction,
     photos: &BTreeMap<u32, Option<(u32, u32)>>,
     outcomes: &BTreeMap<u32, ImageOutcome>,
@@ -262,11 +262,13 @@ pub fn write_scene_tables(
 }
 
 /// (image id, name, verdict) of every registered image, from `scene/images.parquet`.
-pub fn read_verdicts(dir: &Path) -> Result<Vec<(u32, String, String)>> {
+pub fn read_verdicts(dir: &Store) -> Result<Vec<(u32, String, String)>> {
     use crate::parquet_io::column;
-    let path = dir.join(IMAGES_TABLE);
+    let path = dir.name(IMAGES_TABLE);
     let mut out = Vec::new();
-    for b in crate::parquet_io::read_batches(&path, Some(&["image_id", "name", "verdict"]))? {
+    for b in
+        crate::parquet_io::read_batches(dir, IMAGES_TABLE, Some(&["image_id", "name", "verdict"]))?
+    {
         let ids = column::<UInt32Array>(&b, "image_id", &path)?;
         let names = column::<StringArray>(&b, "name", &path)?;
         let verdicts = column::<StringArray>(&b, "verdict", &path)?;
@@ -283,11 +285,12 @@ pub fn read_verdicts(dir: &Path) -> Result<Vec<(u32, String, String)>> {
 
 /// The nearest and farthest rendered depth over the kept views (from `depth_min` and
 /// `depth_max`), if any view was kept.
-pub fn read_depth_range(dir: &Path) -> Result<Option<(f64, f64)>> {
+pub fn read_depth_range(dir: &Store) -> Result<Option<(f64, f64)>> {
     use crate::parquet_io::column;
-    let path = dir.join(IMAGES_TABLE);
+    let path = dir.name(IMAGES_TABLE);
     let mut range: Option<(f64, f64)> = None;
-    for b in crate::parquet_io::read_batches(&path, Some(&["depth_min", "depth_max"]))? {
+    for b in crate::parquet_io::read_batches(dir, IMAGES_TABLE, Some(&["depth_min", "depth_max"]))?
+    {
         let lo = column::<Float64Array>(&b, "depth_min", &path)?;
         let hi = column::<Float64Array>(&b, "depth_max", &path)?;
         for (l, h) in lo.iter().zip(hi.iter()) {
@@ -300,7 +303,7 @@ pub fn read_depth_range(dir: &Path) -> Result<Option<(f64, f64)>> {
 }
 
 /// The largest rendered depth over the kept views (from `depth_max`), if any view was kept.
-pub fn read_depth_max(dir: &Path) -> Result<Option<f64>> {
+pub fn read_depth_max(dir: &Store) -> Result<Option<f64>> {
     // Ingest writes depth_min and depth_max together (both or neither per view).
     Ok(read_depth_range(dir)?.map(|(_, far)| far))
 }

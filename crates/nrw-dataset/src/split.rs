@@ -3,8 +3,8 @@
 //! count; re-running after new photos arrive assigns only the new ones, so a validation photo
 //! never moves to training.
 
+use crate::store::Store;
 use std::collections::BTreeMap;
-use std::path::Path;
 use std::sync::Arc;
 
 use arrow_array::{RecordBatch, StringArray, UInt32Array, UInt64Array};
@@ -126,7 +126,7 @@ pub fn assign(
 }
 
 /// Write `splits.parquet` atomically.
-pub fn write_splits(dir: &Path, rows: &[Assignment]) -> Result<crate::manifest::FileEntry> {
+pub fn write_splits(dir: &Store, rows: &[Assignment]) -> Result<crate::manifest::FileEntry> {
     let batch = RecordBatch::try_new(
         splits_schema(),
         vec![
@@ -150,14 +150,14 @@ pub fn write_splits(dir: &Path, rows: &[Assignment]) -> Result<crate::manifest::
 }
 
 /// Read `splits.parquet`, or nothing if the dataset has no split yet.
-pub fn read_splits(dir: &Path) -> Result<Vec<Assignment>> {
-    let path = dir.join(SPLITS_TABLE);
-    if !path.is_file() {
+pub fn read_splits(dir: &Store) -> Result<Vec<Assignment>> {
+    let path = dir.name(SPLITS_TABLE);
+    if !dir.exists(SPLITS_TABLE)? {
         return Ok(Vec::new());
     }
     use crate::parquet_io::column;
     let mut out = Vec::new();
-    for b in crate::parquet_io::read_batches(&path, None)? {
+    for b in crate::parquet_io::read_batches(dir, SPLITS_TABLE, None)? {
         let ids = column::<UInt32Array>(&b, "image_id", &path)?;
         let names = column::<StringArray>(&b, "name", &path)?;
         let splits = column::<StringArray>(&b, "split", &path)?;

@@ -2,6 +2,8 @@
 //! distance, in order, with squared distances: what appearance pretraining samples from.
 
 use std::path::Path;
+
+use crate::store::Store;
 use std::sync::Arc;
 
 use arrow_array::builder::{Float64Builder, ListBuilder, UInt32Builder};
@@ -57,7 +59,7 @@ pub fn triplets_schema() -> SchemaRef {
 }
 
 /// Write the table atomically.
-pub fn write_triplets(dir: &Path, info: &TripletInfo, rows: &[TripletRow]) -> Result<FileEntry> {
+pub fn write_triplets(dir: &Store, info: &TripletInfo, rows: &[TripletRow]) -> Result<FileEntry> {
     let schema = triplets_schema();
     let field = |i: usize| match schema.field(i).data_type() {
         DataType::List(f) => f.clone(),
@@ -115,16 +117,16 @@ pub fn write_triplets(dir: &Path, info: &TripletInfo, rows: &[TripletRow]) -> Re
 }
 
 /// Read the table back (the trainer's triplet sampler reads it), or None before `triplets`.
-pub fn read_triplets(dir: &Path) -> Result<Option<Vec<TripletRow>>> {
+pub fn read_triplets(dir: &Store) -> Result<Option<Vec<TripletRow>>> {
     use crate::parquet_io::column;
     use arrow_array::types::{Float64Type, UInt32Type};
     use arrow_array::ListArray;
-    let path = dir.join(TRIPLETS_TABLE);
-    if !path.is_file() {
+    let path = dir.name(TRIPLETS_TABLE);
+    if !dir.exists(TRIPLETS_TABLE)? {
         return Ok(None);
     }
     let mut out = Vec::new();
-    for b in crate::parquet_io::read_batches(&path, None)? {
+    for b in crate::parquet_io::read_batches(dir, TRIPLETS_TABLE, None)? {
         let anchors = column::<UInt32Array>(&b, "anchor_id", &path)?;
         let names = column::<StringArray>(&b, "anchor_name", &path)?;
         let lists = |name: &str| column::<ListArray>(&b, name, &path);

@@ -10,14 +10,13 @@
 //! Every file has exactly one writer (groups belong to one unit), so units running at once,
 //! on one machine or many sharing a folder, never overwrite each other.
 
-use std::path::{Path, PathBuf};
-
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DatasetError, Result};
 use crate::manifest::{FileEntry, SceneSource};
 use crate::scene::ImageOutcome;
+use crate::store::Store;
 
 /// Folder of the unit records inside a dataset.
 pub const UNITS_DIR: &str = ".units";
@@ -82,38 +81,33 @@ pub struct GroupRecord {
 }
 
 /// Write a record atomically (compact JSON: records are read by programs).
-pub fn write_record<T: Serialize>(dir: &Path, rel: &str, record: &T) -> Result<()> {
-    let path = dir.join(rel);
-    let text = serde_json::to_string(record).map_err(|e| DatasetError::Json {
-        path: path.clone(),
+pub fn write_record<T: Serialize>(dir: &Store, rel: &str, record: &T) -> Result<()> {
+    let text = serde_json::to_vec(record).map_err(|e| DatasetError::Json {
+        path: dir.name(rel),
         source: e,
     })?;
-    crate::atomic::write_bytes_atomic(&path, text.as_bytes())
+    dir.write(rel, text)
 }
 
 /// Read a record; `None` when it does not exist.
-pub fn read_record<T: DeserializeOwned>(dir: &Path, rel: &str) -> Result<Option<T>> {
-    let path = dir.join(rel);
-    match std::fs::read_to_string(&path) {
-        Ok(text) => serde_json::from_str(&text)
+pub fn read_record<T: DeserializeOwned>(dir: &Store, rel: &str) -> Result<Option<T>> {
+    match dir.read_opt(rel)? {
+        Some(bytes) => serde_json::from_slice(&bytes)
             .map(Some)
-            .map_err(|e| DatasetError::Json { path, source: e }),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(DatasetError::io(path, e)),
+            .map_err(|e| DatasetError::Json {
+                path: dir.name(rel),
+                source: e,
+            }),
+        None => Ok(None),
     }
 }
 
 /// Every unit record of a stage, ordered by count then index.
-pub fn unit_records(dir: &Path, stage: &str) -> Result<Vec<UnitRecord>> {
-    let folder = dir.join(stage_dir(stage));
-    let Ok(entries) = std::fs::read_dir(&folder) else {
-        return Ok(Vec::new());
-    };
+pub fn unit_records(dir: &Store, stage: &str) -> Result<Vec<UnitRecord>> {
     let mut out = Vec::new();
-    for e in entries.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
+    for rel in dir.list(&stage_dir(stage))? {
+        let name = rel.rsplit('/').next().unwrap_or_default();
         if name.starts_with("unit-") && name.ends_with(".json") {
-            let rel = format!("{}/{name}", stage_dir(stage));
             if let Some(r) = read_record::<UnitRecord>(dir, &rel)? {
                 out.push(r);
             }
@@ -125,27 +119,22 @@ pub fn unit_records(dir: &Path, stage: &str) -> Result<Vec<UnitRecord>> {
 
 /// Remove every unit record of a stage except `keep` (a whole-stage run owns the dataset and
 /// clears what interrupted unit runs left).
-pub fn remove_unit_records(dir: &Path, stage: &str, keep: Option<(usize, usize)>) -> Result<()> {
+pub fn remove_unit_records(dir: &Store, stage: &str, keep: Option<(usize, usize)>) -> Result<()> {
     for r in unit_records(dir, stage)? {
         if Some((r.index, r.count)) != keep {
-            let path = dir.join(unit_record_path(stage, r.index, r.count));
-            std::fs::remove_file(&path).map_err(|e| DatasetError::io(&path, e))?;
+            dir.delete(&unit_record_path(stage, r.index, r.count))?;
         }
     }
     Ok(())
 }
 
 /// Remove a stage's records once merged.
-pub fn clear_stage(dir: &Path, stage: &str) -> Result<()> {
-    let folder: PathBuf = dir.join(stage_dir(stage));
-    match std::fs::remove_dir_all(&folder) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(DatasetError::io(folder, e)),
+pub fn clear_stage(dir: &Store, stage: &str) -> Result<()> {
+    dir.delete_dir(&stage_dir(stage))?;
+    if let Some(local) = dir.local_dir() {
+        // Only when empty: another stage's records may still wait for their finalize.
+        let _ = std::fs::remove_dir(local.join(UNITS_DIR));
     }
-    let top = dir.join(UNITS_DIR);
-    // Only when empty: another stage's records may still wait for their finalize.
-    let _ = std::fs::remove_dir(top);
     Ok(())
 }
 
@@ -155,7 +144,8 @@ mod tests {
 
     #[test]
     fn records_round_trip_and_unit_listing_is_ordered() {
-        let dir = tempfile::tempdir().unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = &Store::local(tmp.path());
         let rec = |index, count| UnitRecord {
             stage: STYLE.into(),
             index,
@@ -169,22 +159,20 @@ mod tests {
             seconds: 1.0,
         };
         for (i, n) in [(2, 3), (0, 3), (1, 2)] {
-            write_record(dir.path(), &unit_record_path(STYLE, i, n), &rec(i, n)).unwrap();
+            write_record(dir, &unit_record_path(STYLE, i, n), &rec(i, n)).unwrap();
         }
-        let got: Vec<_> = unit_records(dir.path(), STYLE)
+        let got: Vec<_> = unit_records(dir, STYLE)
             .unwrap()
             .iter()
             .map(|r| (r.index, r.count))
             .collect();
         assert_eq!(got, vec![(1, 2), (0, 3), (2, 3)]);
-        remove_unit_records(dir.path(), STYLE, Some((0, 3))).unwrap();
-        assert_eq!(unit_records(dir.path(), STYLE).unwrap(), vec![rec(0, 3)]);
-        assert!(
-            read_record::<UnitRecord>(dir.path(), &group_record_path(STYLE, 0))
-                .unwrap()
-                .is_none()
-        );
-        clear_stage(dir.path(), STYLE).unwrap();
-        assert!(!dir.path().join(UNITS_DIR).exists());
+        remove_unit_records(dir, STYLE, Some((0, 3))).unwrap();
+        assert_eq!(unit_records(dir, STYLE).unwrap(), vec![rec(0, 3)]);
+        assert!(read_record::<UnitRecord>(dir, &group_record_path(STYLE, 0))
+            .unwrap()
+            .is_none());
+        clear_stage(dir, STYLE).unwrap();
+        assert!(!tmp.path().join(UNITS_DIR).exists());
     }
 }

@@ -4,7 +4,7 @@
 //! Shards are small (default 64 rows) with row groups of 8 rows, so a reader streams them
 //! and random access costs one small row group.
 
-use std::path::Path;
+use crate::store::Store;
 use std::sync::Arc;
 
 use arrow_array::builder::{BinaryBuilder, Float64Builder, ListBuilder};
@@ -36,18 +36,12 @@ pub fn is_shard(rel: &str) -> bool {
 
 /// Files in the dataset's shard folder that are none of `keep` (manifest entries): shards
 /// of an earlier run with other parameters.
-pub fn stale_shards(dir: &Path, keep: &[FileEntry]) -> Vec<std::path::PathBuf> {
-    let Ok(entries) = std::fs::read_dir(dir.join(SHARDS_DIR)) else {
-        return Vec::new();
-    };
-    entries
-        .flatten()
-        .filter(|e| {
-            let rel = format!("{SHARDS_DIR}/{}", e.file_name().to_string_lossy());
-            !keep.iter().any(|k| k.path == rel)
-        })
-        .map(|e| e.path())
-        .collect()
+pub fn stale_shards(dir: &Store, keep: &[FileEntry]) -> Result<Vec<String>> {
+    Ok(dir
+        .list(SHARDS_DIR)?
+        .into_iter()
+        .filter(|rel| !keep.iter().any(|k| &k.path == rel))
+        .collect())
 }
 
 /// One kept view.
@@ -182,7 +176,7 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
 
 /// Write a shard atomically at `dir/rel`; payload columns are stored uncompressed (PNG and
 /// EXR are compressed already), metadata columns with zstd.
-pub fn write_shard(dir: &Path, rel: &str, rows: &[ViewRow]) -> Result<FileEntry> {
+pub fn write_shard(dir: &Store, rel: &str, rows: &[ViewRow]) -> Result<FileEntry> {
     let b = batch(rows)?;
     let mut props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(

@@ -81,7 +81,7 @@ fn depth_table(
     ds: &Dataset,
     landmark: &dyn Fn(&nrw_dataset::reader::View) -> Vec<bool>,
 ) -> String {
-    let (near, far) = nrw_dataset::scene::read_depth_range(&ds.dir)
+    let (near, far) = nrw_dataset::scene::read_depth_range(&ds.store)
         .unwrap()
         .unwrap();
     let _ = writeln!(md, "\n### {title}\n\nDataset depth range {near:.3} … {far:.3} (far / near = {:.1}), {} views.\n", far / near, ds.len());

@@ -13,6 +13,11 @@ pub fn default_name(dataset: &Path) -> String {
     std::fs::canonicalize(dataset)
         .ok()
         .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .or_else(|| {
+            dataset
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+        })
         .unwrap_or_else(|| "dataset".into())
 }
 
@@ -36,11 +41,12 @@ pub fn export(
     cfg: &ExportConfig,
     progress: &dyn Progress,
 ) -> Result<ExportSummary> {
-    crate::qa::timed(dataset, "export", || {
-        let ds = crate::triplets::require_views(dataset)?;
+    let store = &nrw_dataset::Store::open_path(dataset)?;
+    crate::qa::timed(store, "export", || {
+        let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
         progress.start("export", total as u64, "views");
-        let dist = |ids: &[u32]| crate::triplets::official_distance_matrix(dataset, ids, cfg.crop);
+        let dist = |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
         let summary = nrw_dataset::export::export(&ds, cfg, &dist, &|| progress.inc(1))?;
         progress.finish();
         Ok(summary)

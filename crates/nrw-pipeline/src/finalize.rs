@@ -5,6 +5,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use nrw_dataset::Store;
+
 use nrw_dataset::units::{self, GroupRecord, UnitRecord};
 use nrw_dataset::{FileEntry, ImageOutcome, Manifest, Tool, SCHEMA_VERSION};
 
@@ -41,8 +43,15 @@ pub struct FinalizeSummary {
 }
 
 /// Merge whatever units wait in the dataset (ingest first, then style).
-pub fn finalize(dataset: &Path) -> Result<FinalizeSummary> {
+pub fn finalize(dataset: &Store) -> Result<FinalizeSummary> {
     let has = |stage| units::unit_records(dataset, stage).map(|r| !r.is_empty());
+    for stage in [units::INGEST, units::STYLE] {
+        if !dataset.list(&units::stage_dir(stage))?.is_empty() && !has(stage)? {
+            return Err(units_error(dataset, format!(
+                "{stage} units have started here but none has finished: run every unit (again; each resumes), then finalize"
+            )));
+        }
+    }
     let ingest = if has(units::INGEST)? {
         Some(finalize_ingest(dataset)?)
     } else {
@@ -53,22 +62,22 @@ pub fn finalize(dataset: &Path) -> Result<FinalizeSummary> {
     } else {
         None
     };
-    if ingest.is_none() && style.is_none() && !dataset.join(Manifest::FILE).is_file() {
+    if ingest.is_none() && style.is_none() && !dataset.exists(Manifest::FILE)? {
         return Err(PipelineError::Units {
-            dataset: dataset.into(),
+            dataset: dataset.root(),
             problem: "no unit has run here (no .units/ records and no manifest.json): run `nrw-etl ingest SCENE --out DATASET --shard I/N` first".into(),
         });
     }
     Ok(FinalizeSummary {
-        dataset: dataset.display().to_string(),
+        dataset: dataset.root().display().to_string(),
         ingest,
         style,
     })
 }
 
-fn units_error(dataset: &Path, problem: String) -> PipelineError {
+fn units_error(dataset: &Store, problem: String) -> PipelineError {
     PipelineError::Units {
-        dataset: dataset.into(),
+        dataset: dataset.root(),
         problem,
     }
 }
@@ -108,7 +117,7 @@ fn difference(a: &UnitRecord, b: &UnitRecord) -> String {
 }
 
 /// Check a stage's unit records agree and are complete; returns one of them.
-fn check_units(dataset: &Path, stage: &str) -> Result<UnitRecord> {
+fn check_units(dataset: &Store, stage: &str) -> Result<UnitRecord> {
     let records = units::unit_records(dataset, stage)?;
     let first = records
         .first()
@@ -165,7 +174,7 @@ fn count(outcomes: &BTreeMap<u32, ImageOutcome>, verdict: &str) -> usize {
 
 /// Merge ingest's units: scene tables and manifest from the group records, stale shards
 /// (of runs with other parameters) removed.
-pub fn finalize_ingest(dataset: &Path) -> Result<IngestMerge> {
+pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
     let unit = check_units(dataset, units::INGEST)?;
     let mut outcomes = BTreeMap::new();
     let mut photos = BTreeMap::new();
@@ -203,23 +212,23 @@ pub fn finalize_ingest(dataset: &Path) -> Result<IngestMerge> {
     let rec = nrw_colmap::read_model(Path::new(&scene.model_dir), format)?;
     check_model_unchanged(dataset, &unit, &rec)?;
     // Shards of an earlier run with other parameters must not linger next to these.
-    for stale in nrw_dataset::views::stale_shards(dataset, &shards) {
-        std::fs::remove_file(&stale).map_err(|e| nrw_dataset::DatasetError::io(&stale, e))?;
+    for stale in nrw_dataset::views::stale_shards(dataset, &shards)? {
+        dataset.delete(&stale)?;
     }
     let mut tables = nrw_dataset::write_scene_tables(dataset, &rec, &photos, &outcomes)?;
     tables.extend(shards.iter().cloned());
     // A split from an earlier run stays (split assigns only new photos when run again).
-    if dataset.join(nrw_dataset::split::SPLITS_TABLE).is_file() {
+    if dataset.exists(nrw_dataset::split::SPLITS_TABLE)? {
         tables.push(FileEntry::of(dataset, nrw_dataset::split::SPLITS_TABLE)?);
     }
     let mut warnings = unit.warnings.clone();
     // Triplets depend on which views survive: a new ingest makes them stale.
-    let stale = dataset.join(nrw_dataset::triplets::TRIPLETS_TABLE);
-    if stale.is_file() {
-        std::fs::remove_file(&stale).map_err(|e| nrw_dataset::DatasetError::io(&stale, e))?;
+    let stale = nrw_dataset::triplets::TRIPLETS_TABLE;
+    if dataset.exists(stale)? {
+        dataset.delete(stale)?;
         warnings.push(format!(
             "{}: removed (stale after a new ingest); run `nrw-etl triplets` again",
-            stale.display()
+            dataset.name(stale).display()
         ));
     }
     let manifest = Manifest {
@@ -258,7 +267,7 @@ pub fn finalize_ingest(dataset: &Path) -> Result<IngestMerge> {
 
 /// The model files read now must be those the units read.
 fn check_model_unchanged(
-    dataset: &Path,
+    dataset: &Store,
     unit: &UnitRecord,
     rec: &nrw_colmap::Reconstruction,
 ) -> Result<()> {
@@ -281,13 +290,13 @@ fn check_model_unchanged(
 
 /// Merge style's units: every part present and of the units' kind, parts past the end
 /// (of an earlier, larger run) removed, all parts listed in the manifest.
-pub fn finalize_style(dataset: &Path) -> Result<StyleMerge> {
+pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
     let unit = check_units(dataset, units::STYLE)?;
     let kind = crate::style::kind_of(&unit);
     for k in 0..unit.groups {
         let rel = nrw_dataset::descriptors::part_path(k);
-        let ok = dataset.join(&rel).is_file()
-            && nrw_dataset::descriptors::read_part(&dataset.join(&rel))?
+        let ok = dataset.exists(&rel)?
+            && nrw_dataset::descriptors::read_part(dataset, &rel)?
                 .0
                 .as_ref()
                 == Some(&kind);

@@ -16,7 +16,7 @@ use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
 };
 use nrw_dataset::units::{self, GroupImage, GroupRecord, UnitRecord};
-use nrw_dataset::{FileEntry, ImageOutcome, SceneSource, ViewRow};
+use nrw_dataset::{FileEntry, ImageOutcome, SceneSource, Store, ViewRow};
 use nrw_render::{render, render_size, Filters, RenderCloud, Verdict, View};
 use rayon::prelude::*;
 
@@ -360,13 +360,13 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
 }
 
 /// A group's record if it is done with these inputs and parameters and its shard is intact.
-fn done_group(out: &Path, g: usize, fingerprint: &str) -> Option<GroupRecord> {
+fn done_group(out: &Store, g: usize, fingerprint: &str) -> Option<GroupRecord> {
     let r: GroupRecord =
         units::read_record(out, &units::group_record_path(units::INGEST, g)).ok()??;
     let intact = r.fingerprint == fingerprint
-        && r.shard.as_ref().is_none_or(|e| {
-            nrw_dataset::manifest::sha256_file(&out.join(&e.path)).is_ok_and(|(_, h)| h == e.sha256)
-        });
+        && r.shard
+            .as_ref()
+            .is_none_or(|e| FileEntry::of(out, &e.path).is_ok_and(|f| f.sha256 == e.sha256));
     intact.then_some(r)
 }
 
@@ -477,6 +477,7 @@ fn process(
 /// Render one group, write its shard, then its record.
 fn run_group(
     cfg: &IngestConfig,
+    store: &Store,
     p: &Prepared,
     g: usize,
     ids: &[u32],
@@ -495,7 +496,7 @@ fn run_group(
     let shard = if rows.is_empty() {
         None
     } else {
-        Some(nrw_dataset::write_shard(&cfg.out, &rel, &rows)?)
+        Some(nrw_dataset::write_shard(store, &rel, &rows)?)
     };
     let images = ids
         .iter()
@@ -516,11 +517,7 @@ fn run_group(
         shard,
         images,
     };
-    units::write_record(
-        &cfg.out,
-        &units::group_record_path(units::INGEST, g),
-        &record,
-    )?;
+    units::write_record(store, &units::group_record_path(units::INGEST, g), &record)?;
     Ok(rows.len())
 }
 
@@ -529,7 +526,7 @@ fn run_group(
 pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> Result<UnitSummary> {
     let t0 = Instant::now();
     let mut p = prepare(cfg, unit)?;
-    std::fs::create_dir_all(&cfg.out).map_err(|e| nrw_dataset::DatasetError::io(&cfg.out, e))?;
+    let store = &Store::open_path(&cfg.out)?;
     let ids: Vec<u32> = p.rec.images.keys().copied().collect();
     let groups: Vec<(usize, &[u32])> = ids
         .chunks(cfg.rows_per_shard)
@@ -538,7 +535,7 @@ pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> R
         .collect();
     let todo: Vec<&(usize, &[u32])> = groups
         .iter()
-        .filter(|(g, _)| done_group(&cfg.out, *g, &p.record.fingerprint).is_none())
+        .filter(|(g, _)| done_group(store, *g, &p.record.fingerprint).is_none())
         .collect();
     let resumed = groups.len() - todo.len();
     progress.start(
@@ -548,7 +545,7 @@ pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> R
     );
     let mut views = 0;
     for (written, (g, group)) in todo.iter().enumerate() {
-        views += run_group(cfg, &p, *g, group, progress)?;
+        views += run_group(cfg, store, &p, *g, group, progress)?;
         if let Some(d) = cfg.pause_after_group {
             std::thread::sleep(d);
         }
@@ -563,9 +560,9 @@ pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> R
     progress.finish();
     p.record.seconds = t0.elapsed().as_secs_f64();
     let rel = units::unit_record_path(units::INGEST, unit.index, unit.count);
-    units::write_record(&cfg.out, &rel, &p.record)?;
+    units::write_record(store, &rel, &p.record)?;
     Ok(UnitSummary {
-        dataset: cfg.out.display().to_string(),
+        dataset: store.root().display().to_string(),
         unit: unit.to_string(),
         groups_owned: groups.len(),
         groups_total: p.record.groups,
@@ -603,9 +600,10 @@ pub struct IngestSummary {
 pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSummary> {
     let t0 = Instant::now();
     check_config(cfg)?;
-    units::remove_unit_records(&cfg.out, units::INGEST, None)?;
+    let store = &Store::open_path(&cfg.out)?;
+    units::remove_unit_records(store, units::INGEST, None)?;
     let u = ingest_unit(cfg, Unit::WHOLE, progress)?;
-    let f = crate::finalize::finalize_ingest(&cfg.out)?;
+    let f = crate::finalize::finalize_ingest(store)?;
     Ok(IngestSummary {
         dataset: u.dataset,
         registered: f.registered,

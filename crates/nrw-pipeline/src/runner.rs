@@ -285,6 +285,7 @@ pub fn run(
 
 /// `k`, lowered to the training photos minus the anchor when there are fewer (with a warning).
 fn capped_k(k: usize, dataset: &Path, progress: &dyn Progress) -> Result<usize> {
+    let dataset = &nrw_dataset::Store::open_path(dataset)?;
     let splits = nrw_dataset::split::read_splits(dataset)?;
     let scope = if splits.is_empty() {
         nrw_dataset::reader::Dataset::open(dataset)?.len()

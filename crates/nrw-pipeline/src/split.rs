@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use nrw_dataset::split::{assign, read_splits, write_splits};
-use nrw_dataset::Manifest;
+use nrw_dataset::{Manifest, Store};
 
 use crate::error::{PipelineError, Result};
 
@@ -42,21 +42,22 @@ pub struct SplitSummary {
 
 /// Assign the kept photos and list the table in the manifest.
 pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
-    crate::qa::timed(&cfg.dataset, "split", || {
-        let mut manifest = Manifest::read(&cfg.dataset)?;
-        let kept: Vec<(u32, String)> = nrw_dataset::scene::read_verdicts(&cfg.dataset)?
+    let store = &Store::open_path(&cfg.dataset)?;
+    crate::qa::timed(store, "split", || {
+        let mut manifest = Manifest::read(store)?;
+        let kept: Vec<(u32, String)> = nrw_dataset::scene::read_verdicts(store)?
             .into_iter()
             .filter(|(_, _, v)| v == nrw_dataset::scene::VERDICT_KEPT)
             .map(|(id, name, _)| (id, name))
             .collect();
-        let previous = read_splits(&cfg.dataset)?;
+        let previous = read_splits(store)?;
         let (rows, change) = assign(&kept, &previous, cfg.val, cfg.seed)
             .map_err(|e| PipelineError::dataset(&cfg.dataset, e.to_string()))?;
-        manifest.replace_table(write_splits(&cfg.dataset, &rows)?);
+        manifest.replace_table(write_splits(store, &rows)?);
         manifest
             .parameters
             .insert("split_val".into(), cfg.val.into());
-        manifest.write(&cfg.dataset)?;
+        manifest.write(store)?;
         let val = rows.iter().filter(|a| a.split == "val").count();
         Ok(SplitSummary {
             train: rows.len() - val,

@@ -10,7 +10,7 @@ use nrw_dataset::descriptors::{
 };
 use nrw_dataset::reader::Dataset;
 use nrw_dataset::units::{self, UnitRecord};
-use nrw_dataset::Manifest;
+use nrw_dataset::{Manifest, Store};
 use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
@@ -133,15 +133,17 @@ pub(crate) fn kind_of(r: &UnitRecord) -> DescriptorKind {
 /// Remove parts of another kind among `parts` (or refuse without `overwrite`).
 fn clear_other_kinds(
     cfg: &StyleConfig,
+    store: &Store,
     kind: &DescriptorKind,
     parts: impl Iterator<Item = usize>,
 ) -> Result<()> {
     for k in parts {
-        let path = cfg.dataset.join(part_path(k));
-        if !path.is_file() {
+        let rel = part_path(k);
+        let path = store.name(&rel);
+        if !store.exists(&rel)? {
             continue;
         }
-        let (pk, _) = read_part(&path)?;
+        let (pk, _) = read_part(store, &rel)?;
         if pk.as_ref().is_some_and(|p| p != kind) {
             if !cfg.overwrite {
                 return Err(PipelineError::input(
@@ -152,34 +154,34 @@ fn clear_other_kinds(
                     ),
                 ));
             }
-            std::fs::remove_file(&path).map_err(|e| nrw_dataset::DatasetError::io(&path, e))?;
+            store.delete(&rel)?;
         }
     }
     Ok(())
 }
 
 /// Every existing part index in the dataset.
-fn existing_parts(dataset: &Path) -> Vec<usize> {
-    let Ok(entries) = std::fs::read_dir(dataset.join(DESCRIPTORS_DIR)) else {
-        return Vec::new();
-    };
-    entries
-        .flatten()
-        .filter_map(|e| {
-            let n = e.file_name().to_string_lossy().into_owned();
-            n.strip_prefix("part-")?
+fn existing_parts(dataset: &Store) -> Result<Vec<usize>> {
+    Ok(dataset
+        .list(DESCRIPTORS_DIR)?
+        .iter()
+        .filter_map(|rel| {
+            rel.strip_prefix(DESCRIPTORS_DIR)?
+                .strip_prefix("/part-")?
                 .strip_suffix(".parquet")?
                 .parse()
                 .ok()
         })
-        .collect()
+        .collect())
 }
 
 /// List parts `0..groups` in the manifest and remove parts past them (of a larger earlier run).
-pub(crate) fn list_parts(dataset: &Path, manifest: &mut Manifest, groups: usize) -> Result<()> {
-    for k in existing_parts(dataset).into_iter().filter(|k| *k >= groups) {
-        let path = dataset.join(part_path(k));
-        std::fs::remove_file(&path).map_err(|e| nrw_dataset::DatasetError::io(&path, e))?;
+pub(crate) fn list_parts(dataset: &Store, manifest: &mut Manifest, groups: usize) -> Result<()> {
+    for k in existing_parts(dataset)?
+        .into_iter()
+        .filter(|k| *k >= groups)
+    {
+        dataset.delete(&part_path(k))?;
     }
     manifest.remove_tables(nrw_dataset::descriptors::is_part);
     for k in 0..groups {
@@ -189,12 +191,12 @@ pub(crate) fn list_parts(dataset: &Path, manifest: &mut Manifest, groups: usize)
 }
 
 /// Whether part `k` is already done for these photos and this kind.
-fn part_done(dataset: &Path, k: usize, kind: &DescriptorKind, ids: &[u32]) -> Result<bool> {
-    let path = dataset.join(part_path(k));
-    if !path.is_file() {
+fn part_done(dataset: &Store, k: usize, kind: &DescriptorKind, ids: &[u32]) -> Result<bool> {
+    let rel = part_path(k);
+    if !dataset.exists(&rel)? {
         return Ok(false);
     }
-    let (pk, rows) = read_part(&path)?;
+    let (pk, rows) = read_part(dataset, &rel)?;
     Ok(pk.as_ref() == Some(kind) && rows.iter().map(|r| r.image_id).eq(ids.iter().copied()))
 }
 
@@ -232,7 +234,7 @@ fn describe_part(
         })
         .collect::<Result<_>>()?;
     rows.sort_by_key(|r| r.image_id);
-    write_part(&cfg.dataset, k, kind, &rows)?;
+    write_part(&ds.store, k, kind, &rows)?;
     Ok(())
 }
 
@@ -257,7 +259,8 @@ fn run_unit(
         ));
     }
     let kind = kind(cfg, net);
-    let ds = Dataset::open(&cfg.dataset)?;
+    let ds = Dataset::open(Store::open_path(&cfg.dataset)?)?;
+    let store = &ds.store.clone();
     let mut ids: Vec<u32> = ds
         .splits()
         .iter()
@@ -272,13 +275,13 @@ fn run_unit(
     // A whole run owns every part: it refuses (or clears) other kinds anywhere; a unit only
     // among its own parts.
     if unit.is_whole() {
-        clear_other_kinds(cfg, &kind, existing_parts(&cfg.dataset).into_iter())?;
+        clear_other_kinds(cfg, store, &kind, existing_parts(store)?.into_iter())?;
     } else {
-        clear_other_kinds(cfg, &kind, groups.iter().map(|(k, _)| *k))?;
+        clear_other_kinds(cfg, store, &kind, groups.iter().map(|(k, _)| *k))?;
     }
     let mut todo = Vec::new();
     for (k, g) in &groups {
-        if !part_done(&cfg.dataset, *k, &kind, g)? {
+        if !part_done(store, *k, &kind, g)? {
             todo.push((*k, *g));
         }
     }
@@ -316,12 +319,12 @@ fn run_unit(
         seconds: t0.elapsed().as_secs_f64(),
     };
     units::write_record(
-        &cfg.dataset,
+        store,
         &units::unit_record_path(units::STYLE, unit.index, unit.count),
         &record,
     )?;
     Ok(StyleSummary {
-        dataset: cfg.dataset.display().to_string(),
+        dataset: store.root().display().to_string(),
         unit: unit.to_string(),
         tier: kind.tier,
         photos: groups.iter().map(|(_, g)| g.len()).sum(),
@@ -334,9 +337,10 @@ fn run_unit(
 /// Describe every kept photo in this process, then list the parts in the manifest. Parts
 /// of another kind are replaced only with `overwrite`.
 pub fn style(cfg: &StyleConfig, progress: &dyn Progress) -> Result<StyleSummary> {
-    units::remove_unit_records(&cfg.dataset, units::STYLE, None)?;
+    let store = &Store::open_path(&cfg.dataset)?;
+    units::remove_unit_records(store, units::STYLE, None)?;
     let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
     let s = run_unit(cfg, Unit::WHOLE, net.as_ref(), progress)?;
-    crate::finalize::finalize_style(&cfg.dataset)?;
+    crate::finalize::finalize_style(store)?;
     Ok(s)
 }

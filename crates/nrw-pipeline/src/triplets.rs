@@ -2,10 +2,10 @@
 //! distance, from the descriptors style wrote; and the official export's distance matrix.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use nrw_dataset::triplets::{write_triplets, TripletInfo, TripletRow};
-use nrw_dataset::Manifest;
+use nrw_dataset::{Manifest, Store};
 
 use crate::error::{PipelineError, Result};
 
@@ -49,13 +49,13 @@ pub struct TripletsSummary {
 }
 
 /// Refuse stages that need views when ingest kept none, saying so.
-pub fn require_views(dataset: &Path) -> Result<nrw_dataset::reader::Dataset> {
+pub fn require_views(dataset: &Store) -> Result<nrw_dataset::reader::Dataset> {
     let ds = nrw_dataset::reader::Dataset::open(dataset)?;
     if ds.is_empty() {
         let registered = nrw_dataset::scene::read_verdicts(dataset)?.len();
-        return Err(PipelineError::dataset(dataset, format!(
+        return Err(PipelineError::dataset(dataset.root(), format!(
             "no kept view: ingest dropped all {registered} registered photos (`nrw-etl inspect {}` shows why)",
-            dataset.display()
+            dataset.root().display()
         )));
     }
     Ok(ds)
@@ -64,9 +64,10 @@ pub fn require_views(dataset: &Path) -> Result<nrw_dataset::reader::Dataset> {
 /// The photos in scope: the training split unless `all_splits` (or no split yet).
 fn in_scope(
     cfg: &TripletsConfig,
+    store: &Store,
     ids: &BTreeSet<u32>,
 ) -> Result<(&'static str, Option<BTreeSet<u32>>)> {
-    let splits = nrw_dataset::split::read_splits(&cfg.dataset)?;
+    let splits = nrw_dataset::split::read_splits(store)?;
     if cfg.all_splits || splits.is_empty() {
         return Ok(("all", None));
     }
@@ -86,13 +87,14 @@ fn in_scope(
 
 /// Compute and write the triplet table.
 pub fn triplets(cfg: &TripletsConfig) -> Result<TripletsSummary> {
-    crate::qa::timed(&cfg.dataset, "triplets", || run(cfg))
+    let store = &Store::open_path(&cfg.dataset)?;
+    crate::qa::timed(store, "triplets", || run(cfg, store))
 }
 
-fn run(cfg: &TripletsConfig) -> Result<TripletsSummary> {
-    require_views(&cfg.dataset)?;
-    let mut manifest = Manifest::read(&cfg.dataset)?;
-    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(&cfg.dataset)? else {
+fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
+    require_views(store)?;
+    let mut manifest = Manifest::read(store)?;
+    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(store)? else {
         return Err(PipelineError::dataset(
             &cfg.dataset,
             format!(
@@ -102,7 +104,7 @@ fn run(cfg: &TripletsConfig) -> Result<TripletsSummary> {
         ));
     };
     let described: BTreeSet<u32> = rows.iter().map(|r| r.image_id).collect();
-    let (scope, allowed) = in_scope(cfg, &described)?;
+    let (scope, allowed) = in_scope(cfg, store, &described)?;
     let rows: Vec<_> = rows
         .into_iter()
         .filter(|r| allowed.as_ref().is_none_or(|a| a.contains(&r.image_id)))
@@ -162,11 +164,11 @@ fn run(cfg: &TripletsConfig) -> Result<TripletsSummary> {
         scope: scope.into(),
         recall,
     };
-    manifest.replace_table(write_triplets(&cfg.dataset, &info, &table)?);
+    manifest.replace_table(write_triplets(store, &info, &table)?);
     manifest
         .parameters
         .insert("triplets_k".into(), cfg.k.into());
-    manifest.write(&cfg.dataset)?;
+    manifest.write(store)?;
     Ok(TripletsSummary {
         anchors: table.len(),
         k: cfg.k,
@@ -182,7 +184,7 @@ fn run(cfg: &TripletsConfig) -> Result<TripletsSummary> {
 /// descriptors of another tier or none. `crop` is the export's: a crop smaller than the
 /// descriptors' would make the published code crop the exported photos differently.
 pub fn official_distance_matrix(
-    dataset: &Path,
+    dataset: &Store,
     ids: &[u32],
     crop: Option<u32>,
 ) -> nrw_dataset::Result<Option<Vec<f64>>> {
@@ -194,7 +196,7 @@ pub fn official_distance_matrix(
         return Ok(None);
     };
     let field = |problem: String| nrw_dataset::DatasetError::Value {
-        path: dataset.join(nrw_dataset::descriptors::DESCRIPTORS_DIR),
+        path: dataset.name(nrw_dataset::descriptors::DESCRIPTORS_DIR),
         record: format!("tier {}", kind.tier),
         field: "descriptor".into(),
         problem,

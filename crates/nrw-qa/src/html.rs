@@ -15,7 +15,7 @@ use crate::{plots, Figures};
 
 /// Everything the page shows.
 pub struct Inputs<'a> {
-    pub dir: &'a Path,
+    pub dir: &'a nrw_dataset::Store,
     pub manifest: &'a nrw_dataset::Manifest,
     pub figures: &'a Figures,
     pub images: &'a [ImageRow],

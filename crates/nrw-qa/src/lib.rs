@@ -110,16 +110,20 @@ pub struct Written {
 pub use nrw_dataset::timings::TIMINGS_FILE;
 
 /// Record how long a stage took in `DATASET/timings.json`.
-pub fn record_timing(dir: &Path, stage: &str, seconds: f64) -> Result<()> {
+pub fn record_timing(dir: &nrw_dataset::Store, stage: &str, seconds: f64) -> Result<()> {
     Ok(nrw_dataset::timings::record(dir, stage, seconds)?)
 }
 
 /// A numeric ingest parameter of the manifest (ingest always records them; the filters'
 /// defaults live in nrw-render alone, so a missing one is an error, not a guess).
-fn param_f64(dir: &Path, p: &serde_json::Map<String, serde_json::Value>, key: &str) -> Result<f64> {
+fn param_f64(
+    dir: &nrw_dataset::Store,
+    p: &serde_json::Map<String, serde_json::Value>,
+    key: &str,
+) -> Result<f64> {
     p.get(key).and_then(|v| v.as_f64()).ok_or_else(|| {
         QaError::Dataset(nrw_dataset::DatasetError::Value {
-            path: dir.join(nrw_dataset::Manifest::FILE),
+            path: dir.name(nrw_dataset::Manifest::FILE),
             record: "parameters".into(),
             field: key.into(),
             problem: "missing or not a number; re-run ingest".into(),
@@ -128,11 +132,11 @@ fn param_f64(dir: &Path, p: &serde_json::Map<String, serde_json::Value>, key: &s
 }
 
 /// Compute the figures and write `report.html` and `qa.json` into `out`.
-pub fn build(dir: &Path, out: &Path) -> Result<Written> {
+pub fn build(dir: &nrw_dataset::Store, out: &Path) -> Result<Written> {
     let manifest = nrw_dataset::Manifest::read(dir)?;
     let images = tables::images(dir)?;
     let triplets = tables::triplets(dir, 3)?;
-    let shard_rows = tables::shard_rows(dir)?;
+    let shard_rows = tables::shard_rows(&manifest);
     let descriptors = nrw_dataset::descriptors::read_all(dir)?;
     let timings = nrw_dataset::timings::read(dir);
     let kept: Vec<&ImageRow> = images
@@ -198,7 +202,7 @@ pub fn build(dir: &Path, out: &Path) -> Result<Written> {
     }
     let warnings = warnings(&images, &counts, max_empty);
     let figures = Figures {
-        dataset: dir.display().to_string(),
+        dataset: dir.root().display().to_string(),
         scene_dir: manifest.scene.scene_dir.clone(),
         tool: format!("{} {}", manifest.tool.name, manifest.tool.version),
         counts,
@@ -331,9 +335,9 @@ mod tests {
     #[test]
     fn timings_accumulate_per_stage() {
         let d = tempfile::tempdir().unwrap();
-        record_timing(d.path(), "ingest", 2.5).unwrap();
-        record_timing(d.path(), "split", 0.5).unwrap();
-        record_timing(d.path(), "ingest", 3.0).unwrap();
+        record_timing(&d.path().into(), "ingest", 2.5).unwrap();
+        record_timing(&d.path().into(), "split", 0.5).unwrap();
+        record_timing(&d.path().into(), "ingest", 3.0).unwrap();
         let t: BTreeMap<String, f64> =
             serde_json::from_str(&std::fs::read_to_string(d.path().join(TIMINGS_FILE)).unwrap())
                 .unwrap();

@@ -1,7 +1,9 @@
-//! The dataset's tables, read with polars lazy scans: only the columns the report needs are
-//! read (projection pushdown), so shards' image bytes never enter memory here.
+//! The dataset's small tables (scene, split, triplets) read with polars through the
+//! dataset's store; shards are never read here (their row counts come from the manifest).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use nrw_dataset::Store;
 
 use polars::prelude::*;
 
@@ -26,15 +28,16 @@ pub struct ImageRow {
     pub split: Option<String>,
 }
 
-fn scan(path: &Path) -> Result<LazyFrame> {
-    LazyFrame::scan_parquet(
-        PlRefPath::new(path.to_string_lossy().as_ref()),
-        ScanArgsParquet::default(),
-    )
-    .map_err(|source| QaError::Polars {
-        path: path.to_path_buf(),
-        source,
-    })
+/// A table of the dataset as a lazy frame (read whole: these tables are small).
+fn scan(store: &Store, rel: &str) -> Result<LazyFrame> {
+    let bytes = store.read(rel)?;
+    ParquetReader::new(std::io::Cursor::new(bytes.to_vec()))
+        .finish()
+        .map(IntoLazy::lazy)
+        .map_err(|source| QaError::Polars {
+            path: store.name(rel),
+            source,
+        })
 }
 
 fn collect(path: &Path, lf: LazyFrame) -> Result<DataFrame> {
@@ -62,11 +65,11 @@ macro_rules! column {
 }
 
 /// `scene/images.parquet` joined with `splits.parquet` (when the dataset has been split).
-pub fn images(dir: &Path) -> Result<Vec<ImageRow>> {
-    let path = dir.join(nrw_dataset::IMAGES_TABLE);
+pub fn images(dir: &Store) -> Result<Vec<ImageRow>> {
+    let path = dir.name(nrw_dataset::IMAGES_TABLE);
     let df = collect(
         &path,
-        scan(&path)?.select([
+        scan(dir, nrw_dataset::IMAGES_TABLE)?.select([
             col("image_id"),
             col("name"),
             col("verdict"),
@@ -120,12 +123,16 @@ pub fn images(dir: &Path) -> Result<Vec<ImageRow>> {
 }
 
 /// (image_id, split) of every split photo; empty before `nrw-etl split`.
-pub fn splits(dir: &Path) -> Result<Vec<(u32, String)>> {
-    let path = dir.join(nrw_dataset::split::SPLITS_TABLE);
-    if !path.is_file() {
+pub fn splits(dir: &Store) -> Result<Vec<(u32, String)>> {
+    let rel = nrw_dataset::split::SPLITS_TABLE;
+    let path = dir.name(rel);
+    if !dir.exists(rel)? {
         return Ok(Vec::new());
     }
-    let df = collect(&path, scan(&path)?.select([col("image_id"), col("split")]))?;
+    let df = collect(
+        &path,
+        scan(dir, rel)?.select([col("image_id"), col("split")]),
+    )?;
     let ids = column!(df, &path, "image_id", u32);
     let split = column!(df, &path, "split", str);
     Ok((0..df.height())
@@ -133,28 +140,14 @@ pub fn splits(dir: &Path) -> Result<Vec<(u32, String)>> {
         .collect())
 }
 
-/// Rows in the view shards (every kept view has one), counted without reading image bytes.
-pub fn shard_rows(dir: &Path) -> Result<u64> {
-    let shards = dir.join(nrw_dataset::views::SHARDS_DIR);
-    if !shards.is_dir() {
-        return Ok(0);
-    }
-    let mut n = 0u64;
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&shards)
-        .map_err(|source| QaError::Io {
-            path: shards.clone(),
-            source,
-        })?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
-        .collect();
-    files.sort();
-    for f in files {
-        let df = collect(&f, scan(&f)?.select([len().alias("rows")]))?;
-        n += column!(df, &f, "rows", u32).get(0).unwrap_or(0) as u64;
-    }
-    Ok(n)
+/// Rows in the view shards (every kept view has one), as the manifest records them.
+pub fn shard_rows(manifest: &nrw_dataset::Manifest) -> u64 {
+    manifest
+        .tables
+        .iter()
+        .filter(|t| nrw_dataset::views::is_shard(&t.path))
+        .filter_map(|t| t.rows)
+        .sum()
 }
 
 /// The first anchors of the triplet table with their neighbour ids, and its settings.
@@ -165,14 +158,15 @@ pub struct Triplets {
 }
 
 /// The triplet table, or None before `nrw-etl triplets`.
-pub fn triplets(dir: &Path, sample: usize) -> Result<Option<Triplets>> {
-    let path = dir.join(nrw_dataset::triplets::TRIPLETS_TABLE);
-    if !path.is_file() {
+pub fn triplets(dir: &Store, sample: usize) -> Result<Option<Triplets>> {
+    let rel = nrw_dataset::triplets::TRIPLETS_TABLE;
+    let path = dir.name(rel);
+    if !dir.exists(rel)? {
         return Ok(None);
     }
     let df = collect(
         &path,
-        scan(&path)?.select([
+        scan(dir, rel)?.select([
             col("anchor_id"),
             col("nearest_ids"),
             col("furthest_ids"),

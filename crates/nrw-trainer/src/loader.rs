@@ -107,7 +107,7 @@ impl<'a> Loader<'a> {
         if cfg.batch == 0 || cfg.crop == 0 {
             return Err(TrainError::Usage("batch and crop must be positive".into()));
         }
-        let depth_scale = nrw_dataset::scene::read_depth_max(&ds.dir)?
+        let depth_scale = nrw_dataset::scene::read_depth_max(&ds.store)?
             .filter(|d| *d > 0.0)
             .unwrap_or(1.0) as f32;
         Ok(Loader {

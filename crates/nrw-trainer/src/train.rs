@@ -201,7 +201,7 @@ pub fn appearance_labels(ds: &Dataset) -> Option<HashMap<u32, String>> {
         })
         .collect();
     // Names from the scene table: decoding every view's row for its name would read every photo.
-    let names = nrw_dataset::scene::read_verdicts(&ds.dir).ok()?;
+    let names = nrw_dataset::scene::read_verdicts(&ds.store).ok()?;
     let mut out = HashMap::new();
     for (id, name, verdict) in names {
         if let (true, Some(l)) = (
@@ -312,7 +312,7 @@ pub fn train(
     out: &Path,
     progress: &mut dyn FnMut(u64, f64),
 ) -> Result<Report> {
-    let rows = nrw_dataset::triplets::read_triplets(&ds.dir)?.ok_or_else(|| {
+    let rows = nrw_dataset::triplets::read_triplets(&ds.store)?.ok_or_else(|| {
         TrainError::Usage(format!(
             "{}: no triplets.parquet; run `nrw-etl style` and `nrw-etl triplets` first",
             ds.dir.display()

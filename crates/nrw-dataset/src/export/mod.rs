@@ -399,7 +399,7 @@ pub fn export(
         ));
     }
     let scale = if paper {
-        let (near, far) = crate::scene::read_depth_range(&ds.dir)?.unwrap_or((1.0, 1.0));
+        let (near, far) = crate::scene::read_depth_range(&ds.store)?.unwrap_or((1.0, 1.0));
         Some(DepthScale {
             mapping: cfg.depth,
             near,

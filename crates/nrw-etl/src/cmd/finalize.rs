@@ -23,7 +23,7 @@ pub struct FinalizeArgs {
 
 /// Run `finalize`.
 pub fn run(args: &FinalizeArgs) -> Result<()> {
-    let s = nrw_pipeline::finalize::finalize(&args.dataset)?;
+    let s = nrw_pipeline::finalize::finalize(&nrw_dataset::Store::open_path(&args.dataset)?)?;
     if let Some(i) = &s.ingest {
         for w in &i.warnings {
             eprintln!("warning: {w}");

@@ -25,8 +25,8 @@ pub struct InspectArgs {
 
 /// A dataset's summary: verdict counts and split sizes.
 fn inspect_dataset(args: &InspectArgs) -> Result<()> {
-    let ds = nrw_dataset::reader::Dataset::open(&args.scene)?;
-    let verdicts = nrw_dataset::scene::read_verdicts(&args.scene)?;
+    let ds = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open_path(&args.scene)?)?;
+    let verdicts = nrw_dataset::scene::read_verdicts(&ds.store)?;
     let mut counts = std::collections::BTreeMap::new();
     for (_, _, v) in &verdicts {
         *counts.entry(v.clone()).or_insert(0usize) += 1;
@@ -66,7 +66,9 @@ fn inspect_dataset(args: &InspectArgs) -> Result<()> {
 
 /// Run `inspect`.
 pub fn run(args: &InspectArgs) -> Result<()> {
-    if args.scene.join(nrw_dataset::Manifest::FILE).is_file() {
+    if nrw_dataset::store::is_url(&args.scene.to_string_lossy())
+        || args.scene.join(nrw_dataset::Manifest::FILE).is_file()
+    {
         return inspect_dataset(args);
     }
     let (dir, rec) = load_model(&args.scene, args.format.map(Into::into))?;

@@ -1,0 +1,383 @@
+//! Datasets on object storage: every stage against a real S3-compatible server (moto, started
+//! here on loopback) gives the bytes the same stages give on local disk; unreachable
+//! endpoints, missing buckets and wrong credentials fail with the URL named and no secret
+//! printed; a unit killed on S3 leaves nothing the manifest lists.
+
+use super::*;
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+
+const SECRET: &str = "nrw-test-secret-do-not-print";
+
+/// A moto S3 server on a free loopback port, stopped on drop.
+struct Moto {
+    child: std::process::Child,
+    port: u16,
+}
+
+impl Drop for Moto {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Start moto_server (with `auth`, it checks access keys as AWS does); `None` (with a
+/// message) when it is not installed, unless NRW_REQUIRE_S3=1 (CI) makes that a failure.
+fn moto(auth: bool) -> Option<Moto> {
+    let found = Command::new("moto_server")
+        .arg("--help")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(
+            std::env::var("NRW_REQUIRE_S3").is_err(),
+            "moto_server is required (NRW_REQUIRE_S3 is set): pip install 'moto[server]'"
+        );
+        eprintln!(
+            "skipped: moto_server not found (pip install 'moto[server]' to run the S3 tests)"
+        );
+        return None;
+    }
+    let port = free_port();
+    let mut cmd = Command::new("moto_server");
+    cmd.args(["-H", "127.0.0.1", "-p", &port.to_string()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+    if auth {
+        cmd.env("INITIAL_NO_AUTH_ACTION_COUNT", "0");
+    }
+    let child = cmd.spawn().unwrap();
+    let m = Moto { child, port };
+    let t0 = std::time::Instant::now();
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(t0.elapsed().as_secs() < 60, "moto_server did not start");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    Some(m)
+}
+
+impl Moto {
+    fn endpoint(&self) -> String {
+        format!("http://127.0.0.1:{}", self.port)
+    }
+
+    /// Create a bucket (moto accepts unsigned requests unless started with `auth`).
+    fn bucket(&self, name: &str) {
+        let mut s = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
+        write!(s, "PUT /{name} HTTP/1.1\r\nHost: 127.0.0.1:{}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n", self.port).unwrap();
+        let mut reply = String::new();
+        s.read_to_string(&mut reply).unwrap();
+        assert!(reply.starts_with("HTTP/1.1 200"), "{reply}");
+    }
+
+    /// The variables a user sets for this endpoint.
+    fn env(&self) -> Vec<(&'static str, String)> {
+        vec![
+            ("AWS_ACCESS_KEY_ID", "nrwtest".into()),
+            ("AWS_SECRET_ACCESS_KEY", SECRET.into()),
+            ("AWS_DEFAULT_REGION", "us-east-1".into()),
+            ("AWS_ENDPOINT_URL", self.endpoint()),
+            ("AWS_ALLOW_HTTP", "true".into()),
+        ]
+    }
+
+    /// Every object under `url`, by path relative to it.
+    fn files(&self, url: &str) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+        let opts: Vec<(String, String)> = self
+            .env()
+            .into_iter()
+            .map(|(k, v)| (k.to_ascii_lowercase(), v))
+            .collect();
+        let store = nrw_dataset::Store::open_with(url, &opts).unwrap();
+        store
+            .list("")
+            .unwrap()
+            .into_iter()
+            .filter(|rel| !rel.ends_with("timings.json"))
+            .map(|rel| {
+                let bytes = store.read(&rel).unwrap().to_vec();
+                (PathBuf::from(rel), bytes)
+            })
+            .collect()
+    }
+
+    /// `nrw-etl ARGS` with this endpoint's variables.
+    fn nrw(&self, args: &[&str]) -> Output {
+        Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
+            .args(args)
+            .envs(self.env())
+            .output()
+            .expect("binary runs")
+    }
+}
+
+fn assert_ok(o: &Output) -> String {
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains(SECRET), "a secret was printed: {err}");
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn assert_fails(o: &Output) -> String {
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "a clean error exit: {err}");
+    assert!(!err.contains(SECRET), "a secret was printed: {err}");
+    err
+}
+
+/// ingest → split → style → triplets → qa → export of `scene` into `ds` (a folder or a URL).
+fn every_stage(m: &Moto, scene: &Path, ds: &str, export: &Path, ingest_extra: &[&str]) {
+    let mut ingest = vec![
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        ds,
+        "--quiet",
+        "--rows-per-shard",
+        "3",
+    ];
+    ingest.extend(ingest_extra);
+    assert_ok(&m.nrw(&ingest));
+    assert_ok(&m.nrw(&["split", ds, "--val", "2"]));
+    assert_ok(&m.nrw(&[
+        "style",
+        ds,
+        "--tier",
+        "color-stats",
+        "--quiet",
+        "--photos-per-part",
+        "4",
+    ]));
+    assert_ok(&m.nrw(&["triplets", ds, "--k", "3"]));
+    assert_ok(&m.nrw(&["qa", ds]));
+    assert_ok(&m.nrw(&[
+        "export",
+        ds,
+        "--out",
+        export.to_str().unwrap(),
+        "--name",
+        "scene",
+        "--quiet",
+        "--no-semantics",
+    ]));
+}
+
+/// Files of a local dataset or export, without what names its location (the QA report and
+/// the export summary record where they were made; timings differ by nature).
+fn comparable(
+    files: std::collections::BTreeMap<PathBuf, Vec<u8>>,
+) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    files
+        .into_iter()
+        .filter(|(k, _)| {
+            !k.starts_with("qa") && !k.ends_with("export.json") && !k.ends_with("timings.json")
+        })
+        .collect()
+}
+
+fn same_bytes_on_s3_as_on_disk(scene: &Path, ingest_extra: &[&str], what: &str) {
+    let Some(m) = moto(false) else {
+        return;
+    };
+    m.bucket("nrw");
+    let tmp = tempfile::tempdir().unwrap();
+    let local = tmp.path().join("local");
+    every_stage(
+        &m,
+        scene,
+        local.to_str().unwrap(),
+        &tmp.path().join("export-local"),
+        ingest_extra,
+    );
+    let url = "s3://nrw/datasets/scene";
+    every_stage(&m, scene, url, &tmp.path().join("export-s3"), ingest_extra);
+    let (a, b) = (comparable(files(&local)), comparable(m.files(url)));
+    assert_eq!(
+        a.keys().collect::<Vec<_>>(),
+        b.keys().collect::<Vec<_>>(),
+        "{what}: other files"
+    );
+    for (k, v) in &a {
+        assert!(
+            v == &b[k],
+            "{what}: {} differs between disk and S3",
+            k.display()
+        );
+    }
+    let remote = m.files(url);
+    assert!(
+        remote.contains_key(Path::new("qa/report.html")),
+        "the report is uploaded next to the dataset"
+    );
+    let (ea, eb) = (
+        comparable(files(&tmp.path().join("export-local"))),
+        comparable(files(&tmp.path().join("export-s3"))),
+    );
+    assert!(!ea.is_empty() && ea == eb, "{what}: the exports differ");
+}
+
+#[test]
+fn every_stage_on_s3_gives_the_bytes_of_local_disk_on_the_demo_scene() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 9);
+    same_bytes_on_s3_as_on_disk(
+        &scene,
+        &["--min-dim", "96", "--min-photo-side", "100"],
+        "synthetic scene",
+    );
+}
+
+#[test]
+fn every_stage_on_s3_gives_the_bytes_of_local_disk_on_a_real_scene() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    same_bytes_on_s3_as_on_disk(
+        &data().join("sceaux_castle"),
+        &["--min-dim", "200"],
+        "sceaux_castle",
+    );
+}
+
+#[test]
+fn bad_endpoints_buckets_and_credentials_name_the_url_and_keep_secrets() {
+    let Some(m) = moto(false) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 3);
+    let s = scene.to_str().unwrap();
+    let ingest = |m: &Moto, url: &str, env: &[(&str, String)]| {
+        Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
+            .args([
+                "ingest",
+                s,
+                "--out",
+                url,
+                "--quiet",
+                "--min-dim",
+                "96",
+                "--min-photo-side",
+                "100",
+            ])
+            .envs(m.env())
+            .envs(env.iter().map(|(k, v)| (*k, v.clone())))
+            .output()
+            .unwrap()
+    };
+    // Nothing listens there.
+    let dead = format!("http://127.0.0.1:{}", free_port());
+    let t0 = std::time::Instant::now();
+    let err = assert_fails(&ingest(&m, "s3://nrw/ds", &[("AWS_ENDPOINT_URL", dead)]));
+    assert!(
+        err.contains("s3://nrw/ds") && err.contains("cannot reach the endpoint"),
+        "{err}"
+    );
+    assert!(
+        t0.elapsed().as_secs() < 90,
+        "an unreachable endpoint fails in bounded time"
+    );
+    // The bucket does not exist.
+    let err = assert_fails(&ingest(&m, "s3://no-such-bucket/ds", &[]));
+    assert!(
+        err.contains("s3://no-such-bucket/ds") && err.contains("the bucket does not exist"),
+        "{err}"
+    );
+    // A server that checks credentials, given wrong ones.
+    let Some(auth) = moto(true) else {
+        return;
+    };
+    let err = assert_fails(&ingest(&auth, "s3://nrw/ds", &[]));
+    assert!(
+        err.contains("s3://nrw/ds") && err.contains("access denied"),
+        "{err}"
+    );
+    // Nothing was written by any of them.
+    m.bucket("nrw");
+    assert!(m.files("s3://nrw/ds").is_empty());
+}
+
+#[test]
+fn a_unit_killed_on_s3_leaves_nothing_the_manifest_lists_and_resumes() {
+    let Some(m) = moto(false) else {
+        return;
+    };
+    m.bucket("nrw");
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 9);
+    let s = scene.to_str().unwrap();
+    let url = "s3://nrw/units";
+    let base = [
+        "--quiet",
+        "--min-dim",
+        "96",
+        "--min-photo-side",
+        "100",
+        "--rows-per-shard",
+        "2",
+    ];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
+        .args([
+            "ingest",
+            s,
+            "--out",
+            url,
+            "--shard",
+            "0/2",
+            "--pause-after-shard-ms",
+            "1500",
+        ])
+        .args(base)
+        .envs(m.env())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while !m
+        .files(url)
+        .keys()
+        .any(|k| k.to_string_lossy().contains("group-"))
+    {
+        assert!(
+            t0.elapsed().as_secs() < 120,
+            "the unit never recorded a group"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let after_kill = m.files(url);
+    assert!(
+        !after_kill.contains_key(Path::new("manifest.json")),
+        "a unit never writes the manifest"
+    );
+    let err = assert_fails(&m.nrw(&["finalize", url]));
+    assert!(err.contains("none has finished"), "{err}");
+    for shard in ["0/2", "1/2"] {
+        let mut a = vec!["ingest", s, "--out", url, "--shard", shard];
+        a.extend(base);
+        assert_ok(&m.nrw(&a));
+    }
+    assert_ok(&m.nrw(&["finalize", url]));
+    let local = tmp.path().join("local");
+    let mut a = vec!["ingest", s, "--out", local.to_str().unwrap()];
+    a.extend(base);
+    assert_ok(&m.nrw(&a));
+    assert_eq!(
+        comparable(files(&local)),
+        comparable(m.files(url)),
+        "units on S3 equal one local process"
+    );
+}

@@ -2,6 +2,8 @@
 
 #[path = "support/python.rs"]
 mod python;
+#[path = "ray.rs"]
+mod ray;
 #[path = "s3.rs"]
 mod s3;
 #[path = "support/shared.rs"]

@@ -267,3 +267,34 @@ fn style_in_units_plus_finalize_equals_style_in_one_run() {
         "descriptor parts are listed in the manifest ({parts})"
     );
 }
+
+#[test]
+fn the_same_unit_twice_at_once_as_a_retry_racing_its_original_corrupts_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 13);
+    let whole = tmp.path().join("whole");
+    assert_ok(&ingest_unit(&scene, &whole, None, &[]));
+    let out = tmp.path().join("raced");
+    let spawn = |shard: &str| {
+        Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
+            .args([
+                "ingest",
+                scene.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .args(["--min-dim", "96", "--min-photo-side", "100"])
+            .args(COMMON)
+            .args(["--shard", shard])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let racers = [spawn("0/2"), spawn("0/2"), spawn("1/2"), spawn("1/2")];
+    for c in racers {
+        assert_ok(&c.wait_with_output().unwrap());
+    }
+    assert_ok(&nrw(&["finalize", out.to_str().unwrap()]));
+    assert_same(&whole, &out, "units raced by their own retries");
+}

@@ -148,6 +148,7 @@ pub struct Dataset {
     pub store: Store,
     pub manifest: Manifest,
     shards: Vec<String>,
+    sizes: Vec<u64>,
     index: HashMap<u32, Location>,
     /// split name → image ids (sorted).
     splits: BTreeMap<String, Vec<u32>>,
@@ -168,16 +169,18 @@ impl Dataset {
         let store: Store = store.into();
         let dir = &store;
         let manifest = Manifest::read(dir)?;
-        let shards: Vec<String> = manifest
+        let listed: Vec<&crate::manifest::FileEntry> = manifest
             .tables
             .iter()
             .filter(|t| crate::views::is_shard(&t.path))
-            .map(|t| t.path.clone())
             .collect();
+        let shards: Vec<String> = listed.iter().map(|t| t.path.clone()).collect();
+        // Sizes from the manifest spare object stores a HEAD request per read.
+        let sizes: Vec<u64> = listed.iter().map(|t| t.bytes).collect();
         let mut index = HashMap::new();
         for (s, rel) in shards.iter().enumerate() {
             let path = dir.name(rel);
-            let f = dir.chunks(rel)?;
+            let f = dir.chunks_sized(rel, Some(sizes[s]))?;
             let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
             let mask = ProjectionMask::columns(b.parquet_schema(), ["image_id"]);
             let mut row = 0;
@@ -218,6 +221,7 @@ impl Dataset {
             store: store.clone(),
             manifest,
             shards,
+            sizes,
             index,
             splits,
         })
@@ -264,7 +268,7 @@ impl Dataset {
     fn read_rows(&self, shard: usize, rows: &[usize]) -> Result<Vec<View>> {
         let rel = &self.shards[shard];
         let path = self.store.name(rel);
-        let f = self.store.chunks(rel)?;
+        let f = self.store.chunks_sized(rel, Some(self.sizes[shard]))?;
         let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
         let total = b.metadata().file_metadata().num_rows() as usize;
         // Read only the row groups that hold wanted rows, and within them only those rows.

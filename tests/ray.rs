@@ -1,0 +1,68 @@
+//! The Ray driver (pipelines/ray) on Ray's multi-node harness: four work units per stage
+//! over two 1-CPU nodes, one node killed mid-run, give the bytes of one process.
+
+use super::*;
+
+#[test]
+fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
+    // pip install -r pipelines/ray/requirements.txt (CI does).
+    if !python_has("import ray") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 13);
+    let s = scene.to_str().unwrap();
+    let ingest = [
+        "--min-dim",
+        "96",
+        "--min-photo-side",
+        "100",
+        "--rows-per-shard",
+        "2",
+    ];
+    // One process.
+    let one = tmp.path().join("one");
+    let d = one.to_str().unwrap();
+    ok(&[&["ingest", s, "--out", d, "--quiet"][..], &ingest[..]].concat());
+    ok(&["split", d, "--val", "2"]);
+    ok(&["style", d, "--tier", "color-stats", "--quiet"]);
+    ok(&["triplets", d, "--k", "3"]);
+    // The driver on a two-node cluster, one node killed after the first shard.
+    let ray = tmp.path().join("ray");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
+    let o = Command::new("python3")
+        .arg(&script)
+        .args([s, ray.to_str().unwrap(), env!("CARGO_BIN_EXE_nrw-etl")])
+        .args(ingest)
+        .args(["--pause-after-shard-ms", "800"])
+        .env("RAY_USAGE_STATS_ENABLED", "0")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("node killed mid-run"), "{stdout}");
+    assert!(
+        stdout.contains("report:"),
+        "the driver says where the result is: {stdout}"
+    );
+    let strip = |d: &Path| -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+        files(d)
+            .into_iter()
+            .filter(|(k, _)| !k.starts_with("qa"))
+            .collect()
+    };
+    let (a, b) = (strip(&one), strip(&ray));
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    for (k, v) in &a {
+        assert!(
+            v == &b[k],
+            "{} differs between one process and the Ray driver",
+            k.display()
+        );
+    }
+}

@@ -1,5 +1,6 @@
 //! The Ray driver (pipelines/ray) on Ray's multi-node harness: four work units per stage
-//! over two 1-CPU nodes, one node killed mid-run, give the bytes of one process.
+//! over two 1-CPU nodes, one node killed mid-run, give the bytes of one process; and on a
+//! real scene with the dataset on S3 (moto), the bytes of one local process.
 
 use super::*;
 
@@ -62,6 +63,67 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
         assert!(
             v == &b[k],
             "{} differs between one process and the Ray driver",
+            k.display()
+        );
+    }
+}
+
+#[test]
+fn the_ray_driver_on_a_real_scene_with_the_dataset_on_s3_gives_the_bytes_of_one_local_process() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    if !python_has("import ray") {
+        return;
+    }
+    let Some(m) = super::s3::moto(false) else {
+        return;
+    };
+    m.bucket("nrw");
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = data().join("sceaux_castle");
+    let s = scene.to_str().unwrap();
+    let ingest = ["--min-dim", "200", "--rows-per-shard", "3"];
+    let one = tmp.path().join("one");
+    let d = one.to_str().unwrap();
+    ok(&[&["ingest", s, "--out", d, "--quiet"][..], &ingest[..]].concat());
+    ok(&["split", d, "--val", "2"]);
+    ok(&["style", d, "--tier", "color-stats", "--quiet"]);
+    ok(&["triplets", d, "--k", "3"]);
+    let url = "s3://nrw/sceaux";
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
+    let o = Command::new("python3")
+        .arg(&script)
+        .args([s, url, env!("CARGO_BIN_EXE_nrw-etl")])
+        .args(ingest)
+        .envs(m.env())
+        .env("RAY_USAGE_STATS_ENABLED", "0")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains(&format!("dataset: {url}")), "{stdout}");
+    let local: std::collections::BTreeMap<PathBuf, Vec<u8>> = files(&one)
+        .into_iter()
+        .filter(|(k, _)| !k.starts_with("qa"))
+        .collect();
+    let remote: std::collections::BTreeMap<PathBuf, Vec<u8>> = m
+        .files(url)
+        .into_iter()
+        .filter(|(k, _)| !k.starts_with("qa"))
+        .collect();
+    assert_eq!(
+        local.keys().collect::<Vec<_>>(),
+        remote.keys().collect::<Vec<_>>()
+    );
+    for (k, v) in &local {
+        assert!(
+            v == &remote[k],
+            "{} differs between one local process and Ray on S3",
             k.display()
         );
     }

@@ -11,7 +11,7 @@ use std::net::{TcpListener, TcpStream};
 const SECRET: &str = "nrw-test-secret-do-not-print";
 
 /// A moto S3 server on a free loopback port, stopped on drop.
-struct Moto {
+pub(crate) struct Moto {
     child: std::process::Child,
     port: u16,
 }
@@ -33,7 +33,7 @@ fn free_port() -> u16 {
 
 /// Start moto_server (with `auth`, it checks access keys as AWS does); `None` (with a
 /// message) when it is not installed, unless NRW_REQUIRE_S3=1 (CI) makes that a failure.
-fn moto(auth: bool) -> Option<Moto> {
+pub(crate) fn moto(auth: bool) -> Option<Moto> {
     let found = Command::new("moto_server")
         .arg("--help")
         .output()
@@ -72,7 +72,7 @@ impl Moto {
     }
 
     /// Create a bucket (moto accepts unsigned requests unless started with `auth`).
-    fn bucket(&self, name: &str) {
+    pub(crate) fn bucket(&self, name: &str) {
         let mut s = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
         write!(s, "PUT /{name} HTTP/1.1\r\nHost: 127.0.0.1:{}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n", self.port).unwrap();
         let mut reply = String::new();
@@ -81,7 +81,7 @@ impl Moto {
     }
 
     /// The variables a user sets for this endpoint.
-    fn env(&self) -> Vec<(&'static str, String)> {
+    pub(crate) fn env(&self) -> Vec<(&'static str, String)> {
         vec![
             ("AWS_ACCESS_KEY_ID", "nrwtest".into()),
             ("AWS_SECRET_ACCESS_KEY", SECRET.into()),
@@ -92,7 +92,7 @@ impl Moto {
     }
 
     /// Every object under `url`, by path relative to it.
-    fn files(&self, url: &str) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    pub(crate) fn files(&self, url: &str) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
         let opts: Vec<(String, String)> = self
             .env()
             .into_iter()

@@ -428,6 +428,22 @@ fn files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
         .collect()
 }
 
+/// Two file maps hold the same paths with the same bytes (`what` names the comparison).
+fn assert_same_files(
+    a: &std::collections::BTreeMap<PathBuf, Vec<u8>>,
+    b: &std::collections::BTreeMap<PathBuf, Vec<u8>>,
+    what: &str,
+) {
+    assert_eq!(
+        a.keys().collect::<Vec<_>>(),
+        b.keys().collect::<Vec<_>>(),
+        "{what}: other files"
+    );
+    for (k, v) in a {
+        assert!(v == &b[k], "{what}: {} differs", k.display());
+    }
+}
+
 /// `ingest` of a small synthetic scene, render size and photo-size filter lowered to fit it.
 fn ingest_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec![

@@ -4,6 +4,24 @@
 
 use super::*;
 
+/// ingest → split → style (color-stats) → triplets in one process, as the driver's tests run it.
+fn one_process(scene: &str, dir: &Path, ingest: &[&str]) {
+    let d = dir.to_str().unwrap();
+    ok(&[&["ingest", scene, "--out", d, "--quiet"][..], ingest].concat());
+    ok(&["split", d, "--val", "2"]);
+    ok(&["style", d, "--tier", "color-stats", "--quiet"]);
+    ok(&["triplets", d, "--k", "3"]);
+}
+
+/// A dataset's files without its QA report (it names where it was written).
+fn without_qa(
+    f: std::collections::BTreeMap<PathBuf, Vec<u8>>,
+) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    f.into_iter()
+        .filter(|(k, _)| !k.starts_with("qa"))
+        .collect()
+}
+
 #[test]
 fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
     // pip install -r pipelines/ray/requirements.txt (CI does).
@@ -24,11 +42,7 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
     ];
     // One process.
     let one = tmp.path().join("one");
-    let d = one.to_str().unwrap();
-    ok(&[&["ingest", s, "--out", d, "--quiet"][..], &ingest[..]].concat());
-    ok(&["split", d, "--val", "2"]);
-    ok(&["style", d, "--tier", "color-stats", "--quiet"]);
-    ok(&["triplets", d, "--k", "3"]);
+    one_process(s, &one, &ingest);
     // The driver on a two-node cluster, one node killed after the first shard.
     let ray = tmp.path().join("ray");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
@@ -51,21 +65,11 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
         stdout.contains("report:"),
         "the driver says where the result is: {stdout}"
     );
-    let strip = |d: &Path| -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
-        files(d)
-            .into_iter()
-            .filter(|(k, _)| !k.starts_with("qa"))
-            .collect()
-    };
-    let (a, b) = (strip(&one), strip(&ray));
-    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
-    for (k, v) in &a {
-        assert!(
-            v == &b[k],
-            "{} differs between one process and the Ray driver",
-            k.display()
-        );
-    }
+    assert_same_files(
+        &without_qa(files(&one)),
+        &without_qa(files(&ray)),
+        "one process vs the Ray driver",
+    );
 }
 
 #[test]
@@ -85,11 +89,7 @@ fn the_ray_driver_on_a_real_scene_with_the_dataset_on_s3_gives_the_bytes_of_one_
     let s = scene.to_str().unwrap();
     let ingest = ["--min-dim", "200", "--rows-per-shard", "3"];
     let one = tmp.path().join("one");
-    let d = one.to_str().unwrap();
-    ok(&[&["ingest", s, "--out", d, "--quiet"][..], &ingest[..]].concat());
-    ok(&["split", d, "--val", "2"]);
-    ok(&["style", d, "--tier", "color-stats", "--quiet"]);
-    ok(&["triplets", d, "--k", "3"]);
+    one_process(s, &one, &ingest);
     let url = "s3://nrw/sceaux";
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
     let o = Command::new("python3")
@@ -107,24 +107,9 @@ fn the_ray_driver_on_a_real_scene_with_the_dataset_on_s3_gives_the_bytes_of_one_
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(stdout.contains(&format!("dataset: {url}")), "{stdout}");
-    let local: std::collections::BTreeMap<PathBuf, Vec<u8>> = files(&one)
-        .into_iter()
-        .filter(|(k, _)| !k.starts_with("qa"))
-        .collect();
-    let remote: std::collections::BTreeMap<PathBuf, Vec<u8>> = m
-        .files(url)
-        .into_iter()
-        .filter(|(k, _)| !k.starts_with("qa"))
-        .collect();
-    assert_eq!(
-        local.keys().collect::<Vec<_>>(),
-        remote.keys().collect::<Vec<_>>()
+    assert_same_files(
+        &without_qa(files(&one)),
+        &without_qa(m.files(url)),
+        "one local process vs Ray on S3",
     );
-    for (k, v) in &local {
-        assert!(
-            v == &remote[k],
-            "{} differs between one local process and Ray on S3",
-            k.display()
-        );
-    }
 }

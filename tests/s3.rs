@@ -202,18 +202,7 @@ fn same_bytes_on_s3_as_on_disk(scene: &Path, ingest_extra: &[&str], what: &str) 
     let url = "s3://nrw/datasets/scene";
     every_stage(&m, scene, url, &tmp.path().join("export-s3"), ingest_extra);
     let (a, b) = (comparable(files(&local)), comparable(m.files(url)));
-    assert_eq!(
-        a.keys().collect::<Vec<_>>(),
-        b.keys().collect::<Vec<_>>(),
-        "{what}: other files"
-    );
-    for (k, v) in &a {
-        assert!(
-            v == &b[k],
-            "{what}: {} differs between disk and S3",
-            k.display()
-        );
-    }
+    assert_same_files(&a, &b, &format!("{what} on disk and on S3"));
     let remote = m.files(url);
     assert!(
         remote.contains_key(Path::new("qa/report.html")),

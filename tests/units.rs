@@ -20,34 +20,29 @@ fn assert_ok(o: &Output) {
 }
 
 fn assert_same(whole: &Path, other: &Path, what: &str) {
-    let (a, b) = (files(whole), files(other));
-    assert_eq!(
-        a.keys().collect::<Vec<_>>(),
-        b.keys().collect::<Vec<_>>(),
-        "{what}: other files"
-    );
-    for (k, v) in &a {
-        assert!(
-            v == &b[k],
-            "{what}: {} differs from the single run",
-            k.display()
-        );
-    }
+    assert_same_files(&files(whole), &files(other), what);
+}
+
+/// The command of an ingest unit of the small scene (spawned by the caller).
+fn unit_command(scene: &Path, out: &Path, shard: &str) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_nrw-etl"));
+    c.args([
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ])
+    .args(["--min-dim", "96", "--min-photo-side", "100"])
+    .args(COMMON)
+    .args(["--shard", shard]);
+    c
 }
 
 /// Start a unit that pauses after each shard, kill it (SIGKILL) once its first shard is
 /// recorded, and check it died mid-way.
 fn kill_mid_way(scene: &Path, out: &Path, shard: &str) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
-        .args([
-            "ingest",
-            scene.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .args(["--min-dim", "96", "--min-photo-side", "100"])
-        .args(COMMON)
-        .args(["--shard", shard, "--pause-after-shard-ms", "400"])
+    let mut child = unit_command(scene, out, shard)
+        .args(["--pause-after-shard-ms", "400"])
         .spawn()
         .unwrap();
     let records = out.join(".units/ingest");
@@ -119,16 +114,7 @@ fn two_units_at_once_in_one_folder_lose_nothing_and_auto_reads_slurm() {
     assert_ok(&ingest_unit(&scene, &whole, None, &[]));
     let out = tmp.path().join("together");
     let spawn = |task: &str| {
-        Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
-            .args([
-                "ingest",
-                scene.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .args(["--min-dim", "96", "--min-photo-side", "100"])
-            .args(COMMON)
-            .args(["--shard", "auto"])
+        unit_command(&scene, &out, "auto")
             .env("SLURM_ARRAY_TASK_ID", task)
             .env("SLURM_ARRAY_TASK_MIN", "1")
             .env("SLURM_ARRAY_TASK_COUNT", "2")
@@ -277,16 +263,7 @@ fn the_same_unit_twice_at_once_as_a_retry_racing_its_original_corrupts_nothing()
     assert_ok(&ingest_unit(&scene, &whole, None, &[]));
     let out = tmp.path().join("raced");
     let spawn = |shard: &str| {
-        Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
-            .args([
-                "ingest",
-                scene.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .args(["--min-dim", "96", "--min-photo-side", "100"])
-            .args(COMMON)
-            .args(["--shard", shard])
+        unit_command(&scene, &out, shard)
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap()

@@ -120,31 +120,30 @@ fn build_remote(
             })
         };
     }
+    // One builder per provider, each with our client options and retries, then the
+    // environment's settings, then the URL.
+    macro_rules! build {
+        ($builder:expr) => {
+            Arc::new(
+                with_env!($builder
+                    .with_client_options(client_options())
+                    .with_retry(retry()))
+                .with_url(url)
+                .build()
+                .map_err(|e| e.to_string())?,
+            )
+        };
+    }
     let store: Arc<dyn ObjectStore> = match scheme {
-        object_store::ObjectStoreScheme::AmazonS3 => Arc::new(
-            with_env!(object_store::aws::AmazonS3Builder::new()
-                .with_client_options(client_options())
-                .with_retry(retry()))
-            .with_url(url)
-            .build()
-            .map_err(|e| e.to_string())?,
-        ),
-        object_store::ObjectStoreScheme::GoogleCloudStorage => Arc::new(
-            with_env!(object_store::gcp::GoogleCloudStorageBuilder::new()
-                .with_client_options(client_options())
-                .with_retry(retry()))
-            .with_url(url)
-            .build()
-            .map_err(|e| e.to_string())?,
-        ),
-        object_store::ObjectStoreScheme::MicrosoftAzure => Arc::new(
-            with_env!(object_store::azure::MicrosoftAzureBuilder::new()
-                .with_client_options(client_options())
-                .with_retry(retry()))
-            .with_url(url)
-            .build()
-            .map_err(|e| e.to_string())?,
-        ),
+        object_store::ObjectStoreScheme::AmazonS3 => {
+            build!(object_store::aws::AmazonS3Builder::new())
+        }
+        object_store::ObjectStoreScheme::GoogleCloudStorage => {
+            build!(object_store::gcp::GoogleCloudStorageBuilder::new())
+        }
+        object_store::ObjectStoreScheme::MicrosoftAzure => {
+            build!(object_store::azure::MicrosoftAzureBuilder::new())
+        }
         other => {
             return Err(format!(
                 "{other:?} URLs are not supported (s3://, gs://, az:// are)"

@@ -244,12 +244,7 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         warnings: warnings.clone(),
     };
     manifest.write(dataset)?;
-    let seconds: f64 = units::unit_records(dataset, units::INGEST)?
-        .iter()
-        .map(|r| r.seconds)
-        .sum();
-    crate::qa::record_timing(dataset, "ingest", seconds);
-    units::clear_stage(dataset, units::INGEST)?;
+    close_stage(dataset, units::INGEST)?;
     Ok(IngestMerge {
         units: unit.count,
         registered: outcomes.len(),
@@ -263,6 +258,16 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
             .reduce(f64::min),
         warnings,
     })
+}
+
+/// Record the units' summed time as the stage's, and remove their records (merged).
+fn close_stage(dataset: &Store, stage: &str) -> Result<()> {
+    let seconds: f64 = units::unit_records(dataset, stage)?
+        .iter()
+        .map(|r| r.seconds)
+        .sum();
+    crate::qa::record_timing(dataset, stage, seconds);
+    Ok(units::clear_stage(dataset, stage)?)
 }
 
 /// The model files read now must be those the units read.
@@ -314,12 +319,7 @@ pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
     let mut manifest = Manifest::read(dataset)?;
     crate::style::list_parts(dataset, &mut manifest, unit.groups)?;
     manifest.write(dataset)?;
-    let seconds: f64 = units::unit_records(dataset, units::STYLE)?
-        .iter()
-        .map(|r| r.seconds)
-        .sum();
-    crate::qa::record_timing(dataset, "style", seconds);
-    units::clear_stage(dataset, units::STYLE)?;
+    close_stage(dataset, units::STYLE)?;
     Ok(StyleMerge {
         units: unit.count,
         parts: unit.groups,

@@ -10,6 +10,8 @@ mod s3;
 mod shared;
 #[path = "units.rs"]
 mod units;
+#[path = "verify.rs"]
+mod verify;
 
 use python::python_has;
 

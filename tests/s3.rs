@@ -201,6 +201,7 @@ fn same_bytes_on_s3_as_on_disk(scene: &Path, ingest_extra: &[&str], what: &str) 
     );
     let url = "s3://nrw/datasets/scene";
     every_stage(&m, scene, url, &tmp.path().join("export-s3"), ingest_extra);
+    assert!(assert_ok(&m.nrw(&["verify", url, "--quiet"])).starts_with("verified"));
     let (a, b) = (comparable(files(&local)), comparable(m.files(url)));
     assert_same_files(&a, &b, &format!("{what} on disk and on S3"));
     let remote = m.files(url);

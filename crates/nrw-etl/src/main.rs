@@ -51,6 +51,8 @@ enum Command {
     Qa(cmd::qa::QaArgs),
     /// Run the stages a pipeline file lists (pipelines/paper.toml: the paper's settings)
     Run(cmd::run::RunArgs),
+    /// Check a dataset against its manifest: every file's size, SHA-256 and rows (exit 4 on a mismatch)
+    Verify(cmd::verify::VerifyArgs),
     /// Merge the work units (`ingest --shard I/N`, `style --shard I/N`) into the dataset's tables and manifest
     Finalize(cmd::finalize::FinalizeArgs),
 }
@@ -75,6 +77,11 @@ fn main() -> std::process::ExitCode {
         Command::Split(a) => cmd::split::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Finalize(a) => cmd::finalize::run(a),
+        Command::Verify(a) => cmd::verify::run(a).map(|ok| {
+            if !ok {
+                std::process::exit(cmd::verify::EXIT_MISMATCH as i32);
+            }
+        }),
         Command::Style(a) => cmd::style::run(a),
         Command::Triplets(a) => cmd::triplets::run(a),
         Command::Qa(a) => cmd::qa::run(a),

@@ -19,6 +19,7 @@ pub mod style;
 pub mod synth;
 pub mod triplets;
 pub mod units;
+pub mod verify;
 
 pub use error::{PipelineError, Result};
 pub use progress::{Progress, Silent};

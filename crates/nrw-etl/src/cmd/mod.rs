@@ -12,6 +12,7 @@ pub mod split;
 pub mod style;
 pub mod synth;
 pub mod triplets;
+pub mod verify;
 
 use std::sync::Mutex;
 

@@ -1,0 +1,73 @@
+//! `nrw-etl verify`: a dataset against its manifest, after a copy or before training.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::Bars;
+use crate::error::Result;
+
+/// Exit code when verify ran and found files that differ from the manifest.
+pub const EXIT_MISMATCH: u8 = 4;
+
+/// Arguments of `verify`.
+#[derive(Debug, Args)]
+#[command(
+    after_help = "Exit codes: 0 every listed file is as manifest.json records it (size,
+SHA-256, Parquet rows); 4 some differ or are missing (each is printed: file, field, expected,
+found); 1 the dataset could not be read at all (no manifest, unreachable store).
+Files the manifest does not list are reported but do not fail the check: readers ignore them."
+)]
+pub struct VerifyArgs {
+    /// Dataset folder or object-store URL (s3://, gs://, az://)
+    pub dataset: PathBuf,
+    /// Print the report as JSON on stdout
+    #[arg(long)]
+    pub json: bool,
+    /// No progress bar
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Run `verify`; returns whether the dataset matched its manifest.
+pub fn run(args: &VerifyArgs) -> Result<bool> {
+    let store = nrw_dataset::Store::open_path(&args.dataset)?;
+    let r = nrw_pipeline::verify::verify(&store, &Bars::new(args.quiet))?;
+    for m in &r.mismatches {
+        eprintln!(
+            "mismatch: {}: {}: expected {}, found {}",
+            m.file, m.field, m.expected, m.found
+        );
+    }
+    if !r.unlisted.is_empty() && !args.quiet {
+        eprintln!(
+            "note: {} file(s) not listed in the manifest (ignored by readers): {}{}",
+            r.unlisted.len(),
+            r.unlisted
+                .iter()
+                .take(5)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", "),
+            if r.unlisted.len() > 5 { ", …" } else { "" }
+        );
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&r).expect("report serialises")
+        );
+    } else {
+        println!(
+            "{} {}: {} files, {:.1} MB checked in {:.2} s ({:.0} MB/s), {} mismatch(es)",
+            if r.ok() { "verified" } else { "FAILED" },
+            r.dataset,
+            r.files,
+            r.bytes as f64 / 1e6,
+            r.seconds,
+            r.mb_per_s(),
+            r.mismatches.len()
+        );
+    }
+    Ok(r.ok())
+}

@@ -13,6 +13,26 @@ fn one_process(scene: &str, dir: &Path, ingest: &[&str]) {
     ok(&["triplets", d, "--k", "3"]);
 }
 
+/// Run the driver's test script into `out` (a folder or URL); returns its stdout.
+fn driver(scene: &str, out: &str, args: &[&str], env: &[(&str, String)]) -> String {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
+    let o = Command::new("python3")
+        .arg(&script)
+        .args([scene, out, env!("CARGO_BIN_EXE_nrw-etl")])
+        .args(args)
+        .envs(env.iter().map(|(k, v)| (*k, v.clone())))
+        .env("RAY_USAGE_STATS_ENABLED", "0")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    stdout
+}
+
 /// A dataset's files without its QA report (it names where it was written).
 fn without_qa(
     f: std::collections::BTreeMap<PathBuf, Vec<u8>>,
@@ -45,21 +65,8 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
     one_process(s, &one, &ingest);
     // The driver on a two-node cluster, one node killed after the first shard.
     let ray = tmp.path().join("ray");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
-    let o = Command::new("python3")
-        .arg(&script)
-        .args([s, ray.to_str().unwrap(), env!("CARGO_BIN_EXE_nrw-etl")])
-        .args(ingest)
-        .args(["--pause-after-shard-ms", "800"])
-        .env("RAY_USAGE_STATS_ENABLED", "0")
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let args = [&ingest[..], &["--pause-after-shard-ms", "800"]].concat();
+    let stdout = driver(s, ray.to_str().unwrap(), &args, &[]);
     assert!(stdout.contains("node killed mid-run"), "{stdout}");
     assert!(
         stdout.contains("report:"),
@@ -91,21 +98,7 @@ fn the_ray_driver_on_a_real_scene_with_the_dataset_on_s3_gives_the_bytes_of_one_
     let one = tmp.path().join("one");
     one_process(s, &one, &ingest);
     let url = "s3://nrw/sceaux";
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
-    let o = Command::new("python3")
-        .arg(&script)
-        .args([s, url, env!("CARGO_BIN_EXE_nrw-etl")])
-        .args(ingest)
-        .envs(m.env())
-        .env("RAY_USAGE_STATS_ENABLED", "0")
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let stdout = driver(s, url, &ingest, &m.env());
     assert!(stdout.contains(&format!("dataset: {url}")), "{stdout}");
     assert_same_files(
         &without_qa(files(&one)),

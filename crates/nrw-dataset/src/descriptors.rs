@@ -102,6 +102,27 @@ pub fn write_part(
     write_table(dir, &part_path(k), &batch)
 }
 
+/// The kinds of a part's rows, read without the descriptors themselves (the kind columns only).
+pub fn read_kinds(dir: &Store, rel: &str) -> Result<Vec<DescriptorKind>> {
+    let path = &dir.name(rel);
+    let mut out = Vec::new();
+    for b in read_batches(dir, rel, Some(&["tier", "weights_sha256", "preprocess"]))? {
+        let (tier, sha, pre) = (
+            column::<StringArray>(&b, "tier", path)?,
+            column::<StringArray>(&b, "weights_sha256", path)?,
+            column::<StringArray>(&b, "preprocess", path)?,
+        );
+        for i in 0..b.num_rows() {
+            out.push(DescriptorKind {
+                tier: tier.value(i).into(),
+                weights_sha256: sha.value(i).into(),
+                preprocess: pre.value(i).into(),
+            });
+        }
+    }
+    Ok(out)
+}
+
 /// Read a part: its kind (all rows must agree) and rows.
 pub fn read_part(dir: &Store, rel: &str) -> Result<(Option<DescriptorKind>, Vec<DescriptorRow>)> {
     let path = &dir.name(rel);

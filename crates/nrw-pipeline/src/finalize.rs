@@ -300,11 +300,11 @@ pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
     let kind = crate::style::kind_of(&unit);
     for k in 0..unit.groups {
         let rel = nrw_dataset::descriptors::part_path(k);
+        // Only the kind columns: the descriptors themselves are megabytes per photo.
         let ok = dataset.exists(&rel)?
-            && nrw_dataset::descriptors::read_part(dataset, &rel)?
-                .0
-                .as_ref()
-                == Some(&kind);
+            && nrw_dataset::descriptors::read_kinds(dataset, &rel)?
+                .iter()
+                .all(|k| *k == kind);
         if !ok {
             return Err(units_error(
                 dataset,

@@ -1,5 +1,7 @@
 //! End-to-end tests of the `nrw-etl` binary on the real scenes in ../shared/data.
 
+#[path = "bad_inputs.rs"]
+mod bad_inputs;
 #[path = "support/python.rs"]
 mod python;
 #[path = "ray.rs"]
@@ -1019,9 +1021,10 @@ fn reader_streams_a_split_and_crops_every_channel_at_one_place() {
         .contains("not a kept view"));
     // Another schema version is refused with a clear message.
     let m = ds_dir.join("manifest.json");
-    let text = std::fs::read_to_string(&m)
-        .unwrap()
-        .replace("\"schema_version\": 2", "\"schema_version\": 7");
+    let text = std::fs::read_to_string(&m).unwrap().replace(
+        &format!("\"schema_version\": {}", nrw_dataset::SCHEMA_VERSION),
+        "\"schema_version\": 7",
+    );
     std::fs::write(&m, text).unwrap();
     let e = Dataset::open(&ds_dir).unwrap_err().to_string();
     assert!(

@@ -1,5 +1,6 @@
 //! `nrw-etl verify`: a good dataset (and one written by a resumed run) passes; a flipped
-//! byte, a truncated table and a missing shard are each named, with exit code 4.
+//! byte (with its payload's row and column), a truncated table and a missing shard are each
+//! named, with exit code 4. Flips in every payload column: tests/bad_inputs.rs.
 
 use super::*;
 
@@ -66,10 +67,16 @@ fn verify_passes_good_datasets_and_names_every_damaged_file() {
     assert!(err.contains("shards/views-00001.parquet: sha256"), "{err}");
     assert!(err.contains("splits.parquet: size"), "{err}");
     assert!(err.contains("shards/views-00002.parquet: missing"), "{err}");
-    assert!(String::from_utf8_lossy(&o.stdout).contains("3 mismatch(es)"));
+    // The flipped byte lies in a payload (they are most of a shard's bytes): its row and
+    // column are named too.
+    assert!(
+        err.contains("shards/views-00001.parquet: ") && err.contains(" at row "),
+        "{err}"
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("4 mismatch(es)"));
     let o = nrw(&["verify", ds.to_str().unwrap(), "--json", "--quiet"]);
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(r["mismatches"].as_array().unwrap().len(), 3);
+    assert_eq!(r["mismatches"].as_array().unwrap().len(), 4);
     // No dataset at all is an error, not a mismatch.
     assert_eq!(verify(&tmp.path().join("nothing")).status.code(), Some(1));
 }

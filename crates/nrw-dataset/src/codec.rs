@@ -29,18 +29,113 @@ fn png(
     Ok(out)
 }
 
-/// Decode a photo file into RGB8 (EXIF orientation ignored, as COLMAP ignores it).
+/// Largest photo ingest decodes, in pixels (the RGB buffer alone is 805 MB): a header that
+/// claims more is refused before any allocation, so a lying file cannot abort the run.
+pub const MAX_PHOTO_PIXELS: u64 = 1 << 28;
+
+/// Decode a photo file into RGB8, strictly: bytes that end before the image does or that the
+/// decoder rejects are [`DatasetError::Unreadable`], never pixels filled in with grey.
+/// EXIF orientation is ignored, as COLMAP ignores it.
 pub fn load_photo(path: &Path) -> Result<RgbImage> {
-    let img = image::ImageReader::open(path)
-        .map_err(|e| DatasetError::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| DatasetError::io(path, e))?
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
+    decode_photo(&bytes, MAX_PHOTO_PIXELS).map_err(|problem| DatasetError::Unreadable {
+        path: path.to_path_buf(),
+        problem,
+    })
+}
+
+/// Decode photo bytes (JPEG or PNG) into RGB8, or say in a sentence why they cannot be.
+pub fn decode_photo(bytes: &[u8], max_pixels: u64) -> std::result::Result<RgbImage, String> {
+    match photo_format(bytes)? {
+        image::ImageFormat::Jpeg => decode_jpeg_strict(bytes, max_pixels),
+        format => decode_lenient(bytes, format, max_pixels),
+    }
+}
+
+/// A photo's format from its first bytes (16 are enough): JPEG or PNG, or why it is neither.
+pub fn photo_format(head: &[u8]) -> std::result::Result<image::ImageFormat, String> {
+    if head.is_empty() {
+        return Err("the file is empty (0 bytes)".into());
+    }
+    match image::guess_format(head) {
+        Ok(f @ (image::ImageFormat::Jpeg | image::ImageFormat::Png)) => Ok(f),
+        Ok(other) => Err(format!(
+            "{other:?} images are not supported (JPEG and PNG are)"
+        )),
+        Err(_) => Err("not a JPEG or PNG image (its first bytes are no image signature)".into()),
+    }
+}
+
+fn too_large(w: u64, h: u64, max_pixels: u64) -> std::result::Result<(), String> {
+    if w * h > max_pixels {
+        return Err(format!(
+            "the header claims {w}x{h} pixels, more than the {max_pixels}-pixel limit"
+        ));
+    }
+    Ok(())
+}
+
+/// Decode with the `image` crate (PNG's decoder fails on truncated or corrupt data by itself).
+fn decode_lenient(
+    bytes: &[u8],
+    format: image::ImageFormat,
+    max_pixels: u64,
+) -> std::result::Result<RgbImage, String> {
+    let reader = || image::ImageReader::with_format(Cursor::new(bytes), format);
+    let (w, h) = reader()
+        .into_dimensions()
+        .map_err(|e| format!("{format:?} header: {}", e.to_string().trim()))?;
+    too_large(w as u64, h as u64, max_pixels)?;
+    let img = reader()
         .decode()
-        .map_err(|e| DatasetError::Schema {
-            path: path.to_path_buf(),
-            problem: format!("cannot decode photo: {e}"),
-        })?;
+        .map_err(|e| format!("{format:?} data: {}", e.to_string().trim()))?;
     Ok(img.into_rgb8())
+}
+
+/// Strict-mode complaints that leave every pixel intact (junk between header segments, which
+/// many cameras and editors write); the photo is then decoded as the `image` crate does.
+const HARMLESS_JPEG: [&str; 1] = ["Extra bytes between headers"];
+
+/// JPEG through zune-jpeg in strict mode: a scan that ends early ("Premature end of buffer")
+/// or a marker inside entropy-coded data is an error instead of a grey fill. Colour handling
+/// is the `image` crate's (grey stays grey, every other colour space becomes RGB), so a
+/// readable photo decodes to the same pixels as before.
+fn decode_jpeg_strict(bytes: &[u8], max_pixels: u64) -> std::result::Result<RgbImage, String> {
+    use zune_core::{bytestream::ZCursor, colorspace::ColorSpace, options::DecoderOptions};
+    let options = DecoderOptions::default()
+        .set_strict_mode(true)
+        .set_max_width(usize::from(u16::MAX))
+        .set_max_height(usize::from(u16::MAX));
+    let mut d = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
+    d.decode_headers()
+        .map_err(|e| format!("JPEG header: {e}"))?;
+    let (w, h) = d.dimensions().ok_or("JPEG header without a size")?;
+    too_large(w as u64, h as u64, max_pixels)?;
+    let grey = matches!(
+        d.input_colorspace(),
+        Some(ColorSpace::Luma | ColorSpace::LumaA)
+    );
+    let out = if grey {
+        ColorSpace::Luma
+    } else {
+        ColorSpace::RGB
+    };
+    d.set_options(d.options().jpeg_set_out_colorspace(out));
+    let px = match d.decode() {
+        Ok(px) => px,
+        Err(e) if HARMLESS_JPEG.iter().any(|m| e.to_string().contains(m)) => {
+            return decode_lenient(bytes, image::ImageFormat::Jpeg, max_pixels)
+        }
+        Err(e) => return Err(format!("JPEG data: {e}")),
+    };
+    let (w, h) = (w as u32, h as u32);
+    let rgb = if grey {
+        px.iter().flat_map(|&g| [g, g, g]).collect()
+    } else {
+        px
+    };
+    RgbImage::from_raw(w, h, rgb)
+        .ok_or_else(|| format!("JPEG decoder gave a buffer that is not {w}x{h} RGB"))
 }
 
 /// Resize to the render size with Lanczos3 (a no-op when sizes agree). Pixel edges map to
@@ -138,6 +233,59 @@ pub fn decode_png(bytes: &[u8], name: &Path) -> Result<(u32, u32, u8, Vec<u8>)> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn jpeg(img: &image::DynamicImage) -> Vec<u8> {
+        let mut out = Vec::new();
+        img.write_to(&mut Cursor::new(&mut out), image::ImageFormat::Jpeg)
+            .unwrap();
+        out
+    }
+
+    fn pattern(w: u32, h: u32) -> RgbImage {
+        RgbImage::from_fn(w, h, |x, y| {
+            image::Rgb([
+                (x * 7 % 256) as u8,
+                (y * 5 % 256) as u8,
+                ((x ^ y) % 256) as u8,
+            ])
+        })
+    }
+
+    #[test]
+    fn a_whole_jpeg_decodes_to_the_pixels_the_image_crate_gives() {
+        for img in [
+            image::DynamicImage::ImageRgb8(pattern(123, 77)),
+            image::DynamicImage::ImageLuma8(
+                image::DynamicImage::ImageRgb8(pattern(64, 50)).into_luma8(),
+            ),
+        ] {
+            let bytes = jpeg(&img);
+            let ours = decode_photo(&bytes, MAX_PHOTO_PIXELS).unwrap();
+            let theirs = image::load_from_memory(&bytes).unwrap().into_rgb8();
+            assert_eq!(ours, theirs, "{:?}", img.color());
+        }
+    }
+
+    #[test]
+    fn truncated_empty_and_foreign_bytes_are_unreadable_with_a_reason() {
+        let bytes = jpeg(&image::DynamicImage::ImageRgb8(pattern(300, 200)));
+        let cut = decode_photo(&bytes[..bytes.len() / 2], MAX_PHOTO_PIXELS).unwrap_err();
+        assert!(cut.contains("JPEG data"), "{cut}");
+        let mut png = Vec::new();
+        image::DynamicImage::ImageRgb8(pattern(300, 200))
+            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let cut = decode_photo(&png[..png.len() / 2], MAX_PHOTO_PIXELS).unwrap_err();
+        assert!(cut.contains("Png data"), "{cut}");
+        assert!(decode_photo(b"", MAX_PHOTO_PIXELS)
+            .unwrap_err()
+            .contains("empty"));
+        assert!(decode_photo(b"ply\nformat", MAX_PHOTO_PIXELS)
+            .unwrap_err()
+            .contains("not a JPEG or PNG"));
+        let big = decode_photo(&bytes, 1000).unwrap_err();
+        assert!(big.contains("300x200"), "{big}");
+    }
 
     /// Intensity-weighted centre of an image, in pixel-edge coordinates (pixel x spans x..x+1).
     fn centroid(img: &RgbImage) -> (f64, f64) {

@@ -12,7 +12,7 @@ use arrow_schema::{DataType, Field, Schema, SchemaRef};
 
 use crate::error::{DatasetError, Result};
 use crate::manifest::FileEntry;
-use crate::parquet_io::{column, read_batches, write_table};
+use crate::parquet_io::{column, read_batches};
 
 /// Folder of descriptor parts inside a dataset.
 pub const DESCRIPTORS_DIR: &str = "descriptors";
@@ -47,6 +47,7 @@ pub fn descriptors_schema() -> SchemaRef {
             DataType::List(Arc::new(Field::new("item", DataType::Float32, false))),
             false,
         ),
+        Field::new("descriptor_crc32", DataType::UInt32, false),
     ]))
 }
 
@@ -59,6 +60,65 @@ pub fn part_path(k: usize) -> String {
 pub fn is_part(rel: &str) -> bool {
     rel.strip_prefix(DESCRIPTORS_DIR)
         .is_some_and(|r| r.starts_with("/part-"))
+}
+
+/// A descriptor's checksum: CRC-32 of its values as little-endian float32 bytes (in NumPy,
+/// `zlib.crc32(np.asarray(d, "<f4").tobytes())`). Readers check it before using a row.
+pub fn descriptor_crc32(values: &[f32]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    for v in values {
+        h.update(&v.to_le_bytes());
+    }
+    h.finalize()
+}
+
+/// Rows of a part's bytes whose descriptor does not match its checksum (`path` names the
+/// file).
+pub fn check_part(
+    path: &std::path::Path,
+    data: bytes::Bytes,
+) -> Result<Vec<crate::views::PayloadMismatch>> {
+    let mut out = Vec::new();
+    let mut row = 0;
+    let cols = ["image_id", "descriptor", "descriptor_crc32"];
+    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), Some(&cols), 1024)? {
+        let b = b?;
+        out.extend(descriptor_mismatches(&b, row, path)?);
+        row += b.num_rows();
+    }
+    Ok(out)
+}
+
+fn descriptor_mismatches(
+    b: &RecordBatch,
+    first_row: usize,
+    path: &std::path::Path,
+) -> Result<Vec<crate::views::PayloadMismatch>> {
+    let ids = column::<UInt32Array>(b, "image_id", path)?;
+    let desc = column::<ListArray>(b, "descriptor", path)?;
+    let crcs = column::<UInt32Array>(b, "descriptor_crc32", path)?;
+    let mut out = Vec::new();
+    for i in 0..b.num_rows() {
+        let v = desc.value(i);
+        let v = v
+            .as_any()
+            .downcast_ref::<Float32Array>()
+            .ok_or_else(|| DatasetError::Schema {
+                path: path.into(),
+                problem: "descriptor is not float32".into(),
+            })?;
+        let computed = descriptor_crc32(v.values());
+        if computed != crcs.value(i) {
+            out.push(crate::views::PayloadMismatch {
+                row: first_row + i,
+                image_id: ids.value(i),
+                column: "descriptor".into(),
+                stored: Some(crcs.value(i)),
+                computed: Some(computed),
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// Write one part atomically.
@@ -93,13 +153,28 @@ pub fn write_part(
             rep(&kind.weights_sha256),
             rep(&kind.preprocess),
             Arc::new(lists.finish()),
+            Arc::new(UInt32Array::from_iter_values(
+                rows.iter().map(|r| descriptor_crc32(&r.descriptor)),
+            )),
         ],
     )
     .map_err(|e| DatasetError::Arrow {
         table: part_path(k),
         source: e,
     })?;
-    write_table(dir, &part_path(k), &batch)
+    // The values stored as they are (no dictionary, no compression: float32 Grams barely
+    // compress), so a part reads at memory speed and its bytes are the values themselves.
+    let raw = parquet::schema::types::ColumnPath::new(vec![
+        "descriptor".into(),
+        "list".into(),
+        "item".into(),
+    ]);
+    let props = crate::parquet_io::writer_properties_builder(65_536)
+        .set_column_compression(raw.clone(), parquet::basic::Compression::UNCOMPRESSED)
+        .set_column_dictionary_enabled(raw.clone(), false)
+        .set_column_statistics_enabled(raw, parquet::file::properties::EnabledStatistics::None)
+        .build();
+    crate::parquet_io::write_batch(dir, &part_path(k), &batch, props)
 }
 
 /// The kinds of a part's rows, read without the descriptors themselves (the kind columns only).
@@ -129,6 +204,9 @@ pub fn read_part(dir: &Store, rel: &str) -> Result<(Option<DescriptorKind>, Vec<
     let mut kind: Option<DescriptorKind> = None;
     let mut rows = Vec::new();
     for b in read_batches(dir, rel, None)? {
+        if let Some(m) = descriptor_mismatches(&b, rows.len(), path)?.first() {
+            return Err(m.error(path));
+        }
         let ids = column::<UInt32Array>(&b, "image_id", path)?;
         let names = column::<StringArray>(&b, "name", path)?;
         let (tier, sha, pre) = (

@@ -32,6 +32,10 @@ pub enum DatasetError {
         field: String,
         problem: String,
     },
+    /// A photo or label map whose bytes cannot be decoded whole (truncated, corrupt, not an
+    /// image): ingest records the view as `unreadable` instead of storing filled-in pixels.
+    #[error("{}: unreadable: {problem}", path.display())]
+    Unreadable { path: PathBuf, problem: String },
     #[error("{}: JSON: {source}", path.display())]
     Json {
         path: PathBuf,

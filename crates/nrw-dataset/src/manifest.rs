@@ -11,7 +11,7 @@ use crate::error::{DatasetError, Result};
 use crate::store::Store;
 
 /// Bumped whenever a table's schema changes incompatibly.
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 
 /// A file recorded in the manifest.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

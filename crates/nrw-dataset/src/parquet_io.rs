@@ -14,13 +14,19 @@ use crate::store::Store;
 
 /// Writer settings shared by every table: zstd level 3, statistics on, no timestamps.
 pub fn writer_properties(max_row_group_rows: usize) -> WriterProperties {
+    writer_properties_builder(max_row_group_rows).build()
+}
+
+/// [`writer_properties`] before `build`, for tables that set some columns apart.
+pub fn writer_properties_builder(
+    max_row_group_rows: usize,
+) -> parquet::file::properties::WriterPropertiesBuilder {
     WriterProperties::builder()
         .set_compression(Compression::ZSTD(
             ZstdLevel::try_new(3).expect("valid zstd level"),
         ))
         .set_max_row_group_row_count(Some(max_row_group_rows.max(1)))
         .set_created_by(format!("nrw-etl {}", env!("CARGO_PKG_VERSION")))
-        .build()
 }
 
 /// Encode one batch as Parquet bytes with `props`.
@@ -62,9 +68,28 @@ pub fn read_batches(
     rel: &str,
     columns: Option<&[&str]>,
 ) -> Result<Vec<RecordBatch>> {
+    batches(store, rel, columns, 1024)?.collect()
+}
+
+/// The batches of a dataset's Parquet file one at a time (`batch_rows` rows each at most),
+/// optionally only some columns: memory stays at one batch whatever the file's size.
+pub fn batches(
+    store: &Store,
+    rel: &str,
+    columns: Option<&[&str]>,
+    batch_rows: usize,
+) -> Result<impl Iterator<Item = Result<RecordBatch>>> {
+    batches_from(store.chunks(rel)?, store.name(rel), columns, batch_rows)
+}
+
+/// [`batches`] of Parquet bytes already at hand (`path` names them in errors).
+pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
+    f: R,
+    path: std::path::PathBuf,
+    columns: Option<&[&str]>,
+    batch_rows: usize,
+) -> Result<impl Iterator<Item = Result<RecordBatch>>> {
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-    let path = store.name(rel);
-    let f = store.chunks(rel)?;
     let perr = |e| DatasetError::Parquet {
         path: path.clone(),
         source: e,
@@ -76,15 +101,15 @@ pub fn read_batches(
         b = b.with_projection(mask);
     }
     let name = path.display().to_string();
-    b.build()
+    Ok(b.with_batch_size(batch_rows.max(1))
+        .build()
         .map_err(perr)?
-        .map(|r| {
+        .map(move |r| {
             r.map_err(|e| DatasetError::Arrow {
                 table: name.clone(),
                 source: e,
             })
-        })
-        .collect()
+        }))
 }
 
 /// A column of a batch as its concrete Arrow type, or an error naming file and column.

@@ -298,13 +298,14 @@ impl Dataset {
             .with_batch_size(ROW_GROUP_ROWS)
             .build()
             .map_err(parquet_err(&path))?;
-        let mut out = Vec::with_capacity(rows.len());
+        let mut out: Vec<View> = Vec::with_capacity(rows.len());
         for batch in reader {
             let b = batch.map_err(|e| DatasetError::Arrow {
                 table: rel.clone(),
                 source: e,
             })?;
-            out.extend(views_of(&b, &path)?);
+            let at = out.len().min(rows.len());
+            out.extend(views_of(&b, &rows[at..], &path)?);
         }
         Ok(out)
     }
@@ -378,7 +379,14 @@ impl Dataset {
     }
 }
 
-fn views_of(b: &RecordBatch, path: &Path) -> Result<Vec<View>> {
+/// The views of a batch whose row i is row `rows[i]` of the shard at `path`, every payload
+/// checked against its checksum first.
+fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<View>> {
+    for c in crate::views::PAYLOAD_COLUMNS {
+        if let Some(m) = crate::views::payload_mismatches(b, rows, c, path)?.first() {
+            return Err(m.error(path));
+        }
+    }
     let u = |n: &str| column::<UInt32Array>(b, n, path);
     let f = |n: &str| column::<Float64Array>(b, n, path);
     let s = |n: &str| column::<StringArray>(b, n, path);

@@ -21,6 +21,10 @@ pub const IMAGES_TABLE: &str = "scene/images.parquet";
 /// verdict names why a photo was dropped. The renderer's `Verdict::Kept` writes this word.
 pub const VERDICT_KEPT: &str = "kept";
 
+/// The `verdict` of a view whose photo or label map cannot be decoded whole (truncated,
+/// corrupt, not an image); `verdict_detail` holds the decoder's message.
+pub const VERDICT_UNREADABLE: &str = "unreadable";
+
 fn list_of(item: DataType) -> DataType {
     DataType::List(Arc::new(Field::new("item", item, false)))
 }
@@ -62,6 +66,7 @@ pub fn images_schema() -> SchemaRef {
         Field::new("num_observations", DataType::UInt32, false),
         Field::new("verdict", DataType::Utf8, false),
         Field::new("verdict_value", DataType::Float64, false),
+        Field::new("verdict_detail", DataType::Utf8, true),
         Field::new("empty_ratio", DataType::Float64, true),
         Field::new("render_width", DataType::UInt32, true),
         Field::new("render_height", DataType::UInt32, true),
@@ -74,7 +79,7 @@ pub fn images_schema() -> SchemaRef {
 /// What ingest decided about one image (the render stage's output for the images table).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImageOutcome {
-    /// `kept`, `too_small` or `too_sparse`.
+    /// `kept`, `too_small`, `too_sparse` or `unreadable`.
     pub verdict: String,
     /// The measured value the verdict rests on (empty ratio, or shorter side in pixels).
     pub verdict_value: f64,
@@ -84,6 +89,10 @@ pub struct ImageOutcome {
     pub shard: Option<String>,
     /// Smallest and largest rendered depth (camera-space z) of the view, when kept.
     pub depth_range: Option<(f64, f64)>,
+    /// Why, in words, when the verdict needs more than a number (`unreadable`: the decoder's
+    /// message).
+    #[serde(default)]
+    pub detail: Option<String>,
 }
 
 fn to_u32(v: u64, table: &str, record: String, field: &str) -> Result<u32> {
@@ -227,6 +236,9 @@ pub fn images_batch(
             )),
             Arc::new(Float64Array::from_iter_values(
                 outs.iter().map(|o| o.verdict_value),
+            )),
+            Arc::new(StringArray::from_iter(
+                outs.iter().map(|o| o.detail.as_deref()),
             )),
             Arc::new(Float64Array::from_iter(outs.iter().map(|o| o.empty_ratio))),
             Arc::new(UInt32Array::from_iter(

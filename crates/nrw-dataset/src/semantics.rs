@@ -55,10 +55,16 @@ pub fn classes() -> &'static [ClassInfo] {
 
 /// Read a label map (8-bit class ids, 0 = unlabelled) and check its size against the photo's.
 pub fn load_labels(path: &Path, width: u32, height: u32) -> Result<GrayImage> {
-    let img = image::open(path).map_err(|e| DatasetError::Schema {
-        path: path.to_path_buf(),
-        problem: format!("cannot read label map: {e}"),
-    })?;
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
+    // Corrupt or truncated bytes make the view `unreadable` like a bad photo; a readable map
+    // of the wrong kind, size or classes is a mistake of the tool that made it: an error.
+    let img =
+        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|e| {
+            DatasetError::Unreadable {
+                path: path.to_path_buf(),
+                problem: format!("label map (PNG): {e}"),
+            }
+        })?;
     if img.color() != image::ColorType::L8 {
         return Err(DatasetError::Schema {
             path: path.to_path_buf(),

@@ -10,8 +10,7 @@ use std::sync::Arc;
 use arrow_array::builder::{BinaryBuilder, Float64Builder, ListBuilder};
 use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
-use parquet::basic::{Compression, ZstdLevel};
-use parquet::file::properties::WriterProperties;
+use parquet::basic::Compression;
 use parquet::schema::types::ColumnPath;
 
 use crate::error::{DatasetError, Result};
@@ -42,6 +41,31 @@ pub fn stale_shards(dir: &Store, keep: &[FileEntry]) -> Result<Vec<String>> {
         .into_iter()
         .filter(|rel| !keep.iter().any(|k| &k.path == rel))
         .collect())
+}
+
+/// The payload columns of a shard (encoded PNG or EXR bytes). Each has a `<name>_crc32`
+/// column beside it ([`crc_column`]) that every reader checks before decoding, so a byte that
+/// changed on disk or in transit is an error naming file, row and column, never a silently
+/// different image.
+pub const PAYLOAD_COLUMNS: [&str; 7] = [
+    "photo_png",
+    "color_png",
+    "depth_exr",
+    "normal_png",
+    "semantics_png",
+    "transient_png",
+    "labels_png",
+];
+
+/// The checksum column of a payload column.
+pub fn crc_column(payload: &str) -> String {
+    format!("{payload}_crc32")
+}
+
+/// A payload's checksum: CRC-32 (IEEE 802.3, as Python's `zlib.crc32`). It catches every
+/// burst of up to 32 flipped bits, and any other change but one in 2^32, at memory speed.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    crc32fast::hash(bytes)
 }
 
 /// One kept view.
@@ -108,6 +132,13 @@ pub fn views_schema() -> SchemaRef {
         Field::new("semantics_png", DataType::Binary, true),
         Field::new("transient_png", DataType::Binary, true),
         Field::new("labels_png", DataType::Binary, true),
+        Field::new("photo_png_crc32", DataType::UInt32, false),
+        Field::new("color_png_crc32", DataType::UInt32, false),
+        Field::new("depth_exr_crc32", DataType::UInt32, false),
+        Field::new("normal_png_crc32", DataType::UInt32, true),
+        Field::new("semantics_png_crc32", DataType::UInt32, true),
+        Field::new("transient_png_crc32", DataType::UInt32, true),
+        Field::new("labels_png_crc32", DataType::UInt32, true),
     ]))
 }
 
@@ -125,6 +156,9 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
             b.append_option(f(r));
         }
         Arc::new(b.finish())
+    };
+    let crcs = |f: &dyn Fn(&ViewRow) -> Option<&[u8]>| -> ArrayRef {
+        Arc::new(UInt32Array::from_iter(rows.iter().map(|r| f(r).map(crc32))))
     };
     let item = match schema.field(8).data_type() {
         DataType::List(f) => f.clone(),
@@ -166,6 +200,13 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
             bins(&|r| r.semantics_png.as_deref()),
             bins(&|r| r.transient_png.as_deref()),
             bins(&|r| r.labels_png.as_deref()),
+            crcs(&|r| Some(&r.photo_png)),
+            crcs(&|r| Some(&r.color_png)),
+            crcs(&|r| Some(&r.depth_exr)),
+            crcs(&|r| r.normal_png.as_deref()),
+            crcs(&|r| r.semantics_png.as_deref()),
+            crcs(&|r| r.transient_png.as_deref()),
+            crcs(&|r| r.labels_png.as_deref()),
         ],
     )
     .map_err(|e| DatasetError::Arrow {
@@ -178,21 +219,8 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
 /// EXR are compressed already), metadata columns with zstd.
 pub fn write_shard(dir: &Store, rel: &str, rows: &[ViewRow]) -> Result<FileEntry> {
     let b = batch(rows)?;
-    let mut props = WriterProperties::builder()
-        .set_compression(Compression::ZSTD(
-            ZstdLevel::try_new(3).expect("valid level"),
-        ))
-        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
-        .set_created_by(format!("nrw-etl {}", env!("CARGO_PKG_VERSION")));
-    for c in [
-        "photo_png",
-        "color_png",
-        "depth_exr",
-        "normal_png",
-        "semantics_png",
-        "transient_png",
-        "labels_png",
-    ] {
+    let mut props = crate::parquet_io::writer_properties_builder(ROW_GROUP_ROWS);
+    for c in PAYLOAD_COLUMNS {
         props = props
             .set_column_compression(ColumnPath::from(c), Compression::UNCOMPRESSED)
             .set_column_statistics_enabled(
@@ -201,4 +229,97 @@ pub fn write_shard(dir: &Store, rel: &str, rows: &[ViewRow]) -> Result<FileEntry
             );
     }
     crate::parquet_io::write_batch(dir, rel, &b, props.build())
+}
+
+/// A payload whose bytes no longer match the checksum written with them.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct PayloadMismatch {
+    /// Row inside the file (0-based).
+    pub row: usize,
+    pub image_id: u32,
+    pub column: String,
+    /// `None` when the payload and its checksum disagree on being present.
+    pub stored: Option<u32>,
+    pub computed: Option<u32>,
+}
+
+impl PayloadMismatch {
+    /// The mismatch as the error every reader returns.
+    pub fn error(&self, path: &std::path::Path) -> DatasetError {
+        let hex = |c: Option<u32>| c.map_or("none".to_string(), |c| format!("{c:08x}"));
+        DatasetError::Value {
+            path: path.to_path_buf(),
+            record: format!("row {} (image {})", self.row, self.image_id),
+            field: self.column.clone(),
+            problem: format!(
+                "CRC-32 of the bytes is {} but {} was written with them: the file changed after it was written (damaged on disk or in a copy); `nrw-etl verify` lists every damaged payload, and re-running the stage that wrote the file replaces it",
+                hex(self.computed),
+                hex(self.stored)
+            ),
+        }
+    }
+}
+
+/// Check one payload column of a batch against its checksum column; `rows[i]` is batch row
+/// i's row in the file. Columns absent from the batch (not read) are not checked.
+pub fn payload_mismatches(
+    b: &RecordBatch,
+    rows: &[usize],
+    column: &str,
+    path: &std::path::Path,
+) -> Result<Vec<PayloadMismatch>> {
+    use arrow_array::{Array, BinaryArray};
+    if b.column_by_name(column).is_none() {
+        return Ok(Vec::new());
+    }
+    let data = crate::parquet_io::column::<BinaryArray>(b, column, path)?;
+    let crcs = crate::parquet_io::column::<UInt32Array>(b, &crc_column(column), path)?;
+    let ids = crate::parquet_io::column::<UInt32Array>(b, "image_id", path)?;
+    let mut out = Vec::new();
+    for i in 0..b.num_rows() {
+        let computed = (!data.is_null(i)).then(|| crc32(data.value(i)));
+        let stored = (!crcs.is_null(i)).then(|| crcs.value(i));
+        if computed != stored {
+            out.push(PayloadMismatch {
+                row: rows.get(i).copied().unwrap_or(i),
+                image_id: ids.value(i),
+                column: column.into(),
+                stored,
+                computed,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// Every payload of a shard's bytes checked against its checksum (what `verify` runs), a
+/// row group at a time; `path` names the file.
+pub fn check_shard(path: &std::path::Path, data: bytes::Bytes) -> Result<Vec<PayloadMismatch>> {
+    let mut out = Vec::new();
+    let mut row = 0;
+    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, ROW_GROUP_ROWS)? {
+        let b = b?;
+        let rows: Vec<usize> = (row..row + b.num_rows()).collect();
+        for c in PAYLOAD_COLUMNS {
+            out.extend(payload_mismatches(&b, &rows, c, path)?);
+        }
+        row += b.num_rows();
+    }
+    Ok(out)
+}
+
+/// The payload check of any dataset file: shards and descriptor parts have checksummed
+/// payloads; other files have none (their manifest SHA-256 covers them).
+pub fn check_payloads(
+    rel: &str,
+    path: &std::path::Path,
+    data: bytes::Bytes,
+) -> Result<Vec<PayloadMismatch>> {
+    if is_shard(rel) {
+        check_shard(path, data)
+    } else if crate::descriptors::is_part(rel) {
+        crate::descriptors::check_part(path, data)
+    } else {
+        Ok(Vec::new())
+    }
 }

@@ -50,6 +50,8 @@ pub struct IngestConfig {
     pub filters: Filters,
     /// Images per shard (the unit of resumption and of work units).
     pub rows_per_shard: usize,
+    /// Make an unreadable photo or label map an error instead of an `unreadable` verdict.
+    pub strict: bool,
     /// Stop after this many groups, as an interruption would (resume tests).
     pub stop_after_groups: Option<usize>,
     /// Sleep this long after each group (so tests can kill a unit mid-way).
@@ -70,6 +72,7 @@ impl IngestConfig {
             radius: 1.0,
             filters: Filters::default(),
             rows_per_shard: 64,
+            strict: false,
             stop_after_groups: None,
             pause_after_group: None,
         }
@@ -98,6 +101,8 @@ struct Prepared {
     rec: Reconstruction,
     photos_dir: PathBuf,
     photos: BTreeMap<u32, (u32, u32)>,
+    /// Photos whose header cannot be read, with the reason (their views are `unreadable`).
+    unreadable: BTreeMap<u32, String>,
     cloud: RenderCloud,
     source: String,
     record: UnitRecord,
@@ -179,28 +184,37 @@ fn images_dir(cfg: &IngestConfig, model_dir: &Path) -> Result<PathBuf> {
     })
 }
 
-/// One photo's size from its header (no pixel decoded).
-fn header_size(path: &Path) -> Result<(u32, u32)> {
+/// One photo's size from its header (no pixel decoded), or why it has none.
+fn header_size(path: &Path) -> std::result::Result<(u32, u32), String> {
+    use std::io::Read;
+    let mut head = Vec::with_capacity(16);
+    std::fs::File::open(path)
+        .and_then(|f| f.take(16).read_to_end(&mut head))
+        .map_err(|e| e.to_string())?;
+    nrw_dataset::codec::photo_format(&head)?;
     image::ImageReader::open(path)
         .and_then(|r| r.with_guessed_format())
-        .map_err(|e| PipelineError::Photo {
-            path: path.into(),
-            source: image::ImageError::IoError(e),
-        })?
+        .map_err(|e| e.to_string())?
         .into_dimensions()
-        .map_err(|e| PipelineError::Photo {
-            path: path.into(),
-            source: e,
-        })
+        .map_err(|e| format!("cannot read the photo's size: {}", e.to_string().trim()))
 }
 
-/// Photo sizes from file headers, with warnings for size mismatches.
+/// Registered photos' sizes from their headers, and those whose header cannot be read.
+struct PhotoSizes {
+    sizes: BTreeMap<u32, (u32, u32)>,
+    unreadable: BTreeMap<u32, String>,
+}
+
+/// Photo sizes from file headers, with warnings for size mismatches; an unreadable header
+/// is an error only when `strict`.
 fn photo_sizes(
     rec: &Reconstruction,
     dir: &Path,
+    strict: bool,
     warnings: &mut Vec<String>,
-) -> Result<BTreeMap<u32, (u32, u32)>> {
+) -> Result<PhotoSizes> {
     let mut photos = BTreeMap::new();
+    let mut unreadable = BTreeMap::new();
     let mut missing = Vec::new();
     for img in rec.images.values() {
         let path = dir.join(&img.name);
@@ -208,7 +222,15 @@ fn photo_sizes(
             missing.push(img.name.clone());
             continue;
         }
-        let (w, h) = header_size(&path)?;
+        let (w, h) = match header_size(&path) {
+            Ok(size) => size,
+            Err(problem) if strict => return Err(unreadable_error(&path, problem)),
+            Err(problem) => {
+                warnings.push(format!("{}: unreadable: {problem}", path.display()));
+                unreadable.insert(img.id, problem);
+                continue;
+            }
+        };
         let cam = &rec.cameras[&img.camera_id];
         if (w as u64, h as u64) != (cam.width, cam.height) {
             // Same aspect ratio (to a pixel): the photo is rescaled to the render size like
@@ -247,7 +269,18 @@ fn photo_sizes(
             ),
         ));
     }
-    Ok(photos)
+    Ok(PhotoSizes {
+        sizes: photos,
+        unreadable,
+    })
+}
+
+fn unreadable_error(path: &Path, problem: String) -> PipelineError {
+    nrw_dataset::DatasetError::Unreadable {
+        path: path.to_path_buf(),
+        problem,
+    }
+    .into()
 }
 
 /// Which cloud to render, what it is called, and the file it came from (if any).
@@ -315,7 +348,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     let (model_dir, rec) = load_model(&cfg.scene, cfg.format)?;
     let photos_dir = images_dir(cfg, &model_dir)?;
     let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
-    let photos = photo_sizes(&rec, &photos_dir, &mut warnings)?;
+    let photos = photo_sizes(&rec, &photos_dir, cfg.strict, &mut warnings)?;
     let (cloud, source, source_path) = point_source(cfg, &model_dir, &rec)?;
     let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
     let (enc, layout) = describe(&rec);
@@ -352,7 +385,8 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     Ok(Prepared {
         rec,
         photos_dir,
-        photos,
+        photos: photos.sizes,
+        unreadable: photos.unreadable,
         cloud,
         source,
         record,
@@ -378,6 +412,21 @@ fn outcome(verdict: &Verdict, empty: Option<f64>, size: Option<(u32, u32)>) -> I
         render_size: size,
         shard: None,
         depth_range: None,
+        detail: None,
+    }
+}
+
+/// The outcome of a view whose photo or label map cannot be decoded: the verdict's value is
+/// the file's size in bytes (0 for an empty file), the detail the decoder's message.
+fn unreadable(path: &Path, problem: String) -> ImageOutcome {
+    ImageOutcome {
+        verdict: nrw_dataset::VERDICT_UNREADABLE.into(),
+        verdict_value: std::fs::metadata(path).map_or(0.0, |m| m.len() as f64),
+        empty_ratio: None,
+        render_size: None,
+        shard: None,
+        depth_range: None,
+        detail: Some(problem),
     }
 }
 
@@ -399,7 +448,7 @@ fn label_pngs(
     size: (u32, u32),
     w: u32,
     h: u32,
-) -> Result<LabelPngs> {
+) -> nrw_dataset::Result<LabelPngs> {
     let Some(dir) = &cfg.semantics else {
         return Ok((None, None, None));
     };
@@ -422,6 +471,10 @@ fn process(
 ) -> Result<(ImageOutcome, Option<ViewRow>)> {
     let img = &p.rec.images[&image_id];
     let cam = &p.rec.cameras[&img.camera_id];
+    let photo_path = p.photos_dir.join(&img.name);
+    if let Some(problem) = p.unreadable.get(&image_id) {
+        return Ok((unreadable(&photo_path, problem.clone()), None));
+    }
     let size = p.photos[&image_id];
     if let Some(v) = cfg.filters.check_size(size.0 as u64, size.1 as u64) {
         return Ok((outcome(&v, None, None), None));
@@ -440,9 +493,17 @@ fn process(
         depth_range: depth_range(&buf.depth),
         ..o
     };
-    let photo = resize_photo(&load_photo(&p.photos_dir.join(&img.name))?, w, h);
     let name = format!("image {}", img.id);
-    let (semantics_png, transient_png, labels_png) = label_pngs(cfg, &name, &img.name, size, w, h)?;
+    let decoded = load_photo(&photo_path)
+        .and_then(|photo| Ok((photo, label_pngs(cfg, &name, &img.name, size, w, h)?)));
+    let (photo, (semantics_png, transient_png, labels_png)) = match decoded {
+        Ok(d) => d,
+        Err(nrw_dataset::DatasetError::Unreadable { path, problem }) if !cfg.strict => {
+            return Ok((unreadable(&path, problem), None));
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let photo = resize_photo(&photo, w, h);
     let row = ViewRow {
         image_id: img.id,
         name: img.name.clone(),
@@ -507,7 +568,7 @@ fn run_group(
             }
             GroupImage {
                 image_id: *id,
-                photo_size: Some(p.photos[id]),
+                photo_size: p.photos.get(id).copied(),
                 outcome: o,
             }
         })

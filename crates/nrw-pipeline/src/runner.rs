@@ -37,6 +37,9 @@ pub struct IngestStage {
     pub rows_per_shard: usize,
     /// Folder of ADE20K label maps, relative to the scene folder.
     pub semantics: Option<PathBuf>,
+    /// An unreadable photo or label map stops the run instead of being dropped.
+    #[serde(default)]
+    pub strict: bool,
 }
 
 /// `[split]`: validation photos (a count, or a fraction of the kept photos) and seed.
@@ -103,6 +106,7 @@ impl Pipeline {
                 min_photo_side: paper.filters.min_photo_side,
                 rows_per_shard: paper.rows_per_shard,
                 semantics: Some("ground_truth/semantics".into()),
+                strict: false,
             }),
             split: Some(SplitStage {
                 val: None,
@@ -223,6 +227,7 @@ pub fn run(
         c.filters.min_photo_side = i.min_photo_side;
         c.rows_per_shard = i.rows_per_shard;
         c.semantics = i.semantics.as_ref().map(|s| scene.join(s));
+        c.strict = i.strict;
         let s = crate::ingest::ingest(&c, progress)?;
         done(StageDone::Ingest(&s));
         outcome.kept = s.kept > 0;

@@ -1,5 +1,6 @@
 //! Verify: every file a dataset's manifest lists against what it records (size, SHA-256,
-//! rows), and files the manifest does not list, on disk or on object storage.
+//! rows), every payload of shards and descriptor parts against its CRC-32, and files the
+//! manifest does not list, on disk or on object storage.
 
 use std::time::Instant;
 
@@ -13,7 +14,8 @@ use crate::Progress;
 pub struct Mismatch {
     /// The file (a path or URL).
     pub file: String,
-    /// `missing`, `size`, `sha256` or `rows`.
+    /// `missing`, `size`, `sha256`, `rows`, `parquet` (unreadable), or a payload as
+    /// `<column> at row <r> (image <id>)` with its CRC-32s.
     pub field: String,
     pub expected: String,
     pub found: String,
@@ -50,6 +52,28 @@ fn parquet_rows(store: &Store, rel: &str) -> Option<u64> {
     let b = parquet::file::reader::SerializedFileReader::new(f).ok()?;
     use parquet::file::reader::FileReader;
     Some(b.metadata().file_metadata().num_rows() as u64)
+}
+
+/// Every payload of a shard or descriptor part against its CRC-32 (other files have none).
+fn payload_check(rel: &str, name: &str, data: bytes::Bytes) -> Vec<Mismatch> {
+    let hex = |c: Option<u32>| c.map_or("none".into(), |c| format!("crc32 {c:08x}"));
+    match nrw_dataset::views::check_payloads(rel, std::path::Path::new(name), data) {
+        Ok(found) => found
+            .into_iter()
+            .map(|m| Mismatch {
+                file: name.into(),
+                field: format!("{} at row {} (image {})", m.column, m.row, m.image_id),
+                expected: hex(m.stored),
+                found: hex(m.computed),
+            })
+            .collect(),
+        Err(e) => vec![Mismatch {
+            file: name.into(),
+            field: "parquet".into(),
+            expected: "a readable Parquet file".into(),
+            found: e.to_string(),
+        }],
+    }
 }
 
 /// Check every listed file (in parallel, one file per task) and list the unlisted ones.
@@ -99,6 +123,7 @@ pub fn verify(store: &Store, progress: &dyn Progress) -> Result<VerifyReport> {
                             )),
                         }
                     }
+                    out.extend(payload_check(&t.path, &name, data.clone()));
                     data.len() as u64
                 }
             };

@@ -171,6 +171,9 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
     let reason = |r: &str| match r {
         "too_small" => format!("photo shorter side under {:.0} px", inp.min_side),
         "too_sparse" => format!("render more than {:.0}% empty", inp.max_empty * 100.0),
+        nrw_dataset::VERDICT_UNREADABLE => {
+            "photo or label map cannot be decoded whole: empty, truncated or corrupt".into()
+        }
         other => other.to_string(),
     };
     h.push_str("<div class=\"charts\"><table><tr><th>reason</th><th>photos</th></tr>");
@@ -191,6 +194,7 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
     .collect();
     h.push_str(&plots::bars("photos by verdict", &bars)?);
     h.push_str("</div>");
+    unreadable_list(h, inp);
     // A few dropped photos with the measured value, from the scene's images when reachable.
     let images_dir = inp.manifest.scene.images_dir.as_deref().map(Path::new);
     let mut strip = String::new();
@@ -203,6 +207,7 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
         let measured = match r.verdict.as_str() {
             "too_sparse" => format!("{:.1}% empty", r.verdict_value * 100.0),
             "too_small" => format!("{:.0} px shorter side", r.verdict_value),
+            nrw_dataset::VERDICT_UNREADABLE => r.verdict_detail.clone().unwrap_or_default(),
             _ => format!("{}", r.verdict_value),
         };
         let caption = format!("{} — {} ({measured})", r.name, r.verdict);
@@ -223,6 +228,33 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
     }
     let _ = write!(h, "<p>Some dropped photos, with the value that dropped them:</p><div class=\"strip\">{strip}</div>");
     Ok(())
+}
+
+/// Every unreadable photo with the decoder's message: the user must fix or remove each file.
+fn unreadable_list(h: &mut String, inp: &Inputs) {
+    let bad: Vec<_> = inp
+        .images
+        .iter()
+        .filter(|r| r.verdict == nrw_dataset::VERDICT_UNREADABLE)
+        .collect();
+    if bad.is_empty() {
+        return;
+    }
+    let _ = write!(
+        h,
+        "<p class=\"warn\">{} photo(s) could not be decoded whole and were left out; re-download or remove them:</p><table><tr><th>photo</th><th>bytes</th><th>decoder</th></tr>",
+        bad.len()
+    );
+    for r in bad {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{:.0}</td><td>{}</td></tr>",
+            esc(&r.name),
+            r.verdict_value,
+            esc(r.verdict_detail.as_deref().unwrap_or(""))
+        );
+    }
+    h.push_str("</table>");
 }
 
 fn distributions(h: &mut String, inp: &Inputs) -> Result<()> {

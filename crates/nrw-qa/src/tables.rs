@@ -16,6 +16,8 @@ pub struct ImageRow {
     pub name: String,
     pub verdict: String,
     pub verdict_value: f64,
+    /// The verdict in words (`unreadable`: the decoder's message).
+    pub verdict_detail: Option<String>,
     pub empty_ratio: Option<f64>,
     pub photo_width: Option<u32>,
     pub photo_height: Option<u32>,
@@ -74,6 +76,7 @@ pub fn images(dir: &Store) -> Result<Vec<ImageRow>> {
             col("name"),
             col("verdict"),
             col("verdict_value"),
+            col("verdict_detail"),
             col("empty_ratio"),
             col("photo_width"),
             col("photo_height"),
@@ -88,6 +91,7 @@ pub fn images(dir: &Store) -> Result<Vec<ImageRow>> {
     let names = column!(df, &path, "name", str);
     let verdicts = column!(df, &path, "verdict", str);
     let values = column!(df, &path, "verdict_value", f64);
+    let details = column!(df, &path, "verdict_detail", str);
     let empty = column!(df, &path, "empty_ratio", f64);
     let pw = column!(df, &path, "photo_width", u32);
     let ph = column!(df, &path, "photo_height", u32);
@@ -107,6 +111,7 @@ pub fn images(dir: &Store) -> Result<Vec<ImageRow>> {
             name: names.get(i).unwrap_or_default().to_string(),
             verdict: verdicts.get(i).unwrap_or_default().to_string(),
             verdict_value: values.get(i).unwrap_or(f64::NAN),
+            verdict_detail: details.get(i).map(str::to_string),
             empty_ratio: empty.get(i),
             photo_width: pw.get(i),
             photo_height: ph.get(i),

@@ -57,6 +57,10 @@ pub struct IngestArgs {
     /// resumption and of --shard work units)
     #[arg(long, default_value_t = 64)]
     pub rows_per_shard: usize,
+    /// Stop with an error (exit 1, naming the file) at the first photo or label map that
+    /// cannot be decoded whole, instead of dropping its view as `unreadable` and going on
+    #[arg(long)]
+    pub strict: bool,
     #[command(flatten)]
     pub shard: ShardArgs,
     /// Worker threads [default: all cores]; output bytes do not depend on it
@@ -91,6 +95,7 @@ impl IngestArgs {
                 min_photo_side: self.min_photo_side,
             },
             rows_per_shard: self.rows_per_shard,
+            strict: self.strict,
             stop_after_groups: self.stop_after_shards,
             pause_after_group: self
                 .pause_after_shard_ms

@@ -13,10 +13,18 @@ pub const EXIT_MISMATCH: u8 = 4;
 /// Arguments of `verify`.
 #[derive(Debug, Args)]
 #[command(
-    after_help = "Exit codes: 0 every listed file is as manifest.json records it (size,
-SHA-256, Parquet rows); 4 some differ or are missing (each is printed: file, field, expected,
-found); 1 the dataset could not be read at all (no manifest, unreachable store).
-Files the manifest does not list are reported but do not fail the check: readers ignore them."
+    after_help = "Checks every file manifest.json lists (size, SHA-256, Parquet rows) and
+every payload of the shards and descriptor parts (photo, renders, depth, normals, semantics,
+descriptors) against the CRC-32 written beside it, so a damaged file is named down to its row
+and column.
+
+Exit codes: 0 everything matches; 4 something differs or is missing (each mismatch is
+printed: file, field or column and row, expected, found); 1 the dataset could not be read at
+all (no manifest, unreachable store). Files the manifest does not list are reported but do
+not fail the check: readers ignore them.
+
+Example, after copying a dataset:
+  rsync -a ds/ /scratch/ds/ && nrw-etl verify /scratch/ds"
 )]
 pub struct VerifyArgs {
     /// Dataset folder or object-store URL (s3://, gs://, az://)

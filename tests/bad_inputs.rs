@@ -547,13 +547,19 @@ fn stages_killed_with_sigkill_then_rerun_write_the_same_bytes() {
         ];
         for (args, slow) in stages {
             if kill {
-                let mut cmd = Command::new(env!("CARGO_BIN_EXE_nrw-etl"));
-                cmd.args(&args).args(slow.unwrap_or_default());
-                // Killed once its first file lands (or at once for stages that write one).
-                let shards = ds.join("shards");
-                kill_when(cmd, &|| {
-                    shards.read_dir().is_ok_and(|mut d| d.next().is_some())
-                });
+                // Ingest is killed once its first shard lands (it pauses after each); the
+                // others, which write a file or two, after 2, 10 and 40 ms of their run.
+                let delays: &[u64] = if slow.is_some() { &[0] } else { &[2, 10, 40] };
+                for &ms in delays {
+                    let mut cmd = Command::new(env!("CARGO_BIN_EXE_nrw-etl"));
+                    cmd.args(&args).args(slow.clone().unwrap_or_default());
+                    let shards = ds.join("shards");
+                    let t0 = std::time::Instant::now();
+                    kill_when(cmd, &|| {
+                        shards.read_dir().is_ok_and(|mut d| d.next().is_some())
+                            && t0.elapsed().as_millis() as u64 >= ms
+                    });
+                }
             }
             ok(&args);
         }
@@ -563,7 +569,7 @@ fn stages_killed_with_sigkill_then_rerun_write_the_same_bytes() {
     run_all(&killed, true);
     let strip = |m: std::collections::BTreeMap<PathBuf, Vec<u8>>| {
         m.into_iter()
-            .filter(|(k, _)| !k.starts_with(".units") && !k.ends_with("manifest.json"))
+            .filter(|(k, _)| !k.starts_with(".units"))
             .collect::<std::collections::BTreeMap<_, _>>()
     };
     assert_same_files(
@@ -578,4 +584,186 @@ fn verify_code(ds: &Path) -> Option<i32> {
     nrw(&["verify", ds.to_str().unwrap(), "--quiet"])
         .status
         .code()
+}
+
+#[test]
+fn label_maps_of_the_wrong_size_or_classes_are_errors_and_corrupt_ones_unreadable() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("src");
+    small_scene(&src, 4);
+    let labels = src.join("ground_truth/semantics");
+    let mut maps: Vec<PathBuf> = std::fs::read_dir(&labels)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    maps.sort();
+    let copy = |to: &Path| {
+        std::fs::create_dir_all(to).unwrap();
+        for m in &maps {
+            std::fs::copy(m, to.join(m.file_name().unwrap())).unwrap();
+        }
+    };
+    let run = |dir: &Path| {
+        let d = dir.to_str().unwrap();
+        let out = tmp
+            .path()
+            .join(format!("ds-{}", dir.file_name().unwrap().to_string_lossy()));
+        ingest_small(
+            &src,
+            &out,
+            &["--max-empty", "1.0", "--quiet", "--semantics", d],
+        )
+    };
+    let first = maps[0].file_name().unwrap().to_string_lossy().into_owned();
+    let grey = image::open(&maps[0]).unwrap().into_luma8();
+    // Another size than its photo.
+    let wrong = tmp.path().join("wrong-size");
+    copy(&wrong);
+    image::imageops::resize(&grey, 17, 13, image::imageops::FilterType::Nearest)
+        .save(wrong.join(&first))
+        .unwrap();
+    let o = run(&wrong);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains(&first) && err.contains("17x13"), "{err}");
+    // A class id beyond ADE20K's 150.
+    let ids = tmp.path().join("ids");
+    copy(&ids);
+    let mut high = grey.clone();
+    high.put_pixel(3, 2, image::Luma([200]));
+    high.save(ids.join(&first)).unwrap();
+    let o = run(&ids);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&first) && err.contains("class id 200"),
+        "{err}"
+    );
+    // A truncated label map: its view is unreadable, the others are kept.
+    let cut = tmp.path().join("cut");
+    copy(&cut);
+    let bytes = std::fs::read(&maps[0]).unwrap();
+    std::fs::write(cut.join(&first), &bytes[..bytes.len() / 2]).unwrap();
+    let o = run(&cut);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = verdicts(&tmp.path().join("ds-cut"));
+    let unreadable: Vec<_> = v.values().filter(|(v, _)| v == "unreadable").collect();
+    assert_eq!(unreadable.len(), 1, "{v:?}");
+    assert!(unreadable[0]
+        .1
+        .as_deref()
+        .unwrap()
+        .contains("label map (PNG)"));
+    assert_eq!(v.values().filter(|(v, _)| v == "kept").count(), 3);
+}
+
+/// A safetensors file of the given F32 tensors (name, shape), zero-filled.
+fn safetensors(tensors: &[(&str, Vec<usize>)]) -> Vec<u8> {
+    let mut header = serde_json::Map::new();
+    let mut at = 0usize;
+    for (name, shape) in tensors {
+        let n = shape.iter().product::<usize>() * 4;
+        header.insert(
+            name.to_string(),
+            serde_json::json!({"dtype": "F32", "shape": shape, "data_offsets": [at, at + n]}),
+        );
+        at += n;
+    }
+    let h = serde_json::to_vec(&header).unwrap();
+    let mut out = (h.len() as u64).to_le_bytes().to_vec();
+    out.extend(h);
+    out.resize(out.len() + at, 0);
+    out
+}
+
+#[test]
+fn weights_of_the_wrong_shape_or_cut_short_are_refused_naming_file_and_tensor() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = small_dataset(tmp.path(), 4, false);
+    let d = ds.to_str().unwrap();
+    let style = |w: &Path| {
+        fails(&[
+            "style",
+            d,
+            "--tier",
+            "vgg16-128",
+            "--weights",
+            w.to_str().unwrap(),
+            "--quiet",
+        ])
+    };
+    let shaped = tmp.path().join("shaped.safetensors");
+    std::fs::write(
+        &shaped,
+        safetensors(&[
+            ("features.0.weight", vec![8, 3, 3, 3]),
+            ("features.0.bias", vec![8]),
+        ]),
+    )
+    .unwrap();
+    let err = style(&shaped);
+    assert!(
+        err.contains("shaped.safetensors")
+            && err.contains("features.0.weight")
+            && err.contains("expected F32 [64, 3, 3, 3]"),
+        "{err}"
+    );
+    let good = safetensors(&[
+        ("features.0.weight", vec![64, 3, 3, 3]),
+        ("features.0.bias", vec![64]),
+    ]);
+    let cut = tmp.path().join("cut.safetensors");
+    std::fs::write(&cut, &good[..good.len() - 100]).unwrap();
+    let err = style(&cut);
+    assert!(
+        err.contains("cut.safetensors") && err.contains("not a safetensors file"),
+        "{err}"
+    );
+    // Whole but without the later layers: the first missing tensor is named.
+    let short = tmp.path().join("short.safetensors");
+    std::fs::write(&short, &good).unwrap();
+    let err = style(&short);
+    assert!(
+        err.contains("features.2.weight") && err.contains("missing"),
+        "{err}"
+    );
+    assert!(
+        !ds.join("descriptors").exists(),
+        "nothing written on refused weights"
+    );
+}
+
+#[test]
+fn an_edited_or_broken_manifest_is_named_by_verify_and_every_reader() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = small_dataset(tmp.path(), 4, false);
+    let d = ds.to_str().unwrap();
+    let m = ds.join("manifest.json");
+    let text = std::fs::read_to_string(&m).unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let sha = manifest["tables"][0]["sha256"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let file = manifest["tables"][0]["path"].as_str().unwrap().to_string();
+    // A hash edited by hand: verify names the file whose bytes no longer match.
+    std::fs::write(&m, text.replace(&sha, &"0".repeat(64))).unwrap();
+    let o = nrw(&["verify", d, "--quiet"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(4), "{err}");
+    assert!(err.contains(&format!("{file}: sha256")), "{err}");
+    // Broken JSON: every command that opens the dataset names manifest.json and the place.
+    std::fs::write(&m, &text[..text.len() / 2]).unwrap();
+    for args in [
+        vec!["verify", d, "--quiet"],
+        vec!["split", d],
+        vec!["qa", d],
+        vec!["style", d, "--tier", "color-stats", "--quiet"],
+    ] {
+        let err = fails(&args);
+        assert!(
+            err.contains("manifest.json") && err.contains("line"),
+            "{args:?}: {err}"
+        );
+    }
 }

@@ -49,6 +49,7 @@ pub fn encode_exr(depth: &DepthMap) -> Result<Vec<u8>> {
 
 /// Decode EXR bytes written by [`encode_exr`] (or any EXR with one f32 "Z" channel).
 pub fn decode_exr(bytes: &[u8], name: &Path) -> Result<DepthMap> {
+    check_exr_size(bytes, name)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -70,6 +71,34 @@ pub fn decode_exr(bytes: &[u8], name: &Path) -> Result<DepthMap> {
             problem: format!("not a depth EXR: {e}"),
         })?;
     Ok(image.layer_data.channel_data.pixels)
+}
+
+/// Largest depth map decoded, in pixels (256 MB of f32): a header that claims more is refused
+/// before the pixel buffer is allocated, so damaged bytes cannot abort a run.
+pub const MAX_DEPTH_PIXELS: usize = 1 << 26;
+
+/// Refuse an EXR whose header claims a layer larger than [`MAX_DEPTH_PIXELS`].
+fn check_exr_size(bytes: &[u8], name: &Path) -> Result<()> {
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| {
+        DatasetError::Schema {
+            path: name.to_path_buf(),
+            problem: format!("not a depth EXR: {e}"),
+        }
+    })?;
+    for h in &meta.headers {
+        let size = h.layer_size;
+        if size.area() > MAX_DEPTH_PIXELS {
+            return Err(DatasetError::Schema {
+                path: name.to_path_buf(),
+                problem: format!(
+                    "the depth EXR claims {}x{} pixels, more than the {MAX_DEPTH_PIXELS}-pixel limit",
+                    size.x(),
+                    size.y()
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Write a depth map to an EXR file atomically.

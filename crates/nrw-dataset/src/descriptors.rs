@@ -200,10 +200,19 @@ pub fn read_kinds(dir: &Store, rel: &str) -> Result<Vec<DescriptorKind>> {
 
 /// Read a part: its kind (all rows must agree) and rows.
 pub fn read_part(dir: &Store, rel: &str) -> Result<(Option<DescriptorKind>, Vec<DescriptorRow>)> {
-    let path = &dir.name(rel);
+    part_in(dir.chunks(rel)?, &dir.name(rel))
+}
+
+/// A part's kind and rows from its bytes (`path` names them in errors), every descriptor
+/// checked against its CRC-32.
+pub fn part_in<R: parquet::file::reader::ChunkReader + 'static>(
+    data: R,
+    path: &std::path::Path,
+) -> Result<(Option<DescriptorKind>, Vec<DescriptorRow>)> {
     let mut kind: Option<DescriptorKind> = None;
     let mut rows = Vec::new();
-    for b in read_batches(dir, rel, None)? {
+    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, 1024)? {
+        let b = b?;
         if let Some(m) = descriptor_mismatches(&b, rows.len(), path)?.first() {
             return Err(m.error(path));
         }

@@ -122,9 +122,12 @@ impl Manifest {
 
     /// Read a dataset's manifest, refusing other schema versions.
     pub fn read(store: &Store) -> Result<Manifest> {
-        let path = store.name(Self::FILE);
-        let text = store.read(Self::FILE)?;
-        let m: Manifest = serde_json::from_slice(&text).map_err(|e| DatasetError::Json {
+        Self::parse(&store.read(Self::FILE)?, store.name(Self::FILE))
+    }
+
+    /// Parse a manifest's bytes (`path` names them in errors), refusing other schema versions.
+    pub fn parse(text: &[u8], path: std::path::PathBuf) -> Result<Manifest> {
+        let m: Manifest = serde_json::from_slice(text).map_err(|e| DatasetError::Json {
             path: path.clone(),
             source: e,
         })?;

@@ -379,6 +379,21 @@ impl Dataset {
     }
 }
 
+/// Every view of a shard's bytes (`path` names them in errors), each payload checked against
+/// its CRC-32: a shard read whole, without a dataset around it.
+pub fn views_in<R: parquet::file::reader::ChunkReader + 'static>(
+    data: R,
+    path: &Path,
+) -> Result<Vec<View>> {
+    let mut out: Vec<View> = Vec::new();
+    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, ROW_GROUP_ROWS)? {
+        let b = b?;
+        let rows: Vec<usize> = (out.len()..out.len() + b.num_rows()).collect();
+        out.extend(views_of(&b, &rows, path)?);
+    }
+    Ok(out)
+}
+
 /// The views of a batch whose row i is row `rows[i]` of the shard at `path`, every payload
 /// checked against its checksum first.
 fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<View>> {

@@ -118,15 +118,24 @@ pub fn write_triplets(dir: &Store, info: &TripletInfo, rows: &[TripletRow]) -> R
 
 /// Read the table back (the trainer's triplet sampler reads it), or None before `triplets`.
 pub fn read_triplets(dir: &Store) -> Result<Option<Vec<TripletRow>>> {
-    use crate::parquet_io::column;
-    use arrow_array::types::{Float64Type, UInt32Type};
-    use arrow_array::ListArray;
-    let path = dir.name(TRIPLETS_TABLE);
     if !dir.exists(TRIPLETS_TABLE)? {
         return Ok(None);
     }
+    triplets_in(dir.chunks(TRIPLETS_TABLE)?, &dir.name(TRIPLETS_TABLE)).map(Some)
+}
+
+/// The rows of a triplets table's bytes (`path` names them in errors).
+pub fn triplets_in<R: parquet::file::reader::ChunkReader + 'static>(
+    data: R,
+    path: &Path,
+) -> Result<Vec<TripletRow>> {
+    use crate::parquet_io::column;
+    use arrow_array::types::{Float64Type, UInt32Type};
+    use arrow_array::ListArray;
     let mut out = Vec::new();
-    for b in crate::parquet_io::read_batches(dir, TRIPLETS_TABLE, None)? {
+    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, 1024)? {
+        let b = b?;
+        let path = path.to_path_buf();
         let anchors = column::<UInt32Array>(&b, "anchor_id", &path)?;
         let names = column::<StringArray>(&b, "anchor_name", &path)?;
         let lists = |name: &str| column::<ListArray>(&b, name, &path);
@@ -147,7 +156,7 @@ pub fn read_triplets(dir: &Store) -> Result<Option<Vec<TripletRow>>> {
             });
         }
     }
-    Ok(Some(out))
+    Ok(out)
 }
 
 /// Row `i` of a list column as a vector of its primitive values.

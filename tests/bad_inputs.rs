@@ -227,10 +227,32 @@ fn photo_variants_are_kept_converted_or_dropped_with_their_reason() {
         );
         eprintln!("skipped the CMYK and EXIF rows: no Pillow");
     }
+    // Larger than its camera with the same aspect ratio: rescaled, with a warning.
+    let p8 = photo(&names[8]);
+    let big = p8.resize_exact(
+        p8.width() * 3 / 2,
+        p8.height() * 3 / 2,
+        image::imageops::FilterType::Triangle,
+    );
+    replace_photo(&scene, &names[8], &encoded(&big, image::ImageFormat::Png));
     let ds = tmp.path().join("ds");
-    let o = ingest_small(&scene, &ds, &["--max-empty", "1.0", "--quiet"]);
+    let o = ingest_small(&scene, &ds, &["--max-empty", "1.0", "--quiet", "--json"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["unreadable"], 3, "{summary}");
+    let warnings = summary["warnings"].to_string();
+    for n in &names[..3] {
+        assert!(
+            warnings.contains(&format!("{n}: unreadable, left out")),
+            "{warnings}"
+        );
+    }
+    assert!(
+        warnings.contains(&names[8]) && warnings.contains("same aspect ratio, rescaled"),
+        "{warnings}"
+    );
     let v = verdicts(&ds);
+    assert_eq!(v[&names[8]].0, "kept");
     let reason = |n: &str| {
         let (verdict, detail) = &v[n];
         assert_eq!(verdict, "unreadable", "{n}");
@@ -296,6 +318,20 @@ fn photo_variants_are_kept_converted_or_dropped_with_their_reason() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains(&names[0]) && err.contains("empty"), "{err}");
+    // Another aspect ratio than its camera: the model does not describe this photo.
+    let cropped = p8.crop_imm(0, 0, p8.width(), p8.height() / 2);
+    replace_photo(
+        &scene,
+        &names[8],
+        &encoded(&cropped, image::ImageFormat::Png),
+    );
+    let o = ingest_small(&scene, &tmp.path().join("aspect"), &["--quiet"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&names[8]) && err.contains("another aspect ratio"),
+        "{err}"
+    );
 }
 
 /// Offset of `needle` in `hay` (payloads are stored uncompressed, so their bytes are there).
@@ -637,6 +673,20 @@ fn label_maps_of_the_wrong_size_or_classes_are_errors_and_corrupt_ones_unreadabl
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(
         err.contains(&first) && err.contains("class id 200"),
+        "{err}"
+    );
+    // Colour instead of class ids.
+    let rgb = tmp.path().join("rgb");
+    copy(&rgb);
+    image::DynamicImage::ImageLuma8(grey.clone())
+        .into_rgb8()
+        .save(rgb.join(&first))
+        .unwrap();
+    let o = run(&rgb);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&first) && err.contains("8-bit single-channel"),
         "{err}"
     );
     // A truncated label map: its view is unreadable, the others are kept.

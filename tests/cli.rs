@@ -659,6 +659,14 @@ fn shards_read_back_with_pyarrow_duckdb_and_openexr() {
         "100",
         "--quiet",
     ]);
+    // Descriptors too, so their CRC-32s are checked from Python as well.
+    ok(&[
+        "style",
+        out.path().to_str().unwrap(),
+        "--tier",
+        "color-stats",
+        "--quiet",
+    ]);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/read_shards.py");
     let o = Command::new("python3")
         .arg(script)
@@ -670,6 +678,7 @@ fn shards_read_back_with_pyarrow_duckdb_and_openexr() {
     assert_eq!(v["kept"], 11);
     assert_eq!(v["shard_rows"], 11);
     assert_eq!(v["views_checked"], 11);
+    assert_eq!(v["descriptors_checked"], 11);
 }
 
 #[test]

@@ -13,10 +13,18 @@ pub fn describe() -> String {
         .trim()
         .to_string();
     let flags = info.lines().find(|l| l.starts_with("flags")).unwrap_or("");
-    let has: Vec<&str> = ["avx2", "fma", "avx512f", "avx512bw", "avx512_vnni"]
-        .into_iter()
-        .filter(|f| flags.split_whitespace().any(|x| x == *f))
-        .collect();
+    let has: Vec<&str> = [
+        "avx2",
+        "fma",
+        "avx512f",
+        "avx512bw",
+        "avx512_vnni",
+        "pclmulqdq",
+        "sha_ni",
+    ]
+    .into_iter()
+    .filter(|f| flags.split_whitespace().any(|x| x == *f))
+    .collect();
     format!(
         "{model}; {} cores; flags: {}",
         std::thread::available_parallelism().map_or(0, |n| n.get()),

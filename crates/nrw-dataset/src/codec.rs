@@ -283,6 +283,8 @@ mod tests {
         assert!(decode_photo(b"ply\nformat", MAX_PHOTO_PIXELS)
             .unwrap_err()
             .contains("not a JPEG or PNG"));
+        let webp = decode_photo(b"RIFF\x10\0\0\0WEBPVP8 \0\0\0\0", MAX_PHOTO_PIXELS).unwrap_err();
+        assert!(webp.contains("not supported"), "{webp}");
         let big = decode_photo(&bytes, 1000).unwrap_err();
         assert!(big.contains("300x200"), "{big}");
     }

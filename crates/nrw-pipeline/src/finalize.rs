@@ -8,7 +8,7 @@ use std::path::Path;
 use nrw_dataset::Store;
 
 use nrw_dataset::units::{self, GroupRecord, UnitRecord};
-use nrw_dataset::{FileEntry, ImageOutcome, Manifest, Tool, SCHEMA_VERSION};
+use nrw_dataset::{FileEntry, ImageOutcome, Manifest, Tool, SCHEMA_VERSION, VERDICT_UNREADABLE};
 
 use crate::error::{PipelineError, Result};
 
@@ -20,6 +20,8 @@ pub struct IngestMerge {
     pub kept: usize,
     pub too_small: usize,
     pub too_sparse: usize,
+    /// Photos (or label maps) that could not be decoded whole: each is named in `warnings`.
+    pub unreadable: usize,
     pub shards: usize,
     /// Empty ratio of the least empty render (what the filter would have to allow).
     pub least_empty: Option<f64>,
@@ -222,6 +224,16 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         tables.push(FileEntry::of(dataset, nrw_dataset::split::SPLITS_TABLE)?);
     }
     let mut warnings = unit.warnings.clone();
+    for (id, o) in outcomes
+        .iter()
+        .filter(|(_, o)| o.verdict == VERDICT_UNREADABLE)
+    {
+        warnings.push(format!(
+            "{}: unreadable, left out: {}",
+            rec.images.get(id).map_or("?", |i| i.name.as_str()),
+            o.detail.as_deref().unwrap_or("")
+        ));
+    }
     // Triplets depend on which views survive: a new ingest makes them stale.
     let stale = nrw_dataset::triplets::TRIPLETS_TABLE;
     if dataset.exists(stale)? {
@@ -251,6 +263,7 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         kept: count(&outcomes, nrw_dataset::scene::VERDICT_KEPT),
         too_small: count(&outcomes, "too_small"),
         too_sparse: count(&outcomes, "too_sparse"),
+        unreadable: count(&outcomes, VERDICT_UNREADABLE),
         shards: shards.len(),
         least_empty: outcomes
             .values()

@@ -226,7 +226,6 @@ fn photo_sizes(
             Ok(size) => size,
             Err(problem) if strict => return Err(unreadable_error(&path, problem)),
             Err(problem) => {
-                warnings.push(format!("{}: unreadable: {problem}", path.display()));
                 unreadable.insert(img.id, problem);
                 continue;
             }
@@ -645,6 +644,8 @@ pub struct IngestSummary {
     pub kept: usize,
     pub too_small: usize,
     pub too_sparse: usize,
+    /// Photos (or label maps) that could not be decoded whole, each named in `warnings`.
+    pub unreadable: usize,
     pub shards: usize,
     pub point_source: String,
     pub points: usize,
@@ -672,6 +673,7 @@ pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSumma
         kept: f.kept,
         too_small: f.too_small,
         too_sparse: f.too_sparse,
+        unreadable: f.unreadable,
         shards: f.shards,
         point_source: u.point_source,
         points: u.points,

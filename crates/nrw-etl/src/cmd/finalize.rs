@@ -29,8 +29,8 @@ pub fn run(args: &FinalizeArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
         eprintln!(
-            "finalized ingest of {} from {} units: {} registered, {} kept, {} too sparse, {} too small; {} shards",
-            s.dataset, i.units, i.registered, i.kept, i.too_sparse, i.too_small, i.shards
+            "finalized ingest of {} from {} units: {} registered, {} kept, {} too sparse, {} too small, {} unreadable; {} shards",
+            s.dataset, i.units, i.registered, i.kept, i.too_sparse, i.too_small, i.unreadable, i.shards
         );
     }
     if let Some(st) = &s.style {

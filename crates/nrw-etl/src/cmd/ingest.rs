@@ -155,7 +155,7 @@ pub fn print_summary(s: &IngestSummary, cfg: &IngestConfig) {
         eprintln!("warning: {w}");
     }
     eprintln!(
-        "ingested {}: {} registered, {} kept, {} too sparse (>{:.0}% empty), {} too small (<{} px); {} shards; {} points ({}) in {:.1} s",
+        "ingested {}: {} registered, {} kept, {} too sparse (>{:.0}% empty), {} too small (<{} px), {} unreadable; {} shards; {} points ({}) in {:.1} s",
         s.dataset,
         s.registered,
         s.kept,
@@ -163,6 +163,7 @@ pub fn print_summary(s: &IngestSummary, cfg: &IngestConfig) {
         cfg.filters.max_empty_ratio * 100.0,
         s.too_small,
         cfg.filters.min_photo_side,
+        s.unreadable,
         s.shards,
         s.points,
         s.point_source,

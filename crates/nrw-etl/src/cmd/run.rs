@@ -32,8 +32,8 @@ pub fn print_stage(dataset: &std::path::Path, done: StageDone) {
                 eprintln!("warning: {w}");
             }
             eprintln!(
-                "ingested {}: {} registered, {} kept, {} too sparse, {} too small; {} shards in {:.1} s",
-                s.dataset, s.registered, s.kept, s.too_sparse, s.too_small, s.shards, s.seconds
+                "ingested {}: {} registered, {} kept, {} too sparse, {} too small, {} unreadable; {} shards in {:.1} s",
+                s.dataset, s.registered, s.kept, s.too_sparse, s.too_small, s.unreadable, s.shards, s.seconds
             );
         }
         StageDone::Split(s) => println!(

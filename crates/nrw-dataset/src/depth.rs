@@ -77,7 +77,11 @@ pub fn decode_exr(bytes: &[u8], name: &Path) -> Result<DepthMap> {
 /// before the pixel buffer is allocated, so damaged bytes cannot abort a run.
 pub const MAX_DEPTH_PIXELS: usize = 1 << 26;
 
-/// Refuse an EXR whose header claims a layer larger than [`MAX_DEPTH_PIXELS`].
+/// Largest EXR block (scan-line group or tile) decoded, in bytes: ours are a few tens of KB.
+pub const MAX_EXR_BLOCK_BYTES: usize = 64 << 20;
+
+/// Refuse an EXR whose header claims a layer larger than [`MAX_DEPTH_PIXELS`] or blocks
+/// larger than [`MAX_EXR_BLOCK_BYTES`].
 fn check_exr_size(bytes: &[u8], name: &Path) -> Result<()> {
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| {
         DatasetError::Schema {
@@ -86,6 +90,16 @@ fn check_exr_size(bytes: &[u8], name: &Path) -> Result<()> {
         }
     })?;
     for h in &meta.headers {
+        // The reader allocates a block's claimed size before reading it.
+        if h.max_block_byte_size() > MAX_EXR_BLOCK_BYTES {
+            return Err(DatasetError::Schema {
+                path: name.to_path_buf(),
+                problem: format!(
+                    "the depth EXR's blocks would take {} bytes each, more than the {MAX_EXR_BLOCK_BYTES}-byte limit",
+                    h.max_block_byte_size()
+                ),
+            });
+        }
         let size = h.layer_size;
         if size.area() > MAX_DEPTH_PIXELS {
             return Err(DatasetError::Schema {

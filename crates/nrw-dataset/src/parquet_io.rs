@@ -89,12 +89,11 @@ pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
     columns: Option<&[&str]>,
     batch_rows: usize,
 ) -> Result<impl Iterator<Item = Result<RecordBatch>>> {
-    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
     let perr = |e| DatasetError::Parquet {
         path: path.clone(),
         source: e,
     };
-    let mut b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(perr)?;
+    let mut b = reader_builder(f, &path)?;
     if let Some(cols) = columns {
         let mask =
             parquet::arrow::ProjectionMask::columns(b.parquet_schema(), cols.iter().copied());
@@ -110,6 +109,44 @@ pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
                 source: e,
             })
         }))
+}
+
+/// A Parquet reader over `f` whose footer has been checked for what the parquet crate
+/// asserts instead of checking (a column chunk at a negative offset or of negative length
+/// panics deep in the reader): such a file is an error naming `path`.
+pub fn reader_builder<R: parquet::file::reader::ChunkReader + 'static>(
+    f: R,
+    path: &Path,
+) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
+    let len = f.len();
+    let b =
+        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| {
+            DatasetError::Parquet {
+                path: path.to_path_buf(),
+                source: e,
+            }
+        })?;
+    for (g, rg) in b.metadata().row_groups().iter().enumerate() {
+        for c in rg.columns() {
+            let start = c.dictionary_page_offset().unwrap_or(c.data_page_offset());
+            let size = c.compressed_size();
+            let fits = start >= 0
+                && size >= 0
+                && (start as u64)
+                    .checked_add(size as u64)
+                    .is_some_and(|end| end <= len);
+            if !fits {
+                return Err(DatasetError::Schema {
+                    path: path.to_path_buf(),
+                    problem: format!(
+                        "damaged Parquet footer: row group {g}, column `{}` claims bytes {start}..+{size} of a {len}-byte file",
+                        c.column_path()
+                    ),
+                });
+            }
+        }
+    }
+    Ok(b)
 }
 
 /// A column of a batch as its concrete Arrow type, or an error naming file and column.

@@ -15,7 +15,7 @@ use arrow_array::{
     Array, BinaryArray, Float64Array, ListArray, RecordBatch, StringArray, UInt32Array,
 };
 use image::{GrayImage, RgbImage, RgbaImage};
-use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection, RowSelector};
+use parquet::arrow::arrow_reader::{RowSelection, RowSelector};
 use parquet::arrow::ProjectionMask;
 
 use crate::depth::{decode_exr, DepthMap};
@@ -181,7 +181,7 @@ impl Dataset {
         for (s, rel) in shards.iter().enumerate() {
             let path = dir.name(rel);
             let f = dir.chunks_sized(rel, Some(sizes[s]))?;
-            let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
+            let b = crate::parquet_io::reader_builder(f, &path)?;
             let mask = ProjectionMask::columns(b.parquet_schema(), ["image_id"]);
             let mut row = 0;
             for batch in b
@@ -269,7 +269,7 @@ impl Dataset {
         let rel = &self.shards[shard];
         let path = self.store.name(rel);
         let f = self.store.chunks_sized(rel, Some(self.sizes[shard]))?;
-        let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(parquet_err(&path))?;
+        let b = crate::parquet_io::reader_builder(f, &path)?;
         let total = b.metadata().file_metadata().num_rows() as usize;
         // Read only the row groups that hold wanted rows, and within them only those rows.
         let groups: Vec<usize> = {

@@ -8,6 +8,7 @@ pub mod depth;
 pub mod descriptors;
 pub mod error;
 pub mod export;
+pub mod footer;
 pub mod manifest;
 pub mod parquet_io;
 pub mod reader;

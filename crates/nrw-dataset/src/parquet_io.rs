@@ -111,6 +111,30 @@ pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
         }))
 }
 
+/// The footer's counts checked against its bytes ([`crate::footer`]) before the parquet
+/// crate allocates what they claim. Files too short for a footer are left to the parquet
+/// crate's own error.
+fn check_footer_of<R: parquet::file::reader::ChunkReader>(
+    f: &R,
+    len: u64,
+    path: &Path,
+) -> Result<()> {
+    let io = |e: parquet::errors::ParquetError| DatasetError::Parquet {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    if len < 12 {
+        return Ok(());
+    }
+    let tail = f.get_bytes(len - 8, 8).map_err(io)?;
+    let meta = u64::from(u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]));
+    if &tail[4..] != b"PAR1" || meta + 8 > len {
+        return Ok(());
+    }
+    let footer = f.get_bytes(len - 8 - meta, meta as usize).map_err(io)?;
+    crate::footer::check_footer(&footer, path)
+}
+
 /// A Parquet reader over `f` whose footer has been checked for what the parquet crate
 /// asserts instead of checking (a column chunk at a negative offset or of negative length
 /// panics deep in the reader): such a file is an error naming `path`.
@@ -119,6 +143,7 @@ pub fn reader_builder<R: parquet::file::reader::ChunkReader + 'static>(
     path: &Path,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
     let len = f.len();
+    check_footer_of(&f, len, path)?;
     let b =
         parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| {
             DatasetError::Parquet {

@@ -463,6 +463,31 @@ fn a_flipped_byte_in_any_payload_column_stops_verify_and_every_reader() {
         "triplets",
     );
     assert_named(&fails(&["qa", b]), part, "descriptor", "qa");
+
+    // Whole small tables (triplets, scene tables) are checked against the manifest's SHA-256
+    // by the readers that read them whole: QA and the trainer's triplet sampler.
+    ok(&["triplets", d, "--k", "2"]);
+    for rel in ["triplets.parquet", "scene/images.parquet"] {
+        let whole = std::fs::read(ds.join(rel)).unwrap();
+        flipped(&ds, &bad, rel, &whole[whole.len() / 3..whole.len() / 3 + 8]);
+        let err = fails(&["qa", b]);
+        assert!(err.contains(rel) && err.contains("sha256"), "qa: {err}");
+    }
+    let err = nrw_dataset::triplets::read_triplets(&nrw_dataset::Store::from(bad.as_path()));
+    assert!(err.is_ok(), "the last copy damaged only the images table");
+    flipped(
+        &ds,
+        &bad,
+        "triplets.parquet",
+        &std::fs::read(ds.join("triplets.parquet")).unwrap()[100..108],
+    );
+    let err = nrw_dataset::triplets::read_triplets(&nrw_dataset::Store::from(bad.as_path()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("triplets.parquet") && err.contains("sha256"),
+        "{err}"
+    );
 }
 
 /// Mount a small tmpfs at `at` (root only; the CI machine runs as root).

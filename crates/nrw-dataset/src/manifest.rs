@@ -120,6 +120,28 @@ impl Manifest {
         self.tables.retain(|t| !gone(&t.path));
     }
 
+    /// A small table's bytes, checked against this manifest's size and SHA-256 when it lists
+    /// the file: what a reader of a whole table (triplets, the scene tables in QA) uses so a
+    /// changed byte is an error naming the file, never a silently different table.
+    pub fn read_checked(&self, store: &Store, rel: &str) -> Result<bytes::Bytes> {
+        let data = store.read(rel)?;
+        if let Some(t) = self.tables.iter().find(|t| t.path == rel) {
+            let found = FileEntry::of_bytes(rel, &data);
+            if found.bytes != t.bytes || found.sha256 != t.sha256 {
+                return Err(DatasetError::Value {
+                    path: store.name(rel),
+                    record: "the whole file".into(),
+                    field: "sha256".into(),
+                    problem: format!(
+                        "{} bytes with SHA-256 {} but manifest.json records {} bytes with {}: the file changed after it was written (`nrw-etl verify` lists every damaged file; re-running the stage that wrote it replaces it)",
+                        found.bytes, found.sha256, t.bytes, t.sha256
+                    ),
+                });
+            }
+        }
+        Ok(data)
+    }
+
     /// Read a dataset's manifest, refusing other schema versions.
     pub fn read(store: &Store) -> Result<Manifest> {
         Self::parse(&store.read(Self::FILE)?, store.name(Self::FILE))

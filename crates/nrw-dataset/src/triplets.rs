@@ -121,7 +121,9 @@ pub fn read_triplets(dir: &Store) -> Result<Option<Vec<TripletRow>>> {
     if !dir.exists(TRIPLETS_TABLE)? {
         return Ok(None);
     }
-    triplets_in(dir.chunks(TRIPLETS_TABLE)?, &dir.name(TRIPLETS_TABLE)).map(Some)
+    // A small table read whole, so its manifest hash is checked on every read.
+    let data = crate::Manifest::read(dir)?.read_checked(dir, TRIPLETS_TABLE)?;
+    triplets_in(data, &dir.name(TRIPLETS_TABLE)).map(Some)
 }
 
 /// The rows of a triplets table's bytes (`path` names them in errors).

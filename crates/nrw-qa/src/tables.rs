@@ -32,7 +32,9 @@ pub struct ImageRow {
 
 /// A table of the dataset as a lazy frame (read whole: these tables are small).
 fn scan(store: &Store, rel: &str) -> Result<LazyFrame> {
-    let bytes = store.read(rel)?;
+    // Checked against the manifest first: a damaged table is an error naming it, and polars
+    // never sees bytes other than those written.
+    let bytes = nrw_dataset::Manifest::read(store)?.read_checked(store, rel)?;
     ParquetReader::new(std::io::Cursor::new(bytes.to_vec()))
         .finish()
         .map(IntoLazy::lazy)

@@ -1,10 +1,8 @@
-//! A descriptor part's bytes: its rows and kind, each descriptor checked against its CRC-32.
+//! A descriptor part: every row's CRC-32, then its kind and rows.
+//! The code is `nrw_dataset::probe::descriptors`, shared with the regression tests.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let path = std::path::Path::new("part.parquet");
-    let bytes = bytes::Bytes::copy_from_slice(data);
-    let _ = nrw_dataset::descriptors::check_part(path, bytes.clone());
-    let _ = nrw_dataset::descriptors::part_in(bytes, path);
+    let _ = nrw_dataset::probe::descriptors(data);
 });

@@ -4,6 +4,7 @@
 
 pub mod atomic;
 pub mod codec;
+pub mod contain;
 pub mod depth;
 pub mod descriptors;
 pub mod error;
@@ -11,6 +12,7 @@ pub mod export;
 pub mod footer;
 pub mod manifest;
 pub mod parquet_io;
+pub mod probe;
 pub mod reader;
 pub mod scene;
 pub mod schema;

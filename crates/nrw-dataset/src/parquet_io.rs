@@ -99,16 +99,38 @@ pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
             parquet::arrow::ProjectionMask::columns(b.parquet_schema(), cols.iter().copied());
         b = b.with_projection(mask);
     }
-    let name = path.display().to_string();
-    Ok(b.with_batch_size(batch_rows.max(1))
-        .build()
-        .map_err(perr)?
-        .map(move |r| {
-            r.map_err(|e| DatasetError::Arrow {
-                table: name.clone(),
+    let reader = b.with_batch_size(batch_rows.max(1)).build().map_err(perr)?;
+    Ok(guarded(reader, &path))
+}
+
+/// A built reader's batches as results: the parquet crate's errors, and its panics on
+/// damaged pages (see [`crate::contain`]), both become errors naming `path`; iteration
+/// stops at the first.
+pub fn guarded(
+    mut reader: parquet::arrow::arrow_reader::ParquetRecordBatchReader,
+    path: &Path,
+) -> impl Iterator<Item = Result<RecordBatch>> {
+    let path = path.to_path_buf();
+    let mut failed = false;
+    std::iter::from_fn(move || {
+        if failed {
+            return None;
+        }
+        let next = match crate::contain::contained(|| reader.next()) {
+            Ok(None) => return None,
+            Ok(Some(Ok(b))) => return Some(Ok(b)),
+            Ok(Some(Err(e))) => DatasetError::Arrow {
+                table: path.display().to_string(),
                 source: e,
-            })
-        }))
+            },
+            Err(panic) => DatasetError::Schema {
+                path: path.clone(),
+                problem: format!("damaged Parquet data (the parquet crate failed: {panic})"),
+            },
+        };
+        failed = true;
+        Some(Err(next))
+    })
 }
 
 /// The footer's counts checked against its bytes ([`crate::footer`]) before the parquet

@@ -40,40 +40,77 @@ pub struct Crop {
     pub transient: Option<GrayImage>,
 }
 
-fn decode_image(bytes: &[u8], what: &str, name: &str) -> Result<image::DynamicImage> {
-    image::load_from_memory_with_format(bytes, image::ImageFormat::Png).map_err(|e| {
-        DatasetError::Schema {
-            path: PathBuf::from(name),
-            problem: format!("{what}: {e}"),
-        }
-    })
-}
+/// Largest view decoded, in pixels (an RGBA render of it is 256 MB): a row that claims more
+/// is refused before any payload is decoded.
+pub const MAX_VIEW_PIXELS: u64 = 1 << 26;
 
 impl View {
+    /// Decode one PNG payload after checking its header against the view's size, so damaged
+    /// bytes can neither allocate more than the view needs nor give an image of another size.
+    fn decode_image(&self, bytes: &[u8], what: &str) -> Result<image::DynamicImage> {
+        let err = |problem: String| DatasetError::Value {
+            path: PathBuf::from(&self.name),
+            record: format!("image {}", self.image_id),
+            field: what.into(),
+            problem,
+        };
+        let (w, h) = (self.width, self.height);
+        if u64::from(w) * u64::from(h) > MAX_VIEW_PIXELS {
+            return Err(err(format!(
+                "the view claims {w}x{h} pixels, more than the {MAX_VIEW_PIXELS}-pixel limit"
+            )));
+        }
+        let reader = || {
+            image::ImageReader::with_format(std::io::Cursor::new(bytes), image::ImageFormat::Png)
+        };
+        let size = reader().into_dimensions().map_err(|e| err(e.to_string()))?;
+        if size != (w, h) {
+            return Err(err(format!(
+                "the PNG is {}x{} but the view is {w}x{h}",
+                size.0, size.1
+            )));
+        }
+        reader().decode().map_err(|e| err(e.to_string()))
+    }
+
     /// The resized photo.
     pub fn photo(&self) -> Result<RgbImage> {
-        Ok(decode_image(&self.photo_png, "photo_png", &self.name)?.into_rgb8())
+        Ok(self.decode_image(&self.photo_png, "photo_png")?.into_rgb8())
     }
     /// The colour render with coverage as alpha.
     pub fn color(&self) -> Result<RgbaImage> {
-        Ok(decode_image(&self.color_png, "color_png", &self.name)?.into_rgba8())
+        Ok(self
+            .decode_image(&self.color_png, "color_png")?
+            .into_rgba8())
     }
     /// The depth render (camera-space z, 0 = empty).
     pub fn depth(&self) -> Result<DepthMap> {
-        decode_exr(&self.depth_exr, Path::new(&self.name))
+        let d = decode_exr(&self.depth_exr, Path::new(&self.name))?;
+        if (d.width, d.height) != (self.width as usize, self.height as usize) {
+            return Err(DatasetError::Value {
+                path: PathBuf::from(&self.name),
+                record: format!("image {}", self.image_id),
+                field: "depth_exr".into(),
+                problem: format!(
+                    "the EXR is {}x{} but the view is {}x{}",
+                    d.width, d.height, self.width, self.height
+                ),
+            });
+        }
+        Ok(d)
     }
     /// ADE20K colour-coded labels, when the dataset has semantics.
     pub fn semantics(&self) -> Result<Option<RgbImage>> {
         self.semantics_png
             .as_ref()
-            .map(|b| Ok(decode_image(b, "semantics_png", &self.name)?.into_rgb8()))
+            .map(|b| Ok(self.decode_image(b, "semantics_png")?.into_rgb8()))
             .transpose()
     }
     /// Transient mask (255 = transient), when the dataset has semantics.
     pub fn transient(&self) -> Result<Option<GrayImage>> {
         self.transient_png
             .as_ref()
-            .map(|b| Ok(decode_image(b, "transient_png", &self.name)?.into_luma8()))
+            .map(|b| Ok(self.decode_image(b, "transient_png")?.into_luma8()))
             .transpose()
     }
 
@@ -81,7 +118,7 @@ impl View {
     pub fn labels(&self) -> Result<Option<GrayImage>> {
         self.labels_png
             .as_ref()
-            .map(|b| Ok(decode_image(b, "labels_png", &self.name)?.into_luma8()))
+            .map(|b| Ok(self.decode_image(b, "labels_png")?.into_luma8()))
             .transpose()
     }
 
@@ -184,15 +221,12 @@ impl Dataset {
             let b = crate::parquet_io::reader_builder(f, &path)?;
             let mask = ProjectionMask::columns(b.parquet_schema(), ["image_id"]);
             let mut row = 0;
-            for batch in b
+            let reader = b
                 .with_projection(mask)
                 .build()
-                .map_err(parquet_err(&path))?
-            {
-                let batch = batch.map_err(|e| DatasetError::Arrow {
-                    table: rel.clone(),
-                    source: e,
-                })?;
+                .map_err(parquet_err(&path))?;
+            for batch in crate::parquet_io::guarded(reader, &path) {
+                let batch = batch?;
                 let ids = column::<UInt32Array>(&batch, "image_id", &path)?;
                 for i in 0..ids.len() {
                     index.insert(ids.value(i), Location { shard: s, row });
@@ -299,11 +333,8 @@ impl Dataset {
             .build()
             .map_err(parquet_err(&path))?;
         let mut out: Vec<View> = Vec::with_capacity(rows.len());
-        for batch in reader {
-            let b = batch.map_err(|e| DatasetError::Arrow {
-                table: rel.clone(),
-                source: e,
-            })?;
+        for batch in crate::parquet_io::guarded(reader, &path) {
+            let b = batch?;
             let at = out.len().min(rows.len());
             out.extend(views_of(&b, &rows[at..], &path)?);
         }

@@ -46,11 +46,11 @@ impl VerifyReport {
     }
 }
 
-/// Rows of a Parquet file from its footer.
+/// Rows of a Parquet file from its footer (checked before it is parsed: a damaged footer
+/// is what verify looks for).
 fn parquet_rows(store: &Store, rel: &str) -> Option<u64> {
     let f = store.chunks(rel).ok()?;
-    let b = parquet::file::reader::SerializedFileReader::new(f).ok()?;
-    use parquet::file::reader::FileReader;
+    let b = nrw_dataset::parquet_io::reader_builder(f, &store.name(rel)).ok()?;
     Some(b.metadata().file_metadata().num_rows() as u64)
 }
 

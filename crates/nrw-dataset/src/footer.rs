@@ -1,8 +1,9 @@
-//! A bounds check of a Parquet footer before the parquet crate parses it. The footer is
-//! Thrift (compact protocol); the parquet crate allocates what its counts claim (a schema
-//! node's `num_children`, list lengths) before it reads the items, so a damaged footer could
-//! ask for gigabytes. This walk reads no values: it checks that every list, map and string
-//! fits in the bytes that remain and that the schema's children counts fit in the schema.
+//! Bounds checks of a Parquet file's Thrift headers before the parquet crate parses them. It
+//! allocates what they claim before it reads the items — a schema node's `num_children` and
+//! list lengths in the footer; a page's uncompressed size and a dictionary's value count in
+//! page headers — so a damaged file could ask for gigabytes (fuzzing found all four). These
+//! walks read no values: every count must fit in the bytes that remain, every page in its
+//! column chunk, and a page's claims within [`MAX_PAGE_BYTES`] and its own size.
 
 use std::path::Path;
 
@@ -140,6 +141,66 @@ impl Walk<'_> {
             }
         }
     }
+}
+
+/// Largest page accepted, uncompressed (ours hold at most a row group's payloads, a few tens
+/// of MB).
+pub const MAX_PAGE_BYTES: i64 = 256 << 20;
+
+/// Check every page header of one column chunk's bytes: sizes non-negative, each page inside
+/// the chunk, its uncompressed size within [`MAX_PAGE_BYTES`], and a dictionary's value count
+/// within what its uncompressed bytes can hold at `min_value_bytes` per value.
+pub fn check_pages(chunk: &[u8], min_value_bytes: i64) -> std::result::Result<(), String> {
+    let mut at = 0;
+    let mut page = 0;
+    while at < chunk.len() {
+        let mut w = Walk { b: chunk, at };
+        let (mut uncompressed, mut compressed, mut dictionary) = (-1i64, -1i64, None);
+        w.fields(0, |id, t, w| match (id, t) {
+            (2, 5) => {
+                uncompressed = w.zigzag()?;
+                Ok(true)
+            }
+            (3, 5) => {
+                compressed = w.zigzag()?;
+                Ok(true)
+            }
+            (7, 12) => {
+                w.fields(1, |id, t, w| {
+                    if id == 1 && t == 5 {
+                        dictionary = Some(w.zigzag()?);
+                        return Ok(true);
+                    }
+                    Ok(false)
+                })?;
+                Ok(true)
+            }
+            _ => Ok(false),
+        })
+        .map_err(|e| format!("page {page}: {e}"))?;
+        if !(0..=MAX_PAGE_BYTES).contains(&uncompressed) || compressed < 0 {
+            return Err(format!(
+                "page {page} claims {uncompressed} bytes ({compressed} compressed); at most {MAX_PAGE_BYTES} are accepted"
+            ));
+        }
+        if let Some(n) = dictionary {
+            if n < 0 || n.saturating_mul(min_value_bytes) > uncompressed {
+                return Err(format!(
+                    "page {page}: a dictionary of {n} values in {uncompressed} bytes"
+                ));
+            }
+        }
+        let end = w.at.saturating_add(compressed as usize);
+        if end > chunk.len() {
+            return Err(format!(
+                "page {page} ends at byte {end} of a {}-byte column chunk",
+                chunk.len()
+            ));
+        }
+        at = end;
+        page += 1;
+    }
+    Ok(())
 }
 
 /// Check the footer (FileMetaData) of a Parquet file's last bytes: `footer` is the Thrift

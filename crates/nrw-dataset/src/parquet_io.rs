@@ -93,7 +93,7 @@ pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
         path: path.clone(),
         source: e,
     };
-    let mut b = reader_builder(f, &path)?;
+    let mut b = checked_builder(f, &path, None, columns)?;
     if let Some(cols) = columns {
         let mask =
             parquet::arrow::ProjectionMask::columns(b.parquet_schema(), cols.iter().copied());
@@ -133,6 +133,55 @@ pub fn guarded(
     })
 }
 
+/// The page headers of the column chunks about to be read, checked ([`crate::footer::check_pages`])
+/// before the parquet crate allocates what they claim: row groups `groups` (all when `None`)
+/// and the top-level columns `columns` (all when `None`). Costs one more read of those
+/// chunks' bytes (from memory or the page cache; on object storage, the read-ahead).
+pub fn check_pages<R: parquet::file::reader::ChunkReader>(
+    f: &R,
+    meta: &parquet::file::metadata::ParquetMetaData,
+    groups: Option<&[usize]>,
+    columns: Option<&[&str]>,
+    path: &Path,
+) -> Result<()> {
+    use parquet::basic::Type as Physical;
+    for (g, rg) in meta.row_groups().iter().enumerate() {
+        if groups.is_some_and(|gs| !gs.contains(&g)) {
+            continue;
+        }
+        for c in rg.columns() {
+            let top = c.column_path().parts().first().map(String::as_str);
+            if columns.is_some_and(|cols| !top.is_some_and(|t| cols.contains(&t))) {
+                continue;
+            }
+            let (start, len) = c.byte_range(); // in the file: reader_builder checked it
+            let bytes = f
+                .get_bytes(start, len as usize)
+                .map_err(|e| DatasetError::Parquet {
+                    path: path.to_path_buf(),
+                    source: e,
+                })?;
+            let min_value_bytes = match c.column_type() {
+                Physical::BOOLEAN => 0,
+                Physical::INT32 | Physical::FLOAT | Physical::BYTE_ARRAY => 4,
+                Physical::INT64 | Physical::DOUBLE => 8,
+                Physical::INT96 => 12,
+                Physical::FIXED_LEN_BYTE_ARRAY => 1,
+            };
+            crate::footer::check_pages(&bytes, min_value_bytes).map_err(|problem| {
+                DatasetError::Schema {
+                    path: path.to_path_buf(),
+                    problem: format!(
+                        "damaged Parquet page: row group {g}, column `{}`: {problem}",
+                        c.column_path()
+                    ),
+                }
+            })?;
+        }
+    }
+    Ok(())
+}
+
 /// The footer's counts checked against its bytes ([`crate::footer`]) before the parquet
 /// crate allocates what they claim. Files too short for a footer are left to the parquet
 /// crate's own error.
@@ -164,16 +213,31 @@ pub fn reader_builder<R: parquet::file::reader::ChunkReader + 'static>(
     f: R,
     path: &Path,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
+    checked_builder(f, path, Some(&[]), None)
+}
+
+/// [`reader_builder`] that also checks the page headers of the row groups `groups` (all when
+/// `None`) in the top-level columns `columns` (all when `None`): what a reader about to
+/// decode them uses.
+pub fn checked_builder<R: parquet::file::reader::ChunkReader + 'static>(
+    f: R,
+    path: &Path,
+    groups: Option<&[usize]>,
+    columns: Option<&[&str]>,
+) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
+    use parquet::arrow::arrow_reader::{
+        ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder,
+    };
+    let perr = |e| DatasetError::Parquet {
+        path: path.to_path_buf(),
+        source: e,
+    };
     let len = f.len();
     check_footer_of(&f, len, path)?;
-    let b =
-        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| {
-            DatasetError::Parquet {
-                path: path.to_path_buf(),
-                source: e,
-            }
-        })?;
-    for (g, rg) in b.metadata().row_groups().iter().enumerate() {
+    let meta = parquet::file::metadata::ParquetMetaDataReader::new()
+        .parse_and_finish(&f)
+        .map_err(perr)?;
+    for (g, rg) in meta.row_groups().iter().enumerate() {
         for c in rg.columns() {
             let start = c.dictionary_page_offset().unwrap_or(c.data_page_offset());
             let size = c.compressed_size();
@@ -193,7 +257,11 @@ pub fn reader_builder<R: parquet::file::reader::ChunkReader + 'static>(
             }
         }
     }
-    Ok(b)
+    check_pages(&f, &meta, groups, columns, path)?;
+    let meta =
+        ArrowReaderMetadata::try_new(std::sync::Arc::new(meta), ArrowReaderOptions::default())
+            .map_err(perr)?;
+    Ok(ParquetRecordBatchReaderBuilder::new_with_metadata(f, meta))
 }
 
 /// A column of a batch as its concrete Arrow type, or an error naming file and column.

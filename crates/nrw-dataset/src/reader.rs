@@ -218,7 +218,7 @@ impl Dataset {
         for (s, rel) in shards.iter().enumerate() {
             let path = dir.name(rel);
             let f = dir.chunks_sized(rel, Some(sizes[s]))?;
-            let b = crate::parquet_io::reader_builder(f, &path)?;
+            let b = crate::parquet_io::checked_builder(f, &path, None, Some(&["image_id"]))?;
             let mask = ProjectionMask::columns(b.parquet_schema(), ["image_id"]);
             let mut row = 0;
             let reader = b
@@ -303,14 +303,14 @@ impl Dataset {
         let rel = &self.shards[shard];
         let path = self.store.name(rel);
         let f = self.store.chunks_sized(rel, Some(self.sizes[shard]))?;
-        let b = crate::parquet_io::reader_builder(f, &path)?;
-        let total = b.metadata().file_metadata().num_rows() as usize;
         // Read only the row groups that hold wanted rows, and within them only those rows.
         let groups: Vec<usize> = {
             let mut g: Vec<usize> = rows.iter().map(|r| r / ROW_GROUP_ROWS).collect();
             g.dedup();
             g
         };
+        let b = crate::parquet_io::checked_builder(f, &path, Some(&groups), None)?;
+        let total = b.metadata().file_metadata().num_rows() as usize;
         let mut selectors = Vec::new();
         for &g in &groups {
             let (start, end) = (g * ROW_GROUP_ROWS, ((g + 1) * ROW_GROUP_ROWS).min(total));

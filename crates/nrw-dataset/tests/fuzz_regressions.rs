@@ -30,7 +30,12 @@ fn inputs(kind: &str, target: &str) -> Vec<(PathBuf, Vec<u8>)> {
 /// overcommit the allocation itself could succeed, so the error must say why).
 fn refused(p: &Path, e: String) {
     let oom = p.file_name().unwrap().to_string_lossy().starts_with("oom-");
-    let early = ["damaged Parquet footer", "limit", "but the view is"];
+    let early = [
+        "damaged Parquet footer",
+        "damaged Parquet page",
+        "limit",
+        "but the view is",
+    ];
     assert!(
         !oom || early.iter().any(|m| e.contains(m)),
         "{}: {e}",

@@ -117,7 +117,7 @@ fn main() {
          renders about 800×600, {:.2} MB per view in the shards), one thread, page cache warm. Machine: {}.\n\n\
          | what | views / s | time per view | MB/s |\n|---|---|---|---|\n\
          | read the shard bytes only (I/O bound) | {:.0} | {:.2} ms | {:.0} |\n\
-         | stream the rows: Parquet + CRC-32 of every payload, no decode | {:.0} | {:.2} ms | {:.0} |\n\
+         | stream the rows: Parquet (page headers checked first) + CRC-32 of every payload, no decode | {:.0} | {:.2} ms | {:.0} |\n\
          | CRC-32 of the same payload bytes alone | {:.0} | {:.3} ms | {:.0} |\n\
          | stream + decode photo, RGBA render, EXR depth + one aligned 256×256 crop | {:.1} | {:.2} ms | {:.0} |\n\n\
          Decoding costs **{:.0}×** the I/O bound: the reader is decode-bound (PNG and EXR), so a trainer should decode \

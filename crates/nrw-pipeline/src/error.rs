@@ -17,12 +17,6 @@ pub enum PipelineError {
     /// Weights or an image the style stage could not use.
     #[error(transparent)]
     StyleInput(#[from] nrw_style::StyleError),
-    #[error("{}: cannot read the photo's size: {source}", path.display())]
-    Photo {
-        path: PathBuf,
-        #[source]
-        source: image::ImageError,
-    },
     /// A setting outside what the stage accepts (`setting` is the CLI flag or pipeline key).
     #[error("{setting} {problem}")]
     Config { setting: String, problem: String },

@@ -225,18 +225,114 @@ pub fn checked_builder<R: parquet::file::reader::ChunkReader + 'static>(
     groups: Option<&[usize]>,
     columns: Option<&[&str]>,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
-    use parquet::arrow::arrow_reader::{
-        ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder,
+    let meta = checked_metadata(&f, path)?;
+    check_pages(&f, &meta, groups, columns, path)?;
+    builder_with(f, meta, path)
+}
+
+/// [`checked_builder`] for reading the row groups `groups` whole: their bytes are fetched
+/// once, in one read (one request on object storage), and both the page-header check and the
+/// decoder read them from memory.
+pub fn prefetched_builder<R: parquet::file::reader::ChunkReader + 'static>(
+    f: R,
+    path: &Path,
+    groups: &[usize],
+) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<Prefetched<R>>> {
+    let meta = checked_metadata(&f, path)?;
+    let span = meta
+        .row_groups()
+        .iter()
+        .enumerate()
+        .filter(|(g, _)| groups.contains(g))
+        .flat_map(|(_, rg)| rg.columns().iter().map(|c| c.byte_range()))
+        .fold(None, |s: Option<(u64, u64)>, (a, n)| {
+            Some(s.map_or((a, a + n), |(lo, hi)| (lo.min(a), hi.max(a + n))))
+        });
+    let bytes = match span {
+        Some((lo, hi)) => {
+            f.get_bytes(lo, (hi - lo) as usize)
+                .map_err(|e| DatasetError::Parquet {
+                    path: path.to_path_buf(),
+                    source: e,
+                })?
+        }
+        None => bytes::Bytes::new(),
     };
-    let perr = |e| DatasetError::Parquet {
-        path: path.to_path_buf(),
-        source: e,
+    let f = Prefetched {
+        inner: f,
+        start: span.map_or(0, |s| s.0),
+        bytes,
     };
+    check_pages(&f, &meta, Some(groups), None, path)?;
+    builder_with(f, meta, path)
+}
+
+/// A file with one span of it held in memory: reads inside the span come from memory, others
+/// from the file.
+pub struct Prefetched<R> {
+    inner: R,
+    start: u64,
+    bytes: bytes::Bytes,
+}
+
+impl<R: parquet::file::reader::Length> parquet::file::reader::Length for Prefetched<R> {
+    fn len(&self) -> u64 {
+        self.inner.len()
+    }
+}
+
+/// A reader over a [`Prefetched`] span, or over the file outside it.
+pub enum SpanRead<F> {
+    Memory(bytes::buf::Reader<bytes::Bytes>),
+    File(F),
+}
+
+impl<F: std::io::Read> std::io::Read for SpanRead<F> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            SpanRead::Memory(m) => m.read(buf),
+            SpanRead::File(f) => f.read(buf),
+        }
+    }
+}
+
+impl<R: parquet::file::reader::ChunkReader> parquet::file::reader::ChunkReader for Prefetched<R> {
+    type T = SpanRead<R::T>;
+
+    fn get_read(&self, start: u64) -> parquet::errors::Result<Self::T> {
+        use bytes::Buf;
+        let end = self.start + self.bytes.len() as u64;
+        if (self.start..end).contains(&start) {
+            let at = (start - self.start) as usize;
+            return Ok(SpanRead::Memory(self.bytes.slice(at..).reader()));
+        }
+        self.inner.get_read(start).map(SpanRead::File)
+    }
+
+    fn get_bytes(&self, start: u64, length: usize) -> parquet::errors::Result<bytes::Bytes> {
+        let end = start.saturating_add(length as u64);
+        if start >= self.start && end <= self.start + self.bytes.len() as u64 {
+            let at = (start - self.start) as usize;
+            return Ok(self.bytes.slice(at..at + length));
+        }
+        self.inner.get_bytes(start, length)
+    }
+}
+
+/// The footer of `f`, checked ([`check_footer_of`]) and parsed, with every column chunk
+/// inside the file.
+fn checked_metadata<R: parquet::file::reader::ChunkReader>(
+    f: &R,
+    path: &Path,
+) -> Result<parquet::file::metadata::ParquetMetaData> {
     let len = f.len();
-    check_footer_of(&f, len, path)?;
+    check_footer_of(f, len, path)?;
     let meta = parquet::file::metadata::ParquetMetaDataReader::new()
-        .parse_and_finish(&f)
-        .map_err(perr)?;
+        .parse_and_finish(f)
+        .map_err(|e| DatasetError::Parquet {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
     for (g, rg) in meta.row_groups().iter().enumerate() {
         for c in rg.columns() {
             let start = c.dictionary_page_offset().unwrap_or(c.data_page_offset());
@@ -257,10 +353,24 @@ pub fn checked_builder<R: parquet::file::reader::ChunkReader + 'static>(
             }
         }
     }
-    check_pages(&f, &meta, groups, columns, path)?;
+    Ok(meta)
+}
+
+/// A reader builder over `f` with its already checked metadata.
+fn builder_with<R: parquet::file::reader::ChunkReader + 'static>(
+    f: R,
+    meta: parquet::file::metadata::ParquetMetaData,
+    path: &Path,
+) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
+    use parquet::arrow::arrow_reader::{
+        ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder,
+    };
     let meta =
         ArrowReaderMetadata::try_new(std::sync::Arc::new(meta), ArrowReaderOptions::default())
-            .map_err(perr)?;
+            .map_err(|e| DatasetError::Parquet {
+                path: path.to_path_buf(),
+                source: e,
+            })?;
     Ok(ParquetRecordBatchReaderBuilder::new_with_metadata(f, meta))
 }
 

@@ -309,7 +309,7 @@ impl Dataset {
             g.dedup();
             g
         };
-        let b = crate::parquet_io::checked_builder(f, &path, Some(&groups), None)?;
+        let b = crate::parquet_io::prefetched_builder(f, &path, &groups)?;
         let total = b.metadata().file_metadata().num_rows() as usize;
         let mut selectors = Vec::new();
         for &g in &groups {

@@ -89,6 +89,18 @@ fn huge_vertex_count_is_an_error_not_an_allocation() {
 }
 
 #[test]
+fn an_element_of_empty_rows_with_a_huge_count_is_an_error_not_a_spin() {
+    // Rows without properties take no bytes, so nothing ends the skip but the count.
+    let text = "ply\nformat binary_little_endian 1.0\nelement face 4000000000\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n\x00\x00\x00\x3f\x00\x00\x00\x3f\x00\x00\x00\x3f";
+    let (_d, p) = write(text.as_bytes());
+    let e = read_ply(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("cloud.ply") && e.contains("4000000000 rows"),
+        "{e}"
+    );
+}
+
+#[test]
 fn non_finite_and_partial_channels_are_errors() {
     let text = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 nan 6\n";
     let (_d, p) = write(text.as_bytes());

@@ -250,24 +250,7 @@ pub fn read_ply_from<R: std::io::BufRead>(
     };
     for (index, elem) in header.elem_defs.iter().enumerate() {
         if elem.name != "vertex" {
-            // Every row takes at least a byte unless the element has no property; then its
-            // rows take none and a count in the billions would spin (found by fuzzing).
-            if elem.properties.is_empty() && elem.count as u64 > file_len {
-                return Err(ColmapError::invalid(
-                    path,
-                    Record::Nth {
-                        kind: "element",
-                        index: index as u64,
-                        id: None,
-                    },
-                    elem.name.clone(),
-                    format!(
-                        "{} rows without properties in a {file_len}-byte file",
-                        elem.count
-                    ),
-                ));
-            }
-            reader.next_element::<SkipRows>().map_err(|e| {
+            let bad = |problem: String| {
                 ColmapError::invalid(
                     path,
                     Record::Nth {
@@ -276,9 +259,20 @@ pub fn read_ply_from<R: std::io::BufRead>(
                         id: None,
                     },
                     elem.name.clone(),
-                    format!("cannot skip element: {e}"),
+                    problem,
                 )
-            })?;
+            };
+            // Every row takes at least a byte unless the element has no property; then its
+            // rows take none and a count in the billions would spin (found by fuzzing).
+            if elem.properties.is_empty() && elem.count as u64 > file_len {
+                return Err(bad(format!(
+                    "{} rows without properties in a {file_len}-byte file",
+                    elem.count
+                )));
+            }
+            reader
+                .next_element::<SkipRows>()
+                .map_err(|e| bad(format!("cannot skip element: {e}")))?;
             continue;
         }
         let has = |n: &str| elem.properties.iter().any(|p| p.name == n);

@@ -99,26 +99,39 @@ fn descriptor_mismatches(
     let crcs = column::<UInt32Array>(b, "descriptor_crc32", path)?;
     let mut out = Vec::new();
     for i in 0..b.num_rows() {
-        let v = desc.value(i);
-        let v = v
-            .as_any()
-            .downcast_ref::<Float32Array>()
-            .ok_or_else(|| DatasetError::Schema {
-                path: path.into(),
-                problem: "descriptor is not float32".into(),
-            })?;
-        let computed = descriptor_crc32(v.values());
-        if computed != crcs.value(i) {
-            out.push(crate::views::PayloadMismatch {
-                row: first_row + i,
-                image_id: ids.value(i),
-                column: "descriptor".into(),
-                stored: Some(crcs.value(i)),
-                computed: Some(computed),
-            });
-        }
+        let v = row_values(desc, i, path)?;
+        out.extend(row_mismatch(ids.value(i), crcs.value(i), &v, first_row + i));
     }
     Ok(out)
+}
+
+/// Row `i`'s descriptor values.
+fn row_values(desc: &ListArray, i: usize, path: &std::path::Path) -> Result<Float32Array> {
+    desc.value(i)
+        .as_any()
+        .downcast_ref::<Float32Array>()
+        .cloned()
+        .ok_or_else(|| DatasetError::Schema {
+            path: path.into(),
+            problem: "descriptor is not float32".into(),
+        })
+}
+
+/// The mismatch of one row's values against its stored CRC-32, if they differ.
+fn row_mismatch(
+    image_id: u32,
+    stored: u32,
+    values: &Float32Array,
+    row: usize,
+) -> Option<crate::views::PayloadMismatch> {
+    let computed = descriptor_crc32(values.values());
+    (computed != stored).then(|| crate::views::PayloadMismatch {
+        row,
+        image_id,
+        column: "descriptor".into(),
+        stored: Some(stored),
+        computed: Some(computed),
+    })
 }
 
 /// Write one part atomically.
@@ -213,9 +226,7 @@ pub fn part_in<R: parquet::file::reader::ChunkReader + 'static>(
     let mut rows = Vec::new();
     for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, 1024)? {
         let b = b?;
-        if let Some(m) = descriptor_mismatches(&b, rows.len(), path)?.first() {
-            return Err(m.error(path));
-        }
+        let crcs = column::<UInt32Array>(&b, "descriptor_crc32", path)?;
         let ids = column::<UInt32Array>(&b, "image_id", path)?;
         let names = column::<StringArray>(&b, "name", path)?;
         let (tier, sha, pre) = (
@@ -242,14 +253,11 @@ pub fn part_in<R: parquet::file::reader::ChunkReader + 'static>(
                 }
                 _ => {}
             }
-            let v = desc.value(i);
-            let v =
-                v.as_any()
-                    .downcast_ref::<Float32Array>()
-                    .ok_or_else(|| DatasetError::Schema {
-                        path: path.into(),
-                        problem: "descriptor is not float32".into(),
-                    })?;
+            let v = row_values(desc, i, path)?;
+            // Checked before the row is used: one pass over the values.
+            if let Some(m) = row_mismatch(ids.value(i), crcs.value(i), &v, rows.len()) {
+                return Err(m.error(path));
+            }
             rows.push(DescriptorRow {
                 image_id: ids.value(i),
                 name: names.value(i).into(),

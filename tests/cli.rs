@@ -8,6 +8,8 @@ mod python;
 mod ray;
 #[path = "s3.rs"]
 mod s3;
+#[path = "segment.rs"]
+mod segment;
 #[path = "support/shared.rs"]
 mod shared;
 #[path = "units.rs"]

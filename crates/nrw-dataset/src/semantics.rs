@@ -53,6 +53,11 @@ pub fn classes() -> &'static [ClassInfo] {
     })
 }
 
+/// Where a photo's label map lives in a label folder: its name with `.png` (subfolders kept).
+pub fn label_path(dir: &Path, photo: &str) -> std::path::PathBuf {
+    dir.join(Path::new(photo).with_extension("png"))
+}
+
 /// Read a label map (8-bit class ids, 0 = unlabelled) and check its size against the photo's.
 pub fn load_labels(path: &Path, width: u32, height: u32) -> Result<GrayImage> {
     let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;

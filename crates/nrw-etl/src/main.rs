@@ -39,6 +39,8 @@ enum Command {
     /// view was dropped by the filters (the dataset records each verdict); 130 interrupted
     /// (run again to resume).
     Ingest(cmd::ingest::IngestArgs),
+    /// ADE20K label maps of a scene's photos from a SegFormer you give (the paper's segmentation step)
+    Segment(cmd::segment::SegmentArgs),
     /// Assign kept photos to train and val (seeded, incremental: earlier assignments never change)
     Split(cmd::split::SplitArgs),
     /// Style descriptors of a dataset's kept photos, or the VGG Gram matrices of one image (--image)
@@ -59,8 +61,13 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    if let Command::Ingest(a) = &cli.command {
-        if let Some(n) = a.threads {
+    let threads = match &cli.command {
+        Command::Ingest(a) => a.threads,
+        Command::Segment(a) => a.threads,
+        _ => None,
+    };
+    {
+        if let Some(n) = threads {
             if let Err(e) = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
                 .build_global()
@@ -75,6 +82,7 @@ fn main() -> std::process::ExitCode {
         Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Split(a) => cmd::split::run(a),
+        Command::Segment(a) => cmd::segment::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Finalize(a) => cmd::finalize::run(a),
         Command::Verify(a) => cmd::verify::run(a).map(|ok| {

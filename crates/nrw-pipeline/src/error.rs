@@ -14,6 +14,9 @@ pub enum PipelineError {
     Synth(#[from] nrw_synth::SynthError),
     #[error(transparent)]
     Qa(#[from] nrw_qa::QaError),
+    /// A segmentation model or photo the segment stage could not use.
+    #[error(transparent)]
+    Segment(#[from] nrw_segment::SegmentError),
     /// Weights or an image the style stage could not use.
     #[error(transparent)]
     StyleInput(#[from] nrw_style::StyleError),

@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use image::RgbImage;
 use nrw_colmap::{read_ply, Format, Reconstruction};
 use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
@@ -42,6 +43,8 @@ pub struct IngestConfig {
     pub points: Option<PathBuf>,
     /// Folder of per-photo ADE20K label maps.
     pub semantics: Option<PathBuf>,
+    /// Segment each kept photo with this model instead of reading label maps.
+    pub segment: Option<InlineSegment>,
     /// Shorter side of a render in pixels (the paper: 600).
     pub min_dim: u32,
     /// Splat radius in render pixels (the paper: 1).
@@ -68,6 +71,7 @@ impl IngestConfig {
             format: None,
             points: None,
             semantics: None,
+            segment: None,
             min_dim: 600,
             radius: 1.0,
             filters: Filters::default(),
@@ -77,6 +81,14 @@ impl IngestConfig {
             pause_after_group: None,
         }
     }
+}
+
+/// `ingest --segment-weights`: the model and mode that label each kept photo.
+#[derive(Debug, Clone)]
+pub struct InlineSegment {
+    /// The SegFormer folder (config.json + model.safetensors).
+    pub weights: PathBuf,
+    pub mode: nrw_segment::Mode,
 }
 
 /// What a unit of ingest did.
@@ -106,6 +118,8 @@ struct Prepared {
     cloud: RenderCloud,
     source: String,
     record: UnitRecord,
+    /// The model of `--segment-weights`, loaded once.
+    segmenter: Option<nrw_segment::Segformer>,
 }
 
 fn check_config(cfg: &IngestConfig) -> Result<()> {
@@ -136,6 +150,12 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
     if let Some(d) = cfg.semantics.as_ref().filter(|d| !d.is_dir()) {
         return Err(PipelineError::input(d, "--semantics is not a folder"));
     }
+    if cfg.semantics.is_some() && cfg.segment.is_some() {
+        return Err(PipelineError::config(
+            "--segment-weights",
+            "and --semantics both give label maps: use one",
+        ));
+    }
     Ok(())
 }
 
@@ -158,20 +178,20 @@ pub fn describe(rec: &Reconstruction) -> (&'static str, &'static str) {
 }
 
 /// The photo folder: given, or `images/` next to the model as COLMAP lays scenes out.
-fn images_dir(cfg: &IngestConfig, model_dir: &Path) -> Result<PathBuf> {
-    if let Some(d) = &cfg.images {
+pub fn images_dir(images: Option<&Path>, scene: &Path, model_dir: &Path) -> Result<PathBuf> {
+    if let Some(d) = images {
         if !d.is_dir() {
             return Err(PipelineError::input(d, "--images is not a folder"));
         }
-        return Ok(d.clone());
+        return Ok(d.to_path_buf());
     }
-    let mut tried = vec![cfg.scene.join("images")];
+    let mut tried = vec![scene.join("images")];
     for up in model_dir.ancestors().skip(1).take(2) {
         tried.push(up.join("images"));
     }
     tried.iter().find(|d| d.is_dir()).cloned().ok_or_else(|| {
         PipelineError::input(
-            &cfg.scene,
+            scene,
             format!(
                 "no photo folder found (tried {}); pass --images DIR",
                 tried
@@ -345,7 +365,7 @@ pub fn fingerprint(
 fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     check_config(cfg)?;
     let (model_dir, rec) = load_model(&cfg.scene, cfg.format)?;
-    let photos_dir = images_dir(cfg, &model_dir)?;
+    let photos_dir = images_dir(cfg.images.as_deref(), &cfg.scene, &model_dir)?;
     let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
     let photos = photo_sizes(&rec, &photos_dir, cfg.strict, &mut warnings)?;
     let (cloud, source, source_path) = point_source(cfg, &model_dir, &rec)?;
@@ -363,6 +383,15 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     if let Some(d) = &cfg.semantics {
         parameters.insert("semantics".into(), d.display().to_string().into());
     }
+    let segmenter = match &cfg.segment {
+        Some(s) => {
+            let model = crate::segment::load_model(&s.weights)?;
+            parameters.insert("segment_model_sha256".into(), model.sha256.clone().into());
+            parameters.insert("segment_mode".into(), s.mode.to_string().into());
+            Some(model)
+        }
+        None => None,
+    };
     let record = UnitRecord {
         stage: units::INGEST.into(),
         index: unit.index,
@@ -389,6 +418,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
         cloud,
         source,
         record,
+        segmenter,
     })
 }
 
@@ -439,20 +469,27 @@ fn depth_range(depth: &[f32]) -> Option<(f64, f64)> {
 
 type LabelPngs = (Option<Vec<u8>>, Option<Vec<u8>>, Option<Vec<u8>>);
 
-/// The view's label maps (colour-coded, transient mask, class ids), when ingest has them.
+/// The view's label maps (colour-coded, transient mask, class ids), when ingest has them:
+/// read from the label folder, or made from the photo by the model (`--segment-weights`).
 fn label_pngs(
     cfg: &IngestConfig,
+    p: &Prepared,
     name: &str,
-    photo: &str,
-    size: (u32, u32),
+    photo_name: &str,
+    photo: &RgbImage,
     w: u32,
     h: u32,
-) -> nrw_dataset::Result<LabelPngs> {
-    let Some(dir) = &cfg.semantics else {
+) -> Result<LabelPngs> {
+    let labels = if let Some(model) = &p.segmenter {
+        let what = p.photos_dir.join(photo_name).display().to_string();
+        let mode = cfg.segment.as_ref().map(|s| s.mode).unwrap_or_default();
+        nrw_segment::segment(model, photo, mode, &what, nrw_segment::Parallelism::None)?
+    } else if let Some(dir) = &cfg.semantics {
+        let path = nrw_dataset::semantics::label_path(dir, photo_name);
+        nrw_dataset::semantics::load_labels(&path, photo.width(), photo.height())?
+    } else {
         return Ok((None, None, None));
     };
-    let path = dir.join(Path::new(photo).with_extension("png"));
-    let labels = nrw_dataset::semantics::load_labels(&path, size.0, size.1)?;
     let ids = nrw_dataset::semantics::resize_labels(&labels, w, h);
     let (rgb, mask) = nrw_dataset::semantics::colorize(&ids);
     Ok((
@@ -494,13 +531,19 @@ fn process(
     };
     let name = format!("image {}", img.id);
     let decoded = load_photo(&photo_path)
-        .and_then(|photo| Ok((photo, label_pngs(cfg, &name, &img.name, size, w, h)?)));
+        .map_err(PipelineError::from)
+        .and_then(|photo| {
+            let labels = label_pngs(cfg, p, &name, &img.name, &photo, w, h)?;
+            Ok((photo, labels))
+        });
     let (photo, (semantics_png, transient_png, labels_png)) = match decoded {
         Ok(d) => d,
-        Err(nrw_dataset::DatasetError::Unreadable { path, problem }) if !cfg.strict => {
+        Err(PipelineError::Dataset(nrw_dataset::DatasetError::Unreadable { path, problem }))
+            if !cfg.strict =>
+        {
             return Ok((unreadable(&path, problem), None));
         }
-        Err(e) => return Err(e.into()),
+        Err(e) => return Err(e),
     };
     let photo = resize_photo(&photo, w, h);
     let row = ViewRow {

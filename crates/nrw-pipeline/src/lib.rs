@@ -1,5 +1,5 @@
 //! The stages of nrw-etl as functions over plain configuration structs: ingest, finalize,
-//! split, style, triplets, export and qa, plus the pipeline runner that chains them. Each
+//! segment, split, style, triplets, export and qa, plus the pipeline runner that chains them. Each
 //! config's `Default` (or `new`) is the paper's settings; each stage returns a typed summary
 //! or a typed error and reports progress through [`Progress`], so the library never prints.
 //!
@@ -14,6 +14,7 @@ pub mod ingest;
 pub mod progress;
 pub mod qa;
 pub mod runner;
+pub mod segment;
 pub mod split;
 pub mod style;
 pub mod synth;

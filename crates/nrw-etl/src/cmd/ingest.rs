@@ -41,6 +41,16 @@ pub struct IngestArgs {
     /// with .png); stored colour-coded with a transient mask
     #[arg(long)]
     pub semantics: Option<PathBuf>,
+    /// Segment each kept photo with this SegFormer (config.json + model.safetensors) instead
+    /// of reading --semantics; see `nrw-etl segment --help`
+    #[arg(long, conflicts_with = "semantics")]
+    pub segment_weights: Option<PathBuf>,
+    /// With --segment-weights: how a photo is fed to the network
+    #[arg(long, value_enum, default_value = "resize")]
+    pub segment_mode: super::segment::ModeArg,
+    /// With --segment-weights: network input size in pixels
+    #[arg(long, default_value_t = 512)]
+    pub segment_size: u32,
     /// Render so the shorter side has this many pixels (the paper: 600)
     #[arg(long, default_value_t = 600)]
     pub min_dim: u32,
@@ -82,8 +92,16 @@ pub struct IngestArgs {
 
 impl IngestArgs {
     /// The stage's configuration.
-    pub fn config(&self) -> IngestConfig {
-        IngestConfig {
+    pub fn config(&self) -> Result<IngestConfig> {
+        let segment = match &self.segment_weights {
+            Some(w) => Some(nrw_pipeline::ingest::InlineSegment {
+                weights: w.clone(),
+                mode: super::segment::mode(self.segment_mode, self.segment_size)?,
+            }),
+            None => None,
+        };
+        Ok(IngestConfig {
+            segment,
             images: self.images.clone(),
             format: self.format.map(Into::into),
             points: self.points.clone(),
@@ -101,14 +119,14 @@ impl IngestArgs {
                 .pause_after_shard_ms
                 .map(std::time::Duration::from_millis),
             ..IngestConfig::new(&self.scene, &self.out)
-        }
+        })
     }
 }
 
 /// Run `ingest` (whole, or one unit); returns whether any view was kept (a unit: true).
 pub fn run(args: &IngestArgs) -> Result<bool> {
     let bars = Bars::new(args.quiet);
-    let cfg = args.config();
+    let cfg = args.config()?;
     match args.shard.unit()? {
         Some(unit) => {
             let s = nrw_pipeline::ingest::ingest_unit(&cfg, unit, &bars)?;

@@ -8,6 +8,7 @@ pub mod ingest;
 pub mod inspect;
 pub mod qa;
 pub mod run;
+pub mod segment;
 pub mod split;
 pub mod style;
 pub mod synth;

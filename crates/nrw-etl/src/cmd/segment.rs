@@ -1,0 +1,116 @@
+//! `nrw-etl segment`: arguments → `nrw_pipeline::segment` (ADE20K label maps of a scene's
+//! photos from a user-given SegFormer), and what it did, printed.
+
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use nrw_pipeline::segment::{SegmentConfig, SegmentSummary};
+use nrw_segment::Mode;
+
+use super::{Bars, Encoding};
+use crate::error::{EtlError, Result};
+
+/// `--mode` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    /// Hugging Face's default: the photo resized to SIZE×SIZE, logits upsampled to the photo
+    Resize,
+    /// SIZE×SIZE windows (stride ⅔) over the photo scaled to a shorter side of SIZE, logits averaged
+    Slide,
+    /// The published code: the central SIZE×SIZE crop, unresized; 0 (unlabelled) outside it
+    Crop,
+}
+
+/// The library's mode for `--mode`/`--size` (or ingest's `--segment-mode`/`--segment-size`).
+pub fn mode(arg: ModeArg, size: u32) -> Result<Mode> {
+    let name = match arg {
+        ModeArg::Resize => "resize",
+        ModeArg::Slide => "slide",
+        ModeArg::Crop => "crop",
+    };
+    Mode::parse(name, size).map_err(|e| EtlError::Usage(format!("--size {size}: {e}")))
+}
+
+/// Arguments of `segment`.
+#[derive(Debug, Clone, Args)]
+#[command(after_help = "Examples:
+  nrw-etl segment SCENE --weights segformer-b0-finetuned-ade-512-512/ --out SCENE/labels
+  nrw-etl ingest SCENE --out DATASET --semantics SCENE/labels
+  nrw-etl ingest SCENE --out DATASET --segment-weights segformer-b0-finetuned-ade-512-512/
+
+The model is a SegFormer fine-tuned on ADE20K-150 in the Hugging Face layout (a folder with
+config.json and model.safetensors, e.g. `huggingface-cli download nvidia/segformer-b0-finetuned-ade-512-512`
+on a machine with network). Nothing is downloaded. Each photo's map is an 8-bit PNG of ADE20K
+ids 1..150 (schemas/ade20k.csv; 0 = unlabelled), named like the photo with .png. A run that
+stops resumes: maps already written are kept. docs/segmentation.md has the details.")]
+pub struct SegmentArgs {
+    /// Scene folder holding sparse/0/ (or sparse/) and images/, or a model folder itself
+    pub scene: PathBuf,
+    /// SegFormer folder (config.json + model.safetensors), or its model.safetensors
+    #[arg(long)]
+    pub weights: PathBuf,
+    /// Label folder to write (created if missing; segment.json records the model and mode)
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Folder of the photos named in the model [default: <scene>/images]
+    #[arg(long)]
+    pub images: Option<PathBuf>,
+    /// Read this encoding even if the other exists [default: bin when present, else txt]
+    #[arg(long, value_enum)]
+    pub format: Option<Encoding>,
+    /// How a photo is fed to the network
+    #[arg(long, value_enum, default_value = "resize")]
+    pub mode: ModeArg,
+    /// Network input size in pixels (resize: SIZE×SIZE; slide: window and shorter side; crop: crop side)
+    #[arg(long, default_value_t = 512)]
+    pub size: u32,
+    /// Stop with an error at the first photo that cannot be decoded, instead of warning
+    #[arg(long)]
+    pub strict: bool,
+    /// Worker threads [default: all cores]; the maps do not depend on it
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress bar or summary
+    #[arg(long)]
+    pub quiet: bool,
+    /// Print a JSON summary on stdout (for scripts)
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Run `segment`.
+pub fn run(args: &SegmentArgs) -> Result<()> {
+    let cfg = SegmentConfig {
+        images: args.images.clone(),
+        format: args.format.map(Into::into),
+        mode: mode(args.mode, args.size)?,
+        strict: args.strict,
+        ..SegmentConfig::new(&args.scene, &args.weights, &args.out)
+    };
+    let bars = Bars::new(args.quiet);
+    let s = nrw_pipeline::segment::segment(&cfg, &bars)?;
+    if !args.quiet {
+        print_summary(&s);
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&s).expect("summary serialises")
+        );
+    }
+    Ok(())
+}
+
+fn print_summary(s: &SegmentSummary) {
+    eprintln!(
+        "segmented {} of {} photos into {} ({} already there, {} unreadable) with {} (mode {}) in {:.1} s",
+        s.segmented,
+        s.photos,
+        s.out,
+        s.resumed,
+        s.unreadable.len(),
+        s.model,
+        s.mode,
+        s.seconds
+    );
+}

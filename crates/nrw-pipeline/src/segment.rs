@@ -1,0 +1,193 @@
+//! `segment`: the paper's segmentation step. Every registered photo of a scene → an 8-bit
+//! PNG of ADE20K class ids in a label folder (the format `ingest --semantics` reads), from a
+//! SegFormer the user gives. Photos run in parallel, one per core; a photo whose label map
+//! exists is skipped, so an interrupted run resumes; a record in the folder ties the maps to
+//! the model and mode that made them.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nrw_colmap::Format;
+use nrw_segment::{Mode, Parallelism, Segformer};
+use rayon::prelude::*;
+
+use crate::error::{PipelineError, Result};
+use crate::progress::Progress;
+
+/// The label folder's record of what made its maps.
+pub const RECORD: &str = "segment.json";
+
+/// Settings of `segment`.
+#[derive(Debug, Clone)]
+pub struct SegmentConfig {
+    /// Scene folder (COLMAP layout) or a model folder itself.
+    pub scene: PathBuf,
+    /// Photo folder [default: images/ next to the model].
+    pub images: Option<PathBuf>,
+    /// Model encoding to read [default: bin when present].
+    pub format: Option<Format>,
+    /// The SegFormer: a folder with config.json and model.safetensors.
+    pub weights: PathBuf,
+    /// Label folder to write.
+    pub out: PathBuf,
+    /// How photos are fed to the network.
+    pub mode: Mode,
+    /// Make an unreadable photo an error instead of a warning.
+    pub strict: bool,
+}
+
+impl SegmentConfig {
+    /// Hugging Face's default mode for a scene, a model and a label folder.
+    pub fn new(
+        scene: impl Into<PathBuf>,
+        weights: impl Into<PathBuf>,
+        out: impl Into<PathBuf>,
+    ) -> SegmentConfig {
+        SegmentConfig {
+            scene: scene.into(),
+            images: None,
+            format: None,
+            weights: weights.into(),
+            out: out.into(),
+            mode: Mode::default(),
+            strict: false,
+        }
+    }
+}
+
+/// What the label folder records about the maps in it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SegmentRecord {
+    pub model_sha256: String,
+    pub mode: String,
+    /// `ADE20K-150`: ids 1…150 as in schemas/ade20k.csv, 0 unlabelled.
+    pub classes: String,
+}
+
+/// What `segment` did.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SegmentSummary {
+    pub out: String,
+    pub model: String,
+    pub model_sha256: String,
+    pub mode: String,
+    /// Registered photos.
+    pub photos: usize,
+    /// Label maps written by this run.
+    pub segmented: usize,
+    /// Label maps found from an earlier run.
+    pub resumed: usize,
+    /// Photos that could not be decoded (no label map; their views are `unreadable` anyway).
+    pub unreadable: Vec<String>,
+    pub warnings: Vec<String>,
+    pub seconds: f64,
+}
+
+/// Load the model named by a user, as a pipeline error.
+pub fn load_model(weights: &Path) -> Result<Segformer> {
+    Ok(Segformer::load(weights)?)
+}
+
+/// Label maps of every registered photo of a scene.
+pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSummary> {
+    let start = Instant::now();
+    let (model_dir, rec) = crate::ingest::load_model(&cfg.scene, cfg.format)?;
+    let photos_dir = crate::ingest::images_dir(cfg.images.as_deref(), &cfg.scene, &model_dir)?;
+    let model = load_model(&cfg.weights)?;
+    let record = SegmentRecord {
+        model_sha256: model.sha256.clone(),
+        mode: cfg.mode.to_string(),
+        classes: "ADE20K-150".into(),
+    };
+    claim_folder(&cfg.out, &record)?;
+    let names: Vec<&str> = rec.images.values().map(|i| i.name.as_str()).collect();
+    let (done, todo): (Vec<&str>, Vec<&str>) = names
+        .iter()
+        .partition(|n| nrw_dataset::semantics::label_path(&cfg.out, n).is_file());
+    progress.start("segmenting photos", todo.len() as u64, "photos");
+    let results: Vec<Result<Option<String>>> = todo
+        .par_iter()
+        .map(|name| {
+            let r = segment_one(cfg, &model, &photos_dir, name);
+            progress.inc(1);
+            r
+        })
+        .collect();
+    progress.finish();
+    let mut unreadable = Vec::new();
+    let mut warnings = Vec::new();
+    for r in results {
+        if let Some(problem) = r? {
+            progress.warn(&problem);
+            warnings.push(problem.clone());
+            unreadable.push(problem);
+        }
+    }
+    Ok(SegmentSummary {
+        out: cfg.out.display().to_string(),
+        model: cfg.weights.display().to_string(),
+        model_sha256: model.sha256.clone(),
+        mode: record.mode,
+        photos: names.len(),
+        segmented: todo.len() - unreadable.len(),
+        resumed: done.len(),
+        unreadable,
+        warnings,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Create the label folder or check that its maps came from the same model and mode.
+fn claim_folder(out: &Path, record: &SegmentRecord) -> Result<()> {
+    let path = out.join(RECORD);
+    if let Ok(text) = std::fs::read_to_string(&path) {
+        let found: SegmentRecord = serde_json::from_str(&text)
+            .map_err(|e| PipelineError::input(&path, format!("not a segment record: {e}")))?;
+        if found != *record {
+            return Err(PipelineError::input(
+                &path,
+                format!(
+                    "this folder holds label maps of model {} (mode {}), not of model {} (mode {}); write to another folder",
+                    found.model_sha256, found.mode, record.model_sha256, record.mode
+                ),
+            ));
+        }
+        return Ok(());
+    }
+    std::fs::create_dir_all(out).map_err(|e| PipelineError::input(out, e.to_string()))?;
+    let text = serde_json::to_string_pretty(record).expect("record serialises");
+    nrw_dataset::atomic::write_bytes_atomic(&path, text.as_bytes())?;
+    Ok(())
+}
+
+/// One photo's label map, written atomically; `Some(problem)` when the photo is unreadable.
+fn segment_one(
+    cfg: &SegmentConfig,
+    model: &Segformer,
+    photos: &Path,
+    name: &str,
+) -> Result<Option<String>> {
+    let path = photos.join(name);
+    let photo = match nrw_dataset::codec::load_photo(&path) {
+        Ok(p) => p,
+        Err(nrw_dataset::DatasetError::Unreadable { path, problem }) if !cfg.strict => {
+            return Ok(Some(format!("{}: {problem}", path.display())));
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let labels = nrw_segment::segment(
+        model,
+        &photo,
+        cfg.mode,
+        &path.display().to_string(),
+        Parallelism::None,
+    )?;
+    let out = nrw_dataset::semantics::label_path(&cfg.out, name);
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| PipelineError::input(dir, e.to_string()))?;
+    }
+    let png =
+        nrw_dataset::codec::encode_gray(name, labels.width(), labels.height(), labels.as_raw())?;
+    nrw_dataset::atomic::write_bytes_atomic(&out, &png)?;
+    Ok(None)
+}

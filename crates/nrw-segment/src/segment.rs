@@ -1,0 +1,212 @@
+//! A photo → its ADE20K label map, in one of three documented modes.
+
+use gemm::Parallelism;
+use image::{GrayImage, RgbImage};
+
+use crate::error::{Result, SegmentError};
+use crate::model::Segformer;
+use crate::ops::Map;
+use crate::postprocess::labels;
+use crate::preprocess::{normalize, pil_bilinear, preprocess};
+
+/// How a photo is fed to the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Hugging Face's default: the whole photo resized to `width × height` (512 × 512),
+    /// logits upsampled back to the photo's size.
+    Resize { width: u32, height: u32 },
+    /// Sliding windows of `size × size` at a stride of about two thirds of a window over the
+    /// photo scaled so its shorter side is `size` (mmsegmentation's ADE20K test setting),
+    /// logits averaged where windows overlap.
+    Slide { size: u32 },
+    /// The published code's `segment_dataset.py`: the central `size × size` crop of the
+    /// photo, unresized; pixels outside it are 0 (unlabelled).
+    CenterCrop { size: u32 },
+}
+
+impl Default for Mode {
+    fn default() -> Self {
+        Mode::Resize {
+            width: 512,
+            height: 512,
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Mode::Resize { width, height } => write!(f, "resize {width}x{height}"),
+            Mode::Slide { size } => write!(f, "slide {size}"),
+            Mode::CenterCrop { size } => write!(f, "crop {size}"),
+        }
+    }
+}
+
+impl Mode {
+    /// From the CLI's words: `resize`, `slide` or `crop`, with the size in pixels.
+    pub fn parse(name: &str, size: u32) -> std::result::Result<Mode, String> {
+        if size == 0 {
+            return Err("the size must be at least 1 pixel".into());
+        }
+        match name {
+            "resize" => Ok(Mode::Resize {
+                width: size,
+                height: size,
+            }),
+            "slide" if size % 4 != 0 => Err(format!(
+                "slide windows must be a multiple of 4 pixels (the logits' grid), not {size}"
+            )),
+            "slide" => Ok(Mode::Slide { size }),
+            "crop" => Ok(Mode::CenterCrop { size }),
+            other => Err(format!("unknown mode `{other}`: resize, slide or crop")),
+        }
+    }
+}
+
+/// The model's label map of a photo at the photo's size: ADE ids 1…150 (0 only outside a
+/// centre crop). `what` names the photo in errors.
+pub fn segment(
+    model: &Segformer,
+    photo: &RgbImage,
+    mode: Mode,
+    what: &str,
+    par: Parallelism,
+) -> Result<GrayImage> {
+    let (w, h) = (photo.width(), photo.height());
+    let min = model.min_side() as u32;
+    let too_small = |size: u32| SegmentError::Input {
+        what: what.into(),
+        problem: format!(
+            "{mode}: a {size}-pixel input is below the {min} pixels this model's stages need"
+        ),
+    };
+    let ids = match mode {
+        Mode::Resize { width, height } => {
+            if width.min(height) < min {
+                return Err(too_small(width.min(height)));
+            }
+            let logits = model.logits(
+                &preprocess(photo, width, height),
+                height as usize,
+                width as usize,
+                par,
+            );
+            labels(&logits, w as usize, h as usize)
+        }
+        Mode::Slide { size } => {
+            if size < min {
+                return Err(too_small(size));
+            }
+            labels(
+                &slide_logits(model, photo, size, what, par)?,
+                w as usize,
+                h as usize,
+            )
+        }
+        Mode::CenterCrop { size } => {
+            if size < min {
+                return Err(too_small(size));
+            }
+            return center_crop(model, photo, size, what, par);
+        }
+    };
+    Ok(GrayImage::from_raw(w, h, ids).expect("sized label map"))
+}
+
+fn center_crop(
+    model: &Segformer,
+    photo: &RgbImage,
+    size: u32,
+    what: &str,
+    par: Parallelism,
+) -> Result<GrayImage> {
+    let (w, h) = (photo.width(), photo.height());
+    if w < size || h < size {
+        return Err(SegmentError::Input {
+            what: what.into(),
+            problem: format!(
+                "{w}×{h} is smaller than the {size}×{size} centre crop of mode crop (the published code asserts the same); use mode resize or slide"
+            ),
+        });
+    }
+    let (x0, y0) = ((w - size) / 2, (h - size) / 2);
+    let crop = image::imageops::crop_imm(photo, x0, y0, size, size).to_image();
+    let s = size as usize;
+    let ids = labels(&model.logits(&normalize(&crop), s, s, par), s, s);
+    let mut out = GrayImage::new(w, h);
+    for (y, row) in ids.chunks_exact(s).enumerate() {
+        let at = ((y0 as usize + y) * w as usize + x0 as usize) as usize;
+        out.as_mut()[at..at + s].copy_from_slice(row);
+    }
+    Ok(out)
+}
+
+/// Window starts along an axis of `len` (a multiple of 4): every `stride`, plus one flush
+/// with the end.
+fn starts(len: usize, win: usize, stride: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = (0..)
+        .map(|i| i * stride)
+        .take_while(|s| s + win < len)
+        .collect();
+    v.push(len - win);
+    v
+}
+
+/// Averaged logits over the scaled photo, at a quarter of its size.
+fn slide_logits(
+    model: &Segformer,
+    photo: &RgbImage,
+    size: u32,
+    what: &str,
+    par: Parallelism,
+) -> Result<Map> {
+    let (w, h) = (photo.width() as f64, photo.height() as f64);
+    let short = w.min(h);
+    // The long side keeps the aspect ratio, rounded to a multiple of 4 pixels (the logits'
+    // grid) and at least one window.
+    let long = |l: f64| (((l * size as f64 / short) / 4.0).round() as u32 * 4).max(size);
+    let (sw, sh) = if w <= h {
+        (size, long(h))
+    } else {
+        (long(w), size)
+    };
+    let scaled = pil_bilinear(photo, sw, sh);
+    let s = size as usize;
+    let stride = ((2 * s / 3) / 4 * 4).max(4);
+    let (gw, gh) = (sw as usize / 4, sh as usize / 4);
+    let mut sum = Map::zeros(gh, gw, model_classes(model));
+    let mut count = vec![0u32; gw * gh];
+    for y0 in starts(sh as usize, s, stride) {
+        for x0 in starts(sw as usize, s, stride) {
+            let win =
+                image::imageops::crop_imm(&scaled, x0 as u32, y0 as u32, size, size).to_image();
+            let l = model.logits(&normalize(&win), s, s, par);
+            if l.h * 4 != s || l.w * 4 != s {
+                return Err(SegmentError::Input {
+                    what: what.into(),
+                    problem: format!("mode slide needs a model whose logits are a quarter of its input; a {s}-pixel window gave {}×{}", l.w, l.h),
+                });
+            }
+            for y in 0..l.h {
+                for x in 0..l.w {
+                    let g = (y0 / 4 + y) * gw + x0 / 4 + x;
+                    count[g] += 1;
+                    let dst = &mut sum.data[g * l.c..][..l.c];
+                    dst.iter_mut()
+                        .zip(&l.data[(y * l.w + x) * l.c..][..l.c])
+                        .for_each(|(a, b)| *a += b);
+                }
+            }
+        }
+    }
+    for (px, n) in sum.data.chunks_exact_mut(sum.c).zip(&count) {
+        let inv = 1.0 / *n as f32;
+        px.iter_mut().for_each(|v| *v *= inv);
+    }
+    Ok(sum)
+}
+
+fn model_classes(_model: &Segformer) -> usize {
+    crate::config::ADE_CLASSES
+}

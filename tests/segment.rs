@@ -1,0 +1,276 @@
+//! `nrw-etl segment` and `ingest --segment-weights` end to end with the committed tiny
+//! SegFormer: the label maps are the library's, in the format ingest reads (the synthetic
+//! scene's ground-truth label folder is the template), they round-trip into the shards'
+//! ids, colours and transient mask, inline segmentation writes the same shards, and an
+//! interrupted run resumes to the same bytes.
+
+use std::path::{Path, PathBuf};
+
+use arrow_array::{BinaryArray, StringArray, UInt32Array};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+
+use super::{column, fails, files, ingest_small, ok, walk};
+
+fn tiny_model() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/segformer_tiny")
+}
+
+/// PNG paths under a folder, relative to it.
+fn pngs(dir: &Path) -> Vec<PathBuf> {
+    walk(dir)
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .map(|p| p.strip_prefix(dir).unwrap().to_path_buf())
+        .collect()
+}
+
+fn scene(tmp: &Path) -> PathBuf {
+    let scene = tmp.join("scene");
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(4, (120, 150), 60_000);
+    spec.observations.features = 300;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    scene
+}
+
+fn segment(scene: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let model = tiny_model();
+    let mut args = vec![
+        "segment",
+        scene.to_str().unwrap(),
+        "--weights",
+        model.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "64",
+        "--json",
+        "--quiet",
+    ];
+    args.extend(extra);
+    serde_json::from_str(&ok(&args)).unwrap()
+}
+
+#[test]
+fn label_maps_are_the_librarys_in_the_format_ingest_reads_and_resume_to_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene(tmp.path());
+    let labels = tmp.path().join("labels");
+    let s = segment(&scene, &labels, &[]);
+    assert_eq!(
+        (
+            s["photos"].as_u64(),
+            s["segmented"].as_u64(),
+            s["resumed"].as_u64()
+        ),
+        (Some(4), Some(4), Some(0))
+    );
+    let model = nrw_segment::Segformer::load(&tiny_model()).unwrap();
+    assert_eq!(s["model_sha256"], model.sha256.as_str());
+    // The same files as the ground-truth label folder: name for name, size for size.
+    let truth = scene.join("ground_truth/semantics");
+    assert_eq!(pngs(&labels), pngs(&truth));
+    for rel in pngs(&labels) {
+        let ours = image::open(labels.join(&rel)).unwrap();
+        assert_eq!(ours.color(), image::ColorType::L8, "{}", rel.display());
+        let gt = image::open(truth.join(&rel)).unwrap();
+        assert_eq!((ours.width(), ours.height()), (gt.width(), gt.height()));
+        let photo = image::open(scene.join("images").join(rel.with_extension("jpg")))
+            .or_else(|_| image::open(scene.join("images").join(rel.with_extension("png"))))
+            .unwrap()
+            .to_rgb8();
+        let want = nrw_segment::segment(
+            &model,
+            &photo,
+            nrw_segment::Mode::Resize {
+                width: 64,
+                height: 64,
+            },
+            "p",
+            nrw_segment::Parallelism::None,
+        )
+        .unwrap();
+        assert!(
+            ours.to_luma8() == want,
+            "{}: not the library's labels",
+            rel.display()
+        );
+        assert!(want.as_raw().iter().all(|&v| (1..=150).contains(&v)));
+    }
+    // Resume: a deleted map is redone, byte for byte; the others are kept.
+    let before = files(&labels);
+    let first = labels.join(&pngs(&labels)[0]);
+    std::fs::remove_file(&first).unwrap();
+    let s = segment(&scene, &labels, &[]);
+    assert_eq!(
+        (s["segmented"].as_u64(), s["resumed"].as_u64()),
+        (Some(1), Some(3))
+    );
+    assert!(before == files(&labels), "the resumed folder differs");
+    // Another mode into the same folder is refused: maps of two modes never mix.
+    let model = tiny_model();
+    let e = fails(&[
+        "segment",
+        scene.to_str().unwrap(),
+        "--weights",
+        model.to_str().unwrap(),
+        "--out",
+        labels.to_str().unwrap(),
+        "--mode",
+        "slide",
+        "--size",
+        "64",
+    ]);
+    assert!(
+        e.contains("segment.json") && e.contains("slide 64") && e.contains("resize 64x64"),
+        "{e}"
+    );
+}
+
+/// (name, ids, colours, mask) of every view in a dataset's shards.
+type Labelled = Vec<(String, (u32, u32), Vec<u8>, Vec<u8>, Vec<u8>)>;
+
+fn shard_labels(ds: &Path) -> Labelled {
+    let mut out = Vec::new();
+    for shard in walk(&ds.join("shards")) {
+        let f = std::fs::File::open(&shard).unwrap();
+        for b in ParquetRecordBatchReaderBuilder::try_new(f)
+            .unwrap()
+            .build()
+            .unwrap()
+        {
+            let b = b.unwrap();
+            for i in 0..b.num_rows() {
+                let name = column::<StringArray>(&b, "name").value(i).to_string();
+                let size = (
+                    column::<UInt32Array>(&b, "width").value(i),
+                    column::<UInt32Array>(&b, "height").value(i),
+                );
+                let png = |c: &str| {
+                    nrw_dataset::codec::decode_png(
+                        column::<BinaryArray>(&b, c).value(i),
+                        Path::new(&name),
+                    )
+                    .unwrap()
+                    .3
+                };
+                out.push((
+                    name.clone(),
+                    size,
+                    png("labels_png"),
+                    png("semantics_png"),
+                    png("transient_png"),
+                ));
+            }
+        }
+    }
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
+}
+
+#[test]
+fn label_maps_round_trip_into_the_shards_and_inline_segmentation_writes_the_same() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene(tmp.path());
+    let labels = tmp.path().join("labels");
+    segment(&scene, &labels, &[]);
+    let via_files = tmp.path().join("via_files");
+    let common = ["--max-empty", "1.0", "--quiet"];
+    let o = ingest_small(
+        &scene,
+        &via_files,
+        &[&common[..], &["--semantics", labels.to_str().unwrap()]].concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let inline = tmp.path().join("inline");
+    let model = tiny_model();
+    let o = ingest_small(
+        &scene,
+        &inline,
+        &[
+            &common[..],
+            &[
+                "--segment-weights",
+                model.to_str().unwrap(),
+                "--segment-size",
+                "64",
+            ],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (a, b) = (shard_labels(&via_files), shard_labels(&inline));
+    assert_eq!(a.len(), 4);
+    assert!(
+        a == b,
+        "inline segmentation stored other labels than the label folder gave"
+    );
+    let table = nrw_dataset::semantics::classes();
+    for (name, (w, h), ids, rgb, mask) in &a {
+        let map = image::open(labels.join(Path::new(name).with_extension("png")))
+            .unwrap()
+            .to_luma8();
+        for y in 0..*h {
+            for x in 0..*w {
+                // Nearest resize of the map, computed here independently.
+                let sx = (((x as f64 + 0.5) * map.width() as f64 / *w as f64) as u32)
+                    .min(map.width() - 1);
+                let sy = (((y as f64 + 0.5) * map.height() as f64 / *h as f64) as u32)
+                    .min(map.height() - 1);
+                let id = map.get_pixel(sx, sy)[0];
+                let k = (y * w + x) as usize;
+                assert_eq!(ids[k], id, "{name} ({x}, {y})");
+                assert_eq!(
+                    &rgb[k * 3..k * 3 + 3],
+                    &table[id as usize].color,
+                    "{name} ({x}, {y})"
+                );
+                assert_eq!(
+                    mask[k] == 255,
+                    table[id as usize].transient,
+                    "{name} ({x}, {y})"
+                );
+            }
+        }
+    }
+    let manifest = std::fs::read_to_string(inline.join("manifest.json")).unwrap();
+    let sha = nrw_segment::Segformer::load(&model).unwrap().sha256;
+    assert!(
+        manifest.contains(&sha) && manifest.contains("resize 64x64"),
+        "the manifest records the model and mode"
+    );
+}
+
+#[test]
+fn a_bad_model_stops_segment_and_ingest_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene(tmp.path());
+    let bad = tmp.path().join("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    std::fs::copy(tiny_model().join("config.json"), bad.join("config.json")).unwrap();
+    std::fs::write(bad.join("model.safetensors"), b"not a model").unwrap();
+    let out = tmp.path().join("labels");
+    let e = fails(&[
+        "segment",
+        scene.to_str().unwrap(),
+        "--weights",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("model.safetensors") && e.contains("not a safetensors file"),
+        "{e}"
+    );
+    assert!(
+        !out.exists(),
+        "nothing written for a model that cannot load"
+    );
+    let o = ingest_small(
+        &scene,
+        &tmp.path().join("ds"),
+        &["--segment-weights", bad.to_str().unwrap()],
+    );
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("model.safetensors"), "{e}");
+}

@@ -106,6 +106,22 @@ fn label_maps_are_the_librarys_in_the_format_ingest_reads_and_resume_to_the_same
         (Some(1), Some(3))
     );
     assert!(before == files(&labels), "the resumed folder differs");
+    // Two work units into one folder: the whole run's files, each photo done once.
+    let units = labels.with_file_name("labels_units");
+    let a = segment(&scene, &units, &["--shard", "0/2"]);
+    let b = segment(&scene, &units, &["--shard", "1/2"]);
+    assert_eq!(
+        (
+            a["segmented"].as_u64(),
+            b["segmented"].as_u64(),
+            a["unit"].as_str()
+        ),
+        (Some(2), Some(2), Some("0/2"))
+    );
+    assert!(
+        before == files(&units),
+        "two units wrote other files than one process"
+    );
     // Another mode into the same folder is refused: maps of two modes never mix.
     let model = tiny_model();
     let e = fails(&[
@@ -273,4 +289,54 @@ fn a_bad_model_stops_segment_and_ingest_naming_the_file() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{e}");
     assert!(e.contains("model.safetensors"), "{e}");
+}
+
+#[test]
+fn a_folder_of_photos_segments_without_a_model_and_the_accuracy_script_scores_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene(tmp.path());
+    let labels = tmp.path().join("folder_labels");
+    let model = tiny_model();
+    let images = scene.join("images");
+    let s: serde_json::Value = serde_json::from_str(&ok(&[
+        "segment",
+        "--images",
+        images.to_str().unwrap(),
+        "--weights",
+        model.to_str().unwrap(),
+        "--out",
+        labels.to_str().unwrap(),
+        "--size",
+        "64",
+        "--json",
+        "--quiet",
+    ]))
+    .unwrap();
+    assert_eq!(s["photos"].as_u64(), Some(4));
+    let truth = scene.join("ground_truth/semantics");
+    assert_eq!(pngs(&labels), pngs(&truth));
+    if !super::python_has("import numpy, PIL") {
+        return;
+    }
+    let score = |labels: &Path| -> String {
+        let o = std::process::Command::new("python3")
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/segment_check.py"))
+            .args([
+                "--labels",
+                labels.to_str().unwrap(),
+                "--annotations",
+                truth.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    // The ground truth scores itself perfectly; the random tiny model scores something valid.
+    assert!(score(&truth).contains("4 photos: mIoU 100.00%, pixel accuracy 100.00%"));
+    let out = score(&labels);
+    assert!(
+        out.starts_with("4 photos: mIoU ") && !out.contains("100.00%"),
+        "{out}"
+    );
 }

@@ -2,7 +2,9 @@
 //! PNG of ADE20K class ids in a label folder (the format `ingest --semantics` reads), from a
 //! SegFormer the user gives. Photos run in parallel, one per core; a photo whose label map
 //! exists is skipped, so an interrupted run resumes; a record in the folder ties the maps to
-//! the model and mode that made them.
+//! the model and mode that made them. As a work unit (`--shard I/N`) it does the photos at
+//! positions `p ≡ I (mod N)` in image-id order; units write disjoint files and need no
+//! `finalize`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -20,8 +22,9 @@ pub const RECORD: &str = "segment.json";
 /// Settings of `segment`.
 #[derive(Debug, Clone)]
 pub struct SegmentConfig {
-    /// Scene folder (COLMAP layout) or a model folder itself.
-    pub scene: PathBuf,
+    /// Scene folder (COLMAP layout) or a model folder itself; `None`: every photo in
+    /// `images` (a folder of photos without a model, e.g. a benchmark's validation set).
+    pub scene: Option<PathBuf>,
     /// Photo folder [default: images/ next to the model].
     pub images: Option<PathBuf>,
     /// Model encoding to read [default: bin when present].
@@ -34,6 +37,8 @@ pub struct SegmentConfig {
     pub mode: Mode,
     /// Make an unreadable photo an error instead of a warning.
     pub strict: bool,
+    /// The work unit this process does (`Unit::WHOLE`: every photo).
+    pub unit: crate::Unit,
 }
 
 impl SegmentConfig {
@@ -44,13 +49,14 @@ impl SegmentConfig {
         out: impl Into<PathBuf>,
     ) -> SegmentConfig {
         SegmentConfig {
-            scene: scene.into(),
+            scene: Some(scene.into()),
             images: None,
             format: None,
             weights: weights.into(),
             out: out.into(),
             mode: Mode::default(),
             strict: false,
+            unit: crate::Unit::WHOLE,
         }
     }
 }
@@ -71,7 +77,9 @@ pub struct SegmentSummary {
     pub model: String,
     pub model_sha256: String,
     pub mode: String,
-    /// Registered photos.
+    /// The work unit, `I/N` (`0/1`: the whole stage).
+    pub unit: String,
+    /// Registered photos this unit owns.
     pub photos: usize,
     /// Label maps written by this run.
     pub segmented: usize,
@@ -91,8 +99,7 @@ pub fn load_model(weights: &Path) -> Result<Segformer> {
 /// Label maps of every registered photo of a scene.
 pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSummary> {
     let start = Instant::now();
-    let (model_dir, rec) = crate::ingest::load_model(&cfg.scene, cfg.format)?;
-    let photos_dir = crate::ingest::images_dir(cfg.images.as_deref(), &cfg.scene, &model_dir)?;
+    let (photos_dir, all) = photo_list(cfg)?;
     let model = load_model(&cfg.weights)?;
     let record = SegmentRecord {
         model_sha256: model.sha256.clone(),
@@ -100,7 +107,12 @@ pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSu
         classes: "ADE20K-150".into(),
     };
     claim_folder(&cfg.out, &record)?;
-    let names: Vec<&str> = rec.images.values().map(|i| i.name.as_str()).collect();
+    let names: Vec<&str> = all
+        .iter()
+        .enumerate()
+        .filter(|(p, _)| cfg.unit.owns(*p))
+        .map(|(_, n)| n.as_str())
+        .collect();
     let (done, todo): (Vec<&str>, Vec<&str>) = names
         .iter()
         .partition(|n| nrw_dataset::semantics::label_path(&cfg.out, n).is_file());
@@ -128,6 +140,7 @@ pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSu
         model: cfg.weights.display().to_string(),
         model_sha256: model.sha256.clone(),
         mode: record.mode,
+        unit: cfg.unit.to_string(),
         photos: names.len(),
         segmented: todo.len() - unreadable.len(),
         resumed: done.len(),
@@ -135,6 +148,50 @@ pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSu
         warnings,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The photo folder and the photos to segment, in a fixed order: a scene's registered
+/// photos in image-id order, or every JPEG and PNG under the folder, sorted by path.
+fn photo_list(cfg: &SegmentConfig) -> Result<(PathBuf, Vec<String>)> {
+    if let Some(scene) = &cfg.scene {
+        let (model_dir, rec) = crate::ingest::load_model(scene, cfg.format)?;
+        let dir = crate::ingest::images_dir(cfg.images.as_deref(), scene, &model_dir)?;
+        return Ok((dir, rec.images.values().map(|i| i.name.clone()).collect()));
+    }
+    let Some(dir) = &cfg.images else {
+        return Err(PipelineError::config("SCENE", "or --images DIR: give one"));
+    };
+    if !dir.is_dir() {
+        return Err(PipelineError::input(dir, "--images is not a folder"));
+    }
+    let mut names = Vec::new();
+    let mut stack = vec![dir.clone()];
+    while let Some(d) = stack.pop() {
+        let entries = std::fs::read_dir(&d).map_err(|e| PipelineError::input(&d, e.to_string()))?;
+        for e in entries {
+            let p = e
+                .map_err(|e| PipelineError::input(&d, e.to_string()))?
+                .path();
+            let photo = p
+                .extension()
+                .and_then(|x| x.to_str())
+                .is_some_and(|x| ["jpg", "jpeg", "png"].contains(&x.to_ascii_lowercase().as_str()));
+            if p.is_dir() {
+                stack.push(p);
+            } else if photo {
+                let rel = p.strip_prefix(dir).expect("under the folder");
+                names.push(rel.to_string_lossy().into_owned());
+            }
+        }
+    }
+    if names.is_empty() {
+        return Err(PipelineError::input(
+            dir,
+            "no .jpg, .jpeg or .png photos in this folder",
+        ));
+    }
+    names.sort();
+    Ok((dir.clone(), names))
 }
 
 /// Create the label folder or check that its maps came from the same model and mode.

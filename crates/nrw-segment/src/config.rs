@@ -171,7 +171,7 @@ impl SegformerConfig {
         let mut generic = 0;
         let mut agree = 0;
         let mut first_diff = None;
-        for i in 0..ADE_CLASSES {
+        for (i, ade_name) in ade.iter().enumerate().take(ADE_CLASSES) {
             let Some(name) = map.get(&i.to_string()) else {
                 return Err(SegmentError::model(
                     path,
@@ -181,7 +181,7 @@ impl SegformerConfig {
             let name = name.trim().to_lowercase();
             if name == format!("label_{i}") {
                 generic += 1;
-            } else if name == ade[i] {
+            } else if name == *ade_name {
                 agree += 1;
             } else if first_diff.is_none() {
                 first_diff = Some((i, name));

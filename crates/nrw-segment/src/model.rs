@@ -354,7 +354,7 @@ fn load_head(t: &mut Tensors, cfg: &SegformerConfig) -> Result<Head> {
     };
     let (gamma, beta) = (get_d(t, "weight")?, get_d(t, "bias")?);
     let (mean, var) = (get_d(t, "running_mean")?, get_d(t, "running_var")?);
-    if let Some(i) = var.iter().position(|v| !(*v >= 0.0)) {
+    if let Some(i) = var.iter().position(|v| v.is_nan() || *v < 0.0) {
         return Err(SegmentError::model(
             t.path,
             format!(

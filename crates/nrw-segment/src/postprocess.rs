@@ -17,6 +17,9 @@ use crate::ops::{taps, Map, Tap};
 /// corner by a few ulp; this keeps every class that might win.
 const SLACK: f32 = 1e-5;
 
+/// A 2 × 2 cell of logits: (upper row, lower row, left column, right column).
+type Cell = (usize, usize, usize, usize);
+
 /// Class ids (arg-max + 1: ADE ids 1…150) of `logits` upsampled to `w × h`, row-major.
 pub fn labels(logits: &Map, w: usize, h: usize) -> Vec<u8> {
     let c = logits.c;
@@ -26,7 +29,7 @@ pub fn labels(logits: &Map, w: usize, h: usize) -> Vec<u8> {
     out.par_chunks_mut(w)
         .zip(ty.par_iter())
         .for_each(|(row, t)| {
-            let mut cache: Option<((usize, usize, usize, usize), Vec<usize>)> = None;
+            let mut cache: Option<(Cell, Vec<usize>)> = None;
             for (px, s) in row.iter_mut().zip(&tx) {
                 let cell = (t.i0, t.i1, s.i0, s.i1);
                 if cache.as_ref().map(|c| c.0) != Some(cell) {

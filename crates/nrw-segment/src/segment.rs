@@ -24,6 +24,10 @@ pub enum Mode {
     CenterCrop { size: u32 },
 }
 
+/// Largest network input side: memory grows with its square (about 1 GB of activations for
+/// SegFormer-b2 at 2048²); the released models were trained at 512 and 640.
+pub const MAX_SIZE: u32 = 2048;
+
 impl Default for Mode {
     fn default() -> Self {
         Mode::Resize {
@@ -46,15 +50,17 @@ impl std::fmt::Display for Mode {
 impl Mode {
     /// From the CLI's words: `resize`, `slide` or `crop`, with the size in pixels.
     pub fn parse(name: &str, size: u32) -> std::result::Result<Mode, String> {
-        if size == 0 {
-            return Err("the size must be at least 1 pixel".into());
+        if size == 0 || size > MAX_SIZE {
+            return Err(format!(
+                "the size must be 1..={MAX_SIZE} pixels, not {size}"
+            ));
         }
         match name {
             "resize" => Ok(Mode::Resize {
                 width: size,
                 height: size,
             }),
-            "slide" if size % 4 != 0 => Err(format!(
+            "slide" if !size.is_multiple_of(4) => Err(format!(
                 "slide windows must be a multiple of 4 pixels (the logits' grid), not {size}"
             )),
             "slide" => Ok(Mode::Slide { size }),
@@ -136,7 +142,7 @@ fn center_crop(
     let ids = labels(&model.logits(&normalize(&crop), s, s, par), s, s);
     let mut out = GrayImage::new(w, h);
     for (y, row) in ids.chunks_exact(s).enumerate() {
-        let at = ((y0 as usize + y) * w as usize + x0 as usize) as usize;
+        let at = (y0 as usize + y) * w as usize + x0 as usize;
         out.as_mut()[at..at + s].copy_from_slice(row);
     }
     Ok(out)
@@ -175,7 +181,7 @@ fn slide_logits(
     let s = size as usize;
     let stride = ((2 * s / 3) / 4 * 4).max(4);
     let (gw, gh) = (sw as usize / 4, sh as usize / 4);
-    let mut sum = Map::zeros(gh, gw, model_classes(model));
+    let mut sum = Map::zeros(gh, gw, crate::config::ADE_CLASSES);
     let mut count = vec![0u32; gw * gh];
     for y0 in starts(sh as usize, s, stride) {
         for x0 in starts(sw as usize, s, stride) {
@@ -205,8 +211,4 @@ fn slide_logits(
         px.iter_mut().for_each(|v| *v *= inv);
     }
     Ok(sum)
-}
-
-fn model_classes(_model: &Segformer) -> usize {
-    crate::config::ADE_CLASSES
 }

@@ -7,7 +7,7 @@ use clap::{Args, ValueEnum};
 use nrw_pipeline::segment::{SegmentConfig, SegmentSummary};
 use nrw_segment::Mode;
 
-use super::{Bars, Encoding};
+use super::{Bars, Encoding, ShardArgs};
 use crate::error::{EtlError, Result};
 
 /// `--mode` values.
@@ -37,22 +37,28 @@ pub fn mode(arg: ModeArg, size: u32) -> Result<Mode> {
   nrw-etl segment SCENE --weights segformer-b0-finetuned-ade-512-512/ --out SCENE/labels
   nrw-etl ingest SCENE --out DATASET --semantics SCENE/labels
   nrw-etl ingest SCENE --out DATASET --segment-weights segformer-b0-finetuned-ade-512-512/
+  nrw-etl segment SCENE --weights MODEL --out LABELS --shard 2/8   # one of 8 machines
+  nrw-etl segment --images ADEChallengeData2016/images/validation --weights MODEL --out L
 
 The model is a SegFormer fine-tuned on ADE20K-150 in the Hugging Face layout (a folder with
 config.json and model.safetensors, e.g. `huggingface-cli download nvidia/segformer-b0-finetuned-ade-512-512`
 on a machine with network). Nothing is downloaded. Each photo's map is an 8-bit PNG of ADE20K
 ids 1..150 (schemas/ade20k.csv; 0 = unlabelled), named like the photo with .png. A run that
-stops resumes: maps already written are kept. docs/segmentation.md has the details.")]
+stops resumes: maps already written are kept. Work units (--shard I/N) write disjoint maps
+into the same folder and need no finalize. docs/segmentation.md has the details.")]
 pub struct SegmentArgs {
-    /// Scene folder holding sparse/0/ (or sparse/) and images/, or a model folder itself
-    pub scene: PathBuf,
+    /// Scene folder holding sparse/0/ (or sparse/) and images/, or a model folder itself;
+    /// without it, every photo in --images is segmented (a folder without a model)
+    #[arg(required_unless_present = "images")]
+    pub scene: Option<PathBuf>,
     /// SegFormer folder (config.json + model.safetensors), or its model.safetensors
     #[arg(long)]
     pub weights: PathBuf,
     /// Label folder to write (created if missing; segment.json records the model and mode)
     #[arg(long)]
     pub out: PathBuf,
-    /// Folder of the photos named in the model [default: <scene>/images]
+    /// Folder of the photos named in the model [default: <scene>/images]; without SCENE, the
+    /// folder whose .jpg/.jpeg/.png photos (subfolders included) are segmented
     #[arg(long)]
     pub images: Option<PathBuf>,
     /// Read this encoding even if the other exists [default: bin when present, else txt]
@@ -67,6 +73,8 @@ pub struct SegmentArgs {
     /// Stop with an error at the first photo that cannot be decoded, instead of warning
     #[arg(long)]
     pub strict: bool,
+    #[command(flatten)]
+    pub shard: ShardArgs,
     /// Worker threads [default: all cores]; the maps do not depend on it
     #[arg(long)]
     pub threads: Option<usize>,
@@ -85,7 +93,9 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
         format: args.format.map(Into::into),
         mode: mode(args.mode, args.size)?,
         strict: args.strict,
-        ..SegmentConfig::new(&args.scene, &args.weights, &args.out)
+        unit: args.shard.unit()?.unwrap_or(nrw_pipeline::Unit::WHOLE),
+        scene: args.scene.clone(),
+        ..SegmentConfig::new("", &args.weights, &args.out)
     };
     let bars = Bars::new(args.quiet);
     let s = nrw_pipeline::segment::segment(&cfg, &bars)?;
@@ -103,9 +113,10 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
 
 fn print_summary(s: &SegmentSummary) {
     eprintln!(
-        "segmented {} of {} photos into {} ({} already there, {} unreadable) with {} (mode {}) in {:.1} s",
+        "segmented {} of {} photos{} into {} ({} already there, {} unreadable) with {} (mode {}) in {:.1} s",
         s.segmented,
         s.photos,
+        if s.unit == "0/1" { String::new() } else { format!(" (unit {})", s.unit) },
         s.out,
         s.resumed,
         s.unreadable.len(),

@@ -340,3 +340,42 @@ fn a_folder_of_photos_segments_without_a_model_and_the_accuracy_script_scores_it
         "{out}"
     );
 }
+
+#[test]
+fn the_paper_pipeline_with_segment_weights_labels_its_photos_and_exports_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene(tmp.path());
+    let paper = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/paper.toml");
+    let small = tmp.path().join("small.toml");
+    let text = std::fs::read_to_string(&paper).unwrap();
+    assert!(text.contains("segment_size = 512") && text.contains("semantics = false"));
+    std::fs::write(
+        &small,
+        text.replace("val = 100", "val = 1")
+            .replace("min_dim = 600", "min_dim = 96")
+            .replace("min_photo_side = 450", "min_photo_side = 100")
+            .replace("max_empty = 0.85", "max_empty = 1.0")
+            .replace("segment_size = 512", "segment_size = 64")
+            .replace("\"vgg16-512\"", "\"color-stats\""),
+    )
+    .unwrap();
+    let out = tmp.path().join("run");
+    let model = tiny_model();
+    let o = super::nrw(&[
+        "run",
+        small.to_str().unwrap(),
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--segment-weights",
+        model.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let seg = walk(&out.join("export"))
+        .into_iter()
+        .filter(|p| p.to_string_lossy().ends_with("_seg_rgb.png"))
+        .count();
+    assert_eq!(seg, 4, "every exported photo has its semantic map");
+    let manifest = std::fs::read_to_string(out.join("manifest.json")).unwrap();
+    assert!(manifest.contains("segment_model_sha256") && manifest.contains("resize 64x64"));
+}

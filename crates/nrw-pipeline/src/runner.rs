@@ -40,6 +40,13 @@ pub struct IngestStage {
     /// An unreadable photo or label map stops the run instead of being dropped.
     #[serde(default)]
     pub strict: bool,
+    /// With `run --segment-weights`: how photos are fed to the SegFormer (`resize`, `slide`
+    /// or `crop`; default resize).
+    #[serde(default)]
+    pub segment_mode: Option<String>,
+    /// With `run --segment-weights`: the network's input size in pixels (default 512).
+    #[serde(default)]
+    pub segment_size: Option<u32>,
 }
 
 /// `[split]`: validation photos (a count, or a fraction of the kept photos) and seed.
@@ -107,6 +114,8 @@ impl Pipeline {
                 rows_per_shard: paper.rows_per_shard,
                 semantics: Some("ground_truth/semantics".into()),
                 strict: false,
+                segment_mode: None,
+                segment_size: None,
             }),
             split: Some(SplitStage {
                 val: None,
@@ -147,11 +156,48 @@ pub struct RunOutcome {
     pub report: Option<PathBuf>,
 }
 
+/// The model files a pipeline's stages read, given on the command line (never downloaded).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Models<'a> {
+    /// VGG weights for a style stage with a VGG tier.
+    pub vgg: Option<&'a Path>,
+    /// A SegFormer: ingest segments every kept photo with it.
+    pub segformer: Option<&'a Path>,
+}
+
+/// Ingest's settings from `[ingest]` and the models.
+fn ingest_config(
+    i: &IngestStage,
+    scene: &Path,
+    out: &Path,
+    models: Models,
+) -> Result<IngestConfig> {
+    let mut c = IngestConfig::new(scene, out);
+    c.min_dim = i.min_dim;
+    c.radius = i.radius;
+    c.filters.max_empty_ratio = i.max_empty;
+    c.filters.min_photo_side = i.min_photo_side;
+    c.rows_per_shard = i.rows_per_shard;
+    c.semantics = i.semantics.as_ref().map(|s| scene.join(s));
+    c.strict = i.strict;
+    if let Some(w) = models.segformer {
+        let mode = i.segment_mode.as_deref().unwrap_or("resize");
+        let mode = nrw_segment::Mode::parse(mode, i.segment_size.unwrap_or(512))
+            .map_err(|e| PipelineError::config("ingest.segment_mode", e))?;
+        c.segment = Some(crate::ingest::InlineSegment {
+            weights: w.into(),
+            mode,
+        });
+    }
+    Ok(c)
+}
+
 fn export_config(
     p: &Pipeline,
     e: &ExportStage,
     dataset: &Path,
     out: &Path,
+    segmented: bool,
 ) -> Result<ExportConfig> {
     let layout = match e.layout.as_str() {
         "official" => nrw_dataset::export::Layout::Official,
@@ -169,7 +215,8 @@ fn export_config(
     };
     Ok(ExportConfig {
         layout,
-        semantics: e.semantics,
+        // A run that segments its photos exports their labels.
+        semantics: e.semantics || segmented,
         ..crate::export::official(dataset, out)
     })
 }
@@ -199,19 +246,25 @@ pub fn run(
     scene: &Path,
     out: &Path,
     export_dir: &Path,
-    weights: Option<&Path>,
+    models: Models,
     progress: &dyn Progress,
     done: &mut dyn FnMut(StageDone),
 ) -> Result<RunOutcome> {
     let style = p
         .style
         .as_ref()
-        .map(|s| style_config(s, out, weights))
+        .map(|s| style_config(s, out, models.vgg))
         .transpose()?;
+    let segmented = models.segformer.is_some() && p.ingest.is_some();
     let export = p
         .export
         .as_ref()
-        .map(|e| export_config(p, e, out, export_dir))
+        .map(|e| export_config(p, e, out, export_dir, segmented))
+        .transpose()?;
+    let ingest = p
+        .ingest
+        .as_ref()
+        .map(|i| ingest_config(i, scene, out, models))
         .transpose()?;
     let mut outcome = RunOutcome {
         kept: true,
@@ -219,16 +272,8 @@ pub fn run(
         export: None,
         report: None,
     };
-    if let Some(i) = &p.ingest {
-        let mut c = IngestConfig::new(scene, out);
-        c.min_dim = i.min_dim;
-        c.radius = i.radius;
-        c.filters.max_empty_ratio = i.max_empty;
-        c.filters.min_photo_side = i.min_photo_side;
-        c.rows_per_shard = i.rows_per_shard;
-        c.semantics = i.semantics.as_ref().map(|s| scene.join(s));
-        c.strict = i.strict;
-        let s = crate::ingest::ingest(&c, progress)?;
+    if let Some(c) = &ingest {
+        let s = crate::ingest::ingest(c, progress)?;
         done(StageDone::Ingest(&s));
         outcome.kept = s.kept > 0;
     }
@@ -325,7 +370,10 @@ pub fn demo(
         &scene,
         &dir.join("dataset"),
         &dir.join("export"),
-        weights,
+        Models {
+            vgg: weights,
+            segformer: None,
+        },
         progress,
         done,
     )?;

@@ -22,6 +22,10 @@ pub struct RunArgs {
     /// VGG weights for a style stage with a VGG tier (safetensors; never downloaded)
     #[arg(long)]
     pub weights: Option<PathBuf>,
+    /// A SegFormer (config.json + model.safetensors): ingest labels every kept photo with it
+    /// (mode and size from [ingest] segment_mode / segment_size) and the export includes them
+    #[arg(long)]
+    pub segment_weights: Option<PathBuf>,
 }
 
 /// Print a finished stage's summary as its own command would.
@@ -57,7 +61,10 @@ pub fn run(args: &RunArgs) -> Result<bool> {
         &args.scene,
         &args.out,
         &args.out.join(nrw_dataset::EXPORT_DIR),
-        args.weights.as_deref(),
+        nrw_pipeline::runner::Models {
+            vgg: args.weights.as_deref(),
+            segformer: args.segment_weights.as_deref(),
+        },
         &Bars::new(false),
         &mut |d| print_stage(&args.out, d),
     )?;

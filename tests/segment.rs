@@ -41,11 +41,12 @@ fn segment(scene: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
         model.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
-        "--size",
-        "64",
         "--json",
         "--quiet",
     ];
+    if !extra.contains(&"--size") {
+        args.extend(["--size", "64"]);
+    }
     args.extend(extra);
     serde_json::from_str(&ok(&args)).unwrap()
 }
@@ -378,4 +379,64 @@ fn the_paper_pipeline_with_segment_weights_labels_its_photos_and_exports_them() 
     assert_eq!(seg, 4, "every exported photo has its semantic map");
     let manifest = std::fs::read_to_string(out.join("manifest.json")).unwrap();
     assert!(manifest.contains("segment_model_sha256") && manifest.contains("resize 64x64"));
+}
+
+#[test]
+fn an_unreadable_photo_is_a_warning_without_a_map_and_an_error_with_strict() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene(tmp.path());
+    let mut photos = walk(&scene.join("images"));
+    photos.sort();
+    let bad = &photos[1];
+    let bytes = std::fs::read(bad).unwrap();
+    std::fs::write(bad, &bytes[..bytes.len() / 2]).unwrap();
+    let labels = tmp.path().join("labels");
+    let s = segment(&scene, &labels, &[]);
+    assert_eq!((s["segmented"].as_u64(), s["unreadable"].as_array().map(|a| a.len())), (Some(3), Some(1)));
+    let name = bad.file_name().unwrap().to_string_lossy().to_string();
+    assert!(s["unreadable"][0].as_str().unwrap().contains(&name), "{s}");
+    assert_eq!(pngs(&labels).len(), 3, "no map for the unreadable photo");
+    let model = tiny_model();
+    let strict = tmp.path().join("strict");
+    let e = fails(&[
+        "segment",
+        scene.to_str().unwrap(),
+        "--weights",
+        model.to_str().unwrap(),
+        "--out",
+        strict.to_str().unwrap(),
+        "--size",
+        "64",
+        "--strict",
+    ]);
+    assert!(e.contains(&name), "{e}");
+}
+
+#[test]
+fn real_photos_of_every_size_segment_in_all_three_modes() {
+    let Some(_) = super::shared::shared("data") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = super::data().join("sacre_coeur");
+    for (mode, size) in [("resize", "512"), ("slide", "128"), ("crop", "512")] {
+        let out = tmp.path().join(mode);
+        let s = segment(&scene, &out, &["--mode", mode, "--size", size]);
+        assert_eq!(s["segmented"].as_u64(), Some(10), "{mode}");
+        for rel in pngs(&out) {
+            let map = image::open(out.join(&rel)).unwrap().to_luma8();
+            let photo = walk(&scene.join("images"))
+                .into_iter()
+                .find(|p| p.file_stem() == rel.file_stem())
+                .unwrap();
+            let (w, h) = image::image_dimensions(&photo).unwrap();
+            assert_eq!(map.dimensions(), (w, h), "{mode} {}", rel.display());
+            let (x0, y0) = ((w - 512) / 2, (h - 512) / 2);
+            for (x, y, v) in map.enumerate_pixels() {
+                let inside = (x0..x0 + 512).contains(&x) && (y0..y0 + 512).contains(&y);
+                let want_label = mode != "crop" || inside;
+                assert_eq!(v[0] > 0, want_label, "{mode} {} ({x}, {y})", rel.display());
+            }
+        }
+    }
 }

@@ -392,7 +392,13 @@ fn an_unreadable_photo_is_a_warning_without_a_map_and_an_error_with_strict() {
     std::fs::write(bad, &bytes[..bytes.len() / 2]).unwrap();
     let labels = tmp.path().join("labels");
     let s = segment(&scene, &labels, &[]);
-    assert_eq!((s["segmented"].as_u64(), s["unreadable"].as_array().map(|a| a.len())), (Some(3), Some(1)));
+    assert_eq!(
+        (
+            s["segmented"].as_u64(),
+            s["unreadable"].as_array().map(|a| a.len())
+        ),
+        (Some(3), Some(1))
+    );
     let name = bad.file_name().unwrap().to_string_lossy().to_string();
     assert!(s["unreadable"][0].as_str().unwrap().contains(&name), "{s}");
     assert_eq!(pngs(&labels).len(), 3, "no map for the unreadable photo");
@@ -413,13 +419,18 @@ fn an_unreadable_photo_is_a_warning_without_a_map_and_an_error_with_strict() {
 }
 
 #[test]
-fn real_photos_of_every_size_segment_in_all_three_modes() {
+fn real_photos_of_every_size_segment_in_every_mode() {
     let Some(_) = super::shared::shared("data") else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
     let scene = super::data().join("sacre_coeur");
-    for (mode, size) in [("resize", "512"), ("slide", "128"), ("crop", "512")] {
+    for (mode, size) in [
+        ("resize", "512"),
+        ("whole", "256"),
+        ("slide", "128"),
+        ("crop", "512"),
+    ] {
         let out = tmp.path().join(mode);
         let s = segment(&scene, &out, &["--mode", mode, "--size", size]);
         assert_eq!(s["segmented"].as_u64(), Some(10), "{mode}");

@@ -40,8 +40,8 @@ pub struct IngestStage {
     /// An unreadable photo or label map stops the run instead of being dropped.
     #[serde(default)]
     pub strict: bool,
-    /// With `run --segment-weights`: how photos are fed to the SegFormer (`resize`, `slide`
-    /// or `crop`; default resize).
+    /// With `run --segment-weights`: how photos are fed to the SegFormer (`resize`,
+    /// `whole`, `slide` or `crop`; default resize).
     #[serde(default)]
     pub segment_mode: Option<String>,
     /// With `run --segment-weights`: the network's input size in pixels (default 512).

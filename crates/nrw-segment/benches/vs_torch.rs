@@ -84,6 +84,78 @@ fn photo(w: u32, h: u32, seed: u64) -> RgbImage {
     })
 }
 
+/// What the modes and photo sizes cost (ours, one photo per core), and the streaming
+/// arg-max against the full upsampling it replaces (same labels, time and memory).
+fn modes_table(md: &mut String, model: &Segformer, threads: usize, reps: usize) {
+    let _ = writeln!(
+        md,
+        "\n## What the modes cost (ours, SegFormer-b0)\n\n\
+         Time per photo with {threads} photos at once, one per core (`nrw-etl segment`'s way), the whole chain \
+         including the streaming arg-max. `resize` is Hugging Face's default (one 512² pass, aspect ratio \
+         squashed); `whole` keeps the aspect ratio (one pass at a shorter side of 512, the protocol behind \
+         the SegFormer paper's ADE20K numbers); `slide` covers the same scaled photo with 512² windows; `crop` is the \
+         published code's (one 512² pass, labels only inside the crop). The accuracy each buys cannot be \
+         measured here (no ADE20K weights offline; `tests/segment_check.py` measures it where they are).\n\n\
+         | photo | resize 512 | whole 512 | slide 512 | crop 512 | post-processing: streaming arg-max | full upsampling + arg-max (memory) | same labels |\n\
+         |---|---|---|---|---|---|---|---|"
+    );
+    for (w, h) in [(900u32, 600u32), (2000, 1500), (4000, 3000)] {
+        let img = photo(w, h, 7);
+        let batch: Vec<RgbImage> = vec![img.clone(); threads];
+        let mut cells = Vec::new();
+        for mode in [
+            Mode::default(),
+            Mode::Slide { size: 512 },
+            Mode::CenterCrop { size: 512 },
+        ] {
+            let t = time((reps / 2).max(1), || {
+                batch.par_iter().for_each(|i| {
+                    segment(model, i, mode, "bench", Parallelism::None).unwrap();
+                });
+            }) / threads as f64;
+            cells.push(format!("{t:.3} s"));
+        }
+        let x = nrw_segment::preprocess::preprocess(&img, 512, 512);
+        let logits = model.logits(&x, 512, 512, Parallelism::Rayon(0));
+        let mut fast = Vec::new();
+        let tf = time(reps, || {
+            fast = nrw_segment::postprocess::labels(&logits, w as usize, h as usize)
+        });
+        let bytes = logits.c * (w * h) as usize * 4;
+        let (tn, same) = if bytes <= 8 << 30 {
+            let mut naive = Vec::new();
+            let tn = time(1, || {
+                let up = nrw_segment::postprocess::upsample(&logits, w as usize, h as usize);
+                naive = up
+                    .data
+                    .par_chunks(up.c)
+                    .map(|px| {
+                        let mut arg = 0;
+                        for (k, v) in px.iter().enumerate() {
+                            if *v > px[arg] {
+                                arg = k;
+                            }
+                        }
+                        arg as u8 + 1
+                    })
+                    .collect();
+            });
+            (
+                format!("{tn:.3} s ({:.1} GB)", bytes as f64 / 1e9),
+                if naive == fast { "yes" } else { "**no**" },
+            )
+        } else {
+            ("not run".to_string(), "—")
+        };
+        let _ = writeln!(
+            md,
+            "| {w} × {h} | {} | {} | {} | {tf:.3} s | {tn} | {same} |",
+            cells[0], cells[1], cells[2]
+        );
+        eprintln!("modes {w}×{h}: {cells:?}, post {tf:.3} s vs {tn}");
+    }
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -118,6 +190,7 @@ fn main() {
         cpu::describe()
     );
     let mut per_photo = Vec::new();
+    let mut b0 = None;
     for size in ["b0", "b2"] {
         let dir = tmp.path().join(size);
         let mut cmd = Command::new(&python);
@@ -134,6 +207,9 @@ fn main() {
         );
         let r: serde_json::Value = serde_json::from_slice(out.stdout.trim_ascii()).unwrap();
         let model = Segformer::load(&dir).unwrap();
+        if size == "b0" {
+            b0 = Some(model.clone());
+        }
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
         let x: Vec<f32> = (0..3 * 512 * 512)
             .map(|_| rng.random_range(-2.0f32..2.0))
@@ -197,6 +273,7 @@ fn main() {
             thr * 1e4 / 3600.0
         );
     }
+    modes_table(&mut md, &b0.expect("b0 measured"), threads, reps);
     std::fs::create_dir_all(root.join("docs/bench")).unwrap();
     std::fs::write(root.join("docs/bench/segment_speed.md"), md).unwrap();
     eprintln!("wrote docs/bench/segment_speed.md");

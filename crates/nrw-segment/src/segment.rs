@@ -1,4 +1,4 @@
-//! A photo → its ADE20K label map, in one of three documented modes.
+//! A photo → its ADE20K label map, in one of four documented modes.
 
 use gemm::Parallelism;
 use image::{GrayImage, RgbImage};
@@ -15,8 +15,12 @@ pub enum Mode {
     /// Hugging Face's default: the whole photo resized to `width × height` (512 × 512),
     /// logits upsampled back to the photo's size.
     Resize { width: u32, height: u32 },
+    /// mmsegmentation's ADE20K test protocol (the SegFormer paper's numbers): the photo
+    /// scaled, aspect ratio kept, so its shorter side is `size` (the longer at most 4·size),
+    /// one pass over the whole image.
+    Whole { size: u32 },
     /// Sliding windows of `size × size` at a stride of about two thirds of a window over the
-    /// photo scaled so its shorter side is `size` (mmsegmentation's ADE20K test setting),
+    /// photo scaled so its shorter side is `size` (mmsegmentation's `slide` inference),
     /// logits averaged where windows overlap.
     Slide { size: u32 },
     /// The published code's `segment_dataset.py`: the central `size × size` crop of the
@@ -41,6 +45,7 @@ impl std::fmt::Display for Mode {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Mode::Resize { width, height } => write!(f, "resize {width}x{height}"),
+            Mode::Whole { size } => write!(f, "whole {size}"),
             Mode::Slide { size } => write!(f, "slide {size}"),
             Mode::CenterCrop { size } => write!(f, "crop {size}"),
         }
@@ -56,6 +61,7 @@ impl Mode {
             ));
         }
         match name {
+            "whole" => Ok(Mode::Whole { size }),
             "resize" => Ok(Mode::Resize {
                 width: size,
                 height: size,
@@ -65,7 +71,9 @@ impl Mode {
             )),
             "slide" => Ok(Mode::Slide { size }),
             "crop" => Ok(Mode::CenterCrop { size }),
-            other => Err(format!("unknown mode `{other}`: resize, slide or crop")),
+            other => Err(format!(
+                "unknown mode `{other}`: resize, whole, slide or crop"
+            )),
         }
     }
 }
@@ -100,6 +108,14 @@ pub fn segment(
             );
             labels(&logits, w as usize, h as usize)
         }
+        Mode::Whole { size } => {
+            let (sw, sh) = whole_size(w, h, size);
+            if sw.min(sh) < min {
+                return Err(too_small(sw.min(sh)));
+            }
+            let logits = model.logits(&preprocess(photo, sw, sh), sh as usize, sw as usize, par);
+            labels(&logits, w as usize, h as usize)
+        }
         Mode::Slide { size } => {
             if size < min {
                 return Err(too_small(size));
@@ -118,6 +134,15 @@ pub fn segment(
         }
     };
     Ok(GrayImage::from_raw(w, h, ids).expect("sized label map"))
+}
+
+/// mmcv's `Resize(scale=(4·size, size), keep_ratio=True)`: one factor that brings the
+/// shorter side to `size` unless the longer would pass `4·size`; sides rounded half up.
+pub fn whole_size(w: u32, h: u32, size: u32) -> (u32, u32) {
+    let (long, short) = (w.max(h) as f64, w.min(h) as f64);
+    let f = (4.0 * size as f64 / long).min(size as f64 / short);
+    let side = |v: u32| ((v as f64 * f + 0.5) as u32).max(1);
+    (side(w), side(h))
 }
 
 fn center_crop(

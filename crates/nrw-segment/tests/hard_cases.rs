@@ -150,6 +150,40 @@ fn a_photo_one_window_large_slides_to_its_resize() {
 }
 
 #[test]
+fn whole_mode_is_a_resize_to_the_aspect_kept_size() {
+    let m = model();
+    // mmcv's rounding: 90 × 70 with a shorter side of 64 → 82.3 → 82 × 64; a panorama is
+    // capped at 4 × 64 on its longer side.
+    assert_eq!(nrw_segment::segment::whole_size(90, 70, 64), (82, 64));
+    assert_eq!(nrw_segment::segment::whole_size(1000, 50, 64), (256, 13));
+    assert_eq!(nrw_segment::segment::whole_size(64, 64, 64), (64, 64));
+    let p = noise(90, 70, 12);
+    let whole = segment(&m, &p, Mode::Whole { size: 64 }, "p", Parallelism::None).unwrap();
+    let resized = segment(
+        &m,
+        &p,
+        Mode::Resize {
+            width: 82,
+            height: 64,
+        },
+        "p",
+        Parallelism::None,
+    )
+    .unwrap();
+    assert_eq!(whole, resized);
+    let e = segment(
+        &m,
+        &noise(1000, 50, 1),
+        Mode::Whole { size: 64 },
+        "panorama",
+        Parallelism::None,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("panorama") && e.contains("13-pixel"), "{e}");
+}
+
+#[test]
 fn overlapping_windows_average_their_logits() {
     // A photo two windows wide: the averaged logits must differ from any single window's
     // where they overlap, and the map still covers the whole photo.

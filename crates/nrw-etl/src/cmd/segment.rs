@@ -15,6 +15,8 @@ use crate::error::{EtlError, Result};
 pub enum ModeArg {
     /// Hugging Face's default: the photo resized to SIZE×SIZE, logits upsampled to the photo
     Resize,
+    /// mmsegmentation's ADE20K protocol: aspect ratio kept, shorter side SIZE, one pass
+    Whole,
     /// SIZE×SIZE windows (stride ⅔) over the photo scaled to a shorter side of SIZE, logits averaged
     Slide,
     /// The published code: the central SIZE×SIZE crop, unresized; 0 (unlabelled) outside it
@@ -25,6 +27,7 @@ pub enum ModeArg {
 pub fn mode(arg: ModeArg, size: u32) -> Result<Mode> {
     let name = match arg {
         ModeArg::Resize => "resize",
+        ModeArg::Whole => "whole",
         ModeArg::Slide => "slide",
         ModeArg::Crop => "crop",
     };
@@ -67,7 +70,7 @@ pub struct SegmentArgs {
     /// How a photo is fed to the network
     #[arg(long, value_enum, default_value = "resize")]
     pub mode: ModeArg,
-    /// Network input size in pixels (resize: SIZE×SIZE; slide: window and shorter side; crop: crop side)
+    /// Network input size in pixels (resize: SIZE×SIZE; whole: shorter side; slide: window and shorter side; crop: crop side)
     #[arg(long, default_value_t = 512)]
     pub size: u32,
     /// Stop with an error at the first photo that cannot be decoded, instead of warning

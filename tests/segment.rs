@@ -32,23 +32,29 @@ fn scene(tmp: &Path) -> PathBuf {
     scene
 }
 
-fn segment(scene: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let model = tiny_model();
-    let mut args = vec![
+/// `nrw-etl segment SCENE --weights MODEL --out OUT EXTRA…`.
+fn args<'a>(scene: &'a Path, model: &'a Path, out: &'a Path, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut a = vec![
         "segment",
         scene.to_str().unwrap(),
         "--weights",
         model.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
-        "--json",
-        "--quiet",
     ];
+    a.extend(extra);
+    a
+}
+
+/// A successful run with the tiny model (64-pixel inputs unless `extra` sets `--size`).
+fn segment(scene: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let model = tiny_model();
+    let mut a = args(scene, &model, out, &["--json", "--quiet"]);
     if !extra.contains(&"--size") {
-        args.extend(["--size", "64"]);
+        a.extend(["--size", "64"]);
     }
-    args.extend(extra);
-    serde_json::from_str(&ok(&args)).unwrap()
+    a.extend(extra);
+    serde_json::from_str(&ok(&a)).unwrap()
 }
 
 #[test]
@@ -125,18 +131,12 @@ fn label_maps_are_the_librarys_in_the_format_ingest_reads_and_resume_to_the_same
     );
     // Another mode into the same folder is refused: maps of two modes never mix.
     let model = tiny_model();
-    let e = fails(&[
-        "segment",
-        scene.to_str().unwrap(),
-        "--weights",
-        model.to_str().unwrap(),
-        "--out",
-        labels.to_str().unwrap(),
-        "--mode",
-        "slide",
-        "--size",
-        "64",
-    ]);
+    let e = fails(&args(
+        &scene,
+        &model,
+        &labels,
+        &["--mode", "slide", "--size", "64"],
+    ));
     assert!(
         e.contains("segment.json") && e.contains("slide 64") && e.contains("resize 64x64"),
         "{e}"
@@ -266,14 +266,7 @@ fn a_bad_model_stops_segment_and_ingest_naming_the_file() {
     std::fs::copy(tiny_model().join("config.json"), bad.join("config.json")).unwrap();
     std::fs::write(bad.join("model.safetensors"), b"not a model").unwrap();
     let out = tmp.path().join("labels");
-    let e = fails(&[
-        "segment",
-        scene.to_str().unwrap(),
-        "--weights",
-        bad.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let e = fails(&args(&scene, &bad, &out, &[]));
     assert!(
         e.contains("model.safetensors") && e.contains("not a safetensors file"),
         "{e}"
@@ -404,17 +397,12 @@ fn an_unreadable_photo_is_a_warning_without_a_map_and_an_error_with_strict() {
     assert_eq!(pngs(&labels).len(), 3, "no map for the unreadable photo");
     let model = tiny_model();
     let strict = tmp.path().join("strict");
-    let e = fails(&[
-        "segment",
-        scene.to_str().unwrap(),
-        "--weights",
-        model.to_str().unwrap(),
-        "--out",
-        strict.to_str().unwrap(),
-        "--size",
-        "64",
-        "--strict",
-    ]);
+    let e = fails(&args(
+        &scene,
+        &model,
+        &strict,
+        &["--size", "64", "--strict"],
+    ));
     assert!(e.contains(&name), "{e}");
 }
 

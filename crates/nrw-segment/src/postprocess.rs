@@ -82,6 +82,25 @@ fn best(m: &Map, t: &Tap, s: &Tap, cands: &[usize]) -> usize {
     arg
 }
 
+/// The same labels by the definition: every class interpolated at every pixel (the
+/// reference the pruned arg-max is tested and benchmarked against; memory grows with
+/// `w·h·classes`).
+pub fn labels_full(logits: &Map, w: usize, h: usize) -> Vec<u8> {
+    let up = upsample(logits, w, h);
+    up.data
+        .par_chunks(up.c)
+        .map(|px| {
+            let mut arg = 0;
+            for (k, v) in px.iter().enumerate() {
+                if *v > px[arg] {
+                    arg = k;
+                }
+            }
+            arg as u8 + 1
+        })
+        .collect()
+}
+
 /// The upsampled logits themselves (tests and diagnostics; memory grows with `w·h·classes`).
 pub fn upsample(logits: &Map, w: usize, h: usize) -> Map {
     let mut out = Map::zeros(h, w, logits.c);

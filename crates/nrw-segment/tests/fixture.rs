@@ -151,20 +151,7 @@ fn labels_match_post_process_semantic_segmentation() {
         let n = check_labels(&got, &want, &m, labels);
         println!("{labels}: {n} of {} pixels compared, all equal", want.len());
         // The pruned arg-max is the full one on our own logits, exactly.
-        let full = postprocess::upsample(&logits, shape[1], shape[0]);
-        let naive: Vec<u8> = full
-            .data
-            .chunks_exact(full.c)
-            .map(|px| {
-                let mut arg = 0;
-                for (k, v) in px.iter().enumerate() {
-                    if *v > px[arg] {
-                        arg = k;
-                    }
-                }
-                arg as u8 + 1
-            })
-            .collect();
+        let naive = postprocess::labels_full(&logits, shape[1], shape[0]);
         assert_eq!(got, naive, "{labels}: pruned and full arg-max differ");
     }
 }

@@ -11,22 +11,13 @@ mod cpu;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+
+#[path = "../../../tests/support/timed.rs"]
+mod timed;
 
 /// Wall seconds and peak resident MB of one `nrw-etl` process.
 fn timed(args: &[&str]) -> (f64, f64) {
-    let o = Command::new("/usr/bin/time")
-        .args(["-f", "%e %M", env!("CARGO_BIN_EXE_nrw-etl")])
-        .args(args)
-        .output()
-        .expect("/usr/bin/time runs");
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{args:?}: {err}");
-    let last = err.lines().last().expect("time's line");
-    let mut it = last.split_whitespace();
-    let secs: f64 = it.next().unwrap().parse().unwrap();
-    let kb: f64 = it.next().unwrap().parse().unwrap();
-    (secs, kb / 1024.0)
+    timed::timed(env!("CARGO_BIN_EXE_nrw-etl"), args)
 }
 
 /// Every file of a dataset but timings.json, with its bytes.

@@ -1,0 +1,19 @@
+//! One `nrw-etl` process timed whole by `/usr/bin/time`: wall seconds and peak resident MB,
+//! for the benchmarks that compare stages or runs. Shared by `#[path]`.
+#![allow(dead_code)]
+
+/// Wall seconds and peak resident MB of `nrw-etl ARGS` (`exe` is the binary).
+pub fn timed(exe: &str, args: &[&str]) -> (f64, f64) {
+    let o = std::process::Command::new("/usr/bin/time")
+        .args(["-f", "%e %M", exe])
+        .args(args)
+        .output()
+        .expect("/usr/bin/time runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{args:?}: {err}");
+    let last = err.lines().last().expect("time's line");
+    let mut it = last.split_whitespace();
+    let secs: f64 = it.next().unwrap().parse().unwrap();
+    let kb: f64 = it.next().unwrap().parse().unwrap();
+    (secs, kb / 1024.0)
+}

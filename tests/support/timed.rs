@@ -17,3 +17,15 @@ pub fn timed(exe: &str, args: &[&str]) -> (f64, f64) {
     let kb: f64 = it.next().unwrap().parse().unwrap();
     (secs, kb / 1024.0)
 }
+
+/// `[PHOTOS POINTS]` from a benchmark's command line: 200 photos and 10⁷ points unless given.
+pub fn photos_points() -> (usize, usize) {
+    let args: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    (
+        args.first().copied().unwrap_or(200),
+        args.get(1).copied().unwrap_or(10_000_000),
+    )
+}

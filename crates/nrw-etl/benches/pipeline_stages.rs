@@ -17,14 +17,7 @@ use std::path::Path;
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
-    let (photos, points) = (
-        args.first().copied().unwrap_or(200),
-        args.get(1).copied().unwrap_or(10_000_000),
-    );
+    let (photos, points) = timed::photos_points();
     let weights = root.join("../shared/weights/vgg16_imagenet.safetensors");
     assert!(
         weights.is_file(),

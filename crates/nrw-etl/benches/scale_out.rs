@@ -43,14 +43,7 @@ fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
-    let (photos, points) = (
-        args.first().copied().unwrap_or(200),
-        args.get(1).copied().unwrap_or(10_000_000),
-    );
+    let (photos, points) = timed::photos_points();
     let work = root.join("target/bench-scale-out");
     let _ = std::fs::remove_dir_all(&work);
     let scene = work.join("scene");

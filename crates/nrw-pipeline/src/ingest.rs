@@ -118,8 +118,8 @@ struct Prepared {
     cloud: RenderCloud,
     source: String,
     record: UnitRecord,
-    /// The model of `--segment-weights`, loaded once.
-    segmenter: Option<nrw_segment::Segformer>,
+    /// The model of `--segment-weights`, loaded once, and its mode.
+    segmenter: Option<(nrw_segment::Segformer, nrw_segment::Mode)>,
 }
 
 fn check_config(cfg: &IngestConfig) -> Result<()> {
@@ -388,7 +388,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
             let model = crate::segment::load_model(&s.weights)?;
             parameters.insert("segment_model_sha256".into(), model.sha256.clone().into());
             parameters.insert("segment_mode".into(), s.mode.to_string().into());
-            Some(model)
+            Some((model, s.mode))
         }
         None => None,
     };
@@ -480,10 +480,9 @@ fn label_pngs(
     w: u32,
     h: u32,
 ) -> Result<LabelPngs> {
-    let labels = if let Some(model) = &p.segmenter {
+    let labels = if let Some((model, mode)) = &p.segmenter {
         let what = p.photos_dir.join(photo_name).display().to_string();
-        let mode = cfg.segment.as_ref().map(|s| s.mode).unwrap_or_default();
-        nrw_segment::segment(model, photo, mode, &what, nrw_segment::Parallelism::None)?
+        nrw_segment::segment(model, photo, *mode, &what, nrw_segment::Parallelism::None)?
     } else if let Some(dir) = &cfg.semantics {
         let path = nrw_dataset::semantics::label_path(dir, photo_name);
         nrw_dataset::semantics::load_labels(&path, photo.width(), photo.height())?

@@ -8,9 +8,10 @@
 
 use image::RgbImage;
 
+use crate::backend::Backend;
 use crate::error::{Result, StyleError};
 use crate::preprocess::{to_input, Preprocess, MIN_SIDE};
-use crate::vgg::{Arch, Vgg, STYLE_LAYERS};
+use crate::vgg::{Arch, STYLE_LAYERS};
 use crate::Parallelism;
 
 /// A way of describing a photo's style, from the reference (VGG16, 512², five layers) down
@@ -181,9 +182,9 @@ pub fn prepare(photo: &RgbImage, size: Option<u32>) -> RgbImage {
 /// network's input scaling and does not affect `color-stats`). A `-full` tier refuses photos
 /// under 16 × 16: pooling would leave no pixel for the deep Grams, whose normalisation would
 /// then divide by zero.
-pub fn describe(
+pub fn describe<B: Backend + ?Sized>(
     tier: &Tier,
-    net: Option<&Vgg>,
+    net: Option<&B>,
     photo: &RgbImage,
     pre: Preprocess,
     par: Parallelism,
@@ -201,7 +202,7 @@ pub fn describe(
         Tier::Official { crop } => {
             let net = net.expect("the official tier needs weights (checked by the caller)");
             assert_eq!(
-                net.arch,
+                net.arch(),
                 Arch::Vgg16,
                 "official tier runs VGG16 (checked by the caller)"
             );
@@ -211,17 +212,13 @@ pub fn describe(
                 crop: *crop,
             })?;
             let n = *crop as usize;
-            let feats = net.style_features_upto(
-                &to_input(&img, Preprocess::MinusOneToOne),
-                n,
-                n,
-                STYLE_LAYERS.len(),
-                par,
-            );
+            let all: Vec<usize> = (0..STYLE_LAYERS.len()).collect();
+            let grams =
+                net.style_grams(&to_input(&img, Preprocess::MinusOneToOne), n, n, &all, par);
             let mut out = Vec::new();
-            for a in &feats {
+            for (c, g) in &grams {
                 // mean over the C × C entries = ‖·‖²_F / C², so each Gram is scaled by 1/C.
-                pack_symmetric_scaled(a.c, &a.gram(par), 1.0 / a.c as f64, &mut out);
+                pack_symmetric_scaled(*c, g, 1.0 / *c as f64, &mut out);
             }
             out
         }
@@ -254,20 +251,20 @@ pub fn describe(
         Tier::Vgg { arch, size, layers } => {
             let net = net.expect("VGG tiers need weights (checked by the caller)");
             assert_eq!(
-                net.arch, *arch,
+                net.arch(),
+                *arch,
                 "weights and tier architecture (checked by the caller)"
             );
             let img = prepare(photo, *size);
             let (w, h) = (img.width() as usize, img.height() as usize);
-            let upto = layers.iter().max().map_or(0, |l| l + 1);
-            let feats = net.style_features_upto(&to_input(&img, pre), h, w, upto, par);
+            let mut taps = layers.clone();
+            taps.sort_unstable();
+            taps.dedup();
+            debug_assert!(taps.iter().all(|t| *t < STYLE_LAYERS.len()));
             let mut out = Vec::new();
-            for (k, a) in feats.iter().enumerate() {
-                if layers.contains(&k) {
-                    pack_symmetric(a.c, &a.gram(par), &mut out);
-                }
+            for (c, g) in net.style_grams(&to_input(&img, pre), h, w, &taps, par) {
+                pack_symmetric(c, &g, &mut out);
             }
-            debug_assert!(feats.len() <= STYLE_LAYERS.len());
             out
         }
     })
@@ -284,6 +281,53 @@ pub fn distance2(a: &[f32], b: &[f32]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::vgg::Vgg;
+
+    /// A backend that is not a VGG: the seam a GPU backend would use.
+    struct Fake;
+
+    impl Backend for Fake {
+        fn arch(&self) -> Arch {
+            Arch::Vgg16
+        }
+        fn weights_sha256(&self) -> &str {
+            "fake"
+        }
+        fn style_grams(
+            &self,
+            _: &[f32],
+            h: usize,
+            w: usize,
+            taps: &[usize],
+            _: Parallelism,
+        ) -> Vec<(usize, Vec<f64>)> {
+            // Grams of 2 channels whose entries record the tap and the input size.
+            taps.iter()
+                .map(|&t| (2, vec![t as f64, 1.0, 1.0, (h * w) as f64]))
+                .collect()
+        }
+    }
+
+    #[test]
+    fn descriptors_come_through_any_backend() {
+        let tier = Tier::parse("vgg16-128-l25").unwrap();
+        let photo = RgbImage::new(300, 200);
+        let d = describe(
+            &tier,
+            Some(&Fake),
+            &photo,
+            Preprocess::Imagenet,
+            Parallelism::None,
+        );
+        // Taps relu2_2 and relu5_2 (indices 1 and 4), the photo resized to 128²; each packed
+        // as the upper triangle with the off-diagonal × √2.
+        let s2 = std::f32::consts::SQRT_2;
+        assert_eq!(
+            d.unwrap(),
+            vec![1.0, s2, 16384.0, 4.0, s2, 16384.0],
+            "taps, order and packing"
+        );
+    }
 
     #[test]
     fn packed_distance_is_the_frobenius_distance() {
@@ -344,7 +388,7 @@ mod tests {
         let img = RgbImage::from_pixel(10, 10, image::Rgb([255, 0, 51]));
         let d = describe(
             &Tier::ColorStats,
-            None,
+            None::<&Vgg>,
             &img,
             Preprocess::Imagenet,
             Parallelism::None,

@@ -2,16 +2,20 @@
 //! appearance distance the paper mines its triplets with. Weights come from a file the user
 //! gives; the tool never downloads anything.
 
+pub mod backend;
 pub mod descriptor;
 pub mod error;
+mod pool;
 pub mod preprocess;
 pub mod vgg;
+pub mod winograd;
 
+pub use backend::Backend;
 pub use descriptor::{central_crop, describe, distance2, Tier};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};
-pub use vgg::{gram, Activation, Arch, Vgg, STYLE_LAYERS};
+pub use vgg::{gram, Activation, Arch, ConvAlgo, Vgg, STYLE_LAYERS};
 
 /// The five Gram matrices (relu1_2 … relu5_2) of a preprocessed CHW input, f64, row-major.
 pub fn grams(
@@ -21,10 +25,7 @@ pub fn grams(
     w: usize,
     par: Parallelism,
 ) -> Vec<(usize, Vec<f64>)> {
-    net.style_features(input, h, w, par)
-        .iter()
-        .map(|a| (a.c, a.gram(par)))
-        .collect()
+    net.style_grams(input, h, w, &[0, 1, 2, 3, 4], par)
 }
 
 /// The five Gram matrices of one image file exactly as given (no resize or crop), as

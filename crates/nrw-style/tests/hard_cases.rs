@@ -88,10 +88,12 @@ fn grey_and_16_bit_files_equal_their_8_bit_rgb_versions() {
     for ((ga, gb), gc) in a.iter().zip(&b).zip(&c) {
         let scale = gb.1.iter().fold(0f64, |m, v| m.max(v.abs())).max(1e-30);
         for ((x, y), z) in ga.1.iter().zip(&gb.1).zip(&gc.1) {
-            // Not bit-equal: gemm's kernels depend on buffer alignment, so sums may round
-            // differently between two runs on equal inputs (about 1e-7 relative).
-            assert!((x - y).abs() / scale < 1e-6, "grey equals its RGB");
-            assert!((y - z).abs() / scale < 1e-6, "16-bit v·257 equals 8-bit v");
+            // Not bit-equal: the two decoders' inputs differ in the last bit, and the f32
+            // rounding of twelve Winograd convolutions (several times the direct method's)
+            // turns that into up to a few 1e-6 of the deep Grams.
+            let (d_grey, d_16) = ((x - y).abs() / scale, (y - z).abs() / scale);
+            assert!(d_grey < 1e-5, "grey equals its RGB: {d_grey:e}");
+            assert!(d_16 < 1e-5, "16-bit v·257 equals 8-bit v: {d_16:e}");
         }
     }
 }

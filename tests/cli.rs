@@ -12,6 +12,8 @@ mod s3;
 mod segment;
 #[path = "support/shared.rs"]
 mod shared;
+#[path = "undistort.rs"]
+mod undistort;
 #[path = "units.rs"]
 mod units;
 #[path = "verify.rs"]

@@ -13,6 +13,7 @@ pub mod ply;
 pub mod pose;
 pub mod stats;
 mod txt;
+pub mod undistort;
 mod write;
 
 pub use camera::{Camera, CameraModel, Projection, ProjectionVisitor};
@@ -28,4 +29,5 @@ pub use model::{
 pub use ply::{read_ply, read_ply_from, write_ply, PointCloud};
 pub use pose::{LocalRigid3, Rigid3};
 pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};
+pub use undistort::{undistort_camera, UndistortError, UndistortOptions};
 pub use write::write_model;

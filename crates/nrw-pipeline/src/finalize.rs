@@ -211,8 +211,18 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         "bin" => Some(nrw_colmap::Format::Binary),
         _ => None,
     };
-    let rec = nrw_colmap::read_model(Path::new(&scene.model_dir), format)?;
+    let mut rec = nrw_colmap::read_model(Path::new(&scene.model_dir), format)?;
     check_model_unchanged(dataset, &unit, &rec)?;
+    // `ingest --undistort` stored the undistorted PINHOLE cameras: the scene tables list those.
+    if let Some(v) = unit.parameters.get("undistort") {
+        let options = crate::ingest::undistort_from_parameters(v).ok_or_else(|| {
+            units_error(
+                dataset,
+                format!("ingest unit record: unreadable `undistort` parameters {v}"),
+            )
+        })?;
+        crate::ingest::undistort_model(&mut rec, &options, Path::new(&scene.model_dir))?;
+    }
     // Shards of an earlier run with other parameters must not linger next to these.
     for stale in nrw_dataset::views::stale_shards(dataset, &shards)? {
         dataset.delete(&stale)?;

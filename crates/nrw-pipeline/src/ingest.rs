@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use image::RgbImage;
-use nrw_colmap::{read_ply, Format, Reconstruction};
+use nrw_colmap::{read_ply, Format, Reconstruction, UndistortOptions};
 use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
 };
@@ -45,6 +45,9 @@ pub struct IngestConfig {
     pub semantics: Option<PathBuf>,
     /// Segment each kept photo with this model instead of reading label maps.
     pub segment: Option<InlineSegment>,
+    /// Store every view as COLMAP's `image_undistorter` would: the PINHOLE camera it computes
+    /// and the photo resampled to it (`ingest --undistort`).
+    pub undistort: Option<UndistortOptions>,
     /// Shorter side of a render in pixels (the paper: 600).
     pub min_dim: u32,
     /// Splat radius in render pixels (the paper: 1).
@@ -72,6 +75,7 @@ impl IngestConfig {
             points: None,
             semantics: None,
             segment: None,
+            undistort: None,
             min_dim: 600,
             radius: 1.0,
             filters: Filters::default(),
@@ -120,6 +124,9 @@ struct Prepared {
     record: UnitRecord,
     /// The model of `--segment-weights`, loaded once, and its mode.
     segmenter: Option<(nrw_segment::Segformer, nrw_segment::Mode)>,
+    /// With `--undistort`: the photos' own (distorted) cameras; `rec` then holds the
+    /// undistorted PINHOLE ones.
+    distorted: Option<BTreeMap<u32, nrw_colmap::Camera>>,
 }
 
 fn check_config(cfg: &IngestConfig) -> Result<()> {
@@ -150,6 +157,14 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
     if let Some(d) = cfg.semantics.as_ref().filter(|d| !d.is_dir()) {
         return Err(PipelineError::input(d, "--semantics is not a folder"));
     }
+    if cfg.semantics.is_some() && cfg.undistort.is_some() {
+        return Err(PipelineError::config(
+            "--undistort",
+            "cannot be combined with --semantics yet (label maps of the distorted photos \
+             would need resampling too); segment the undistorted photos with \
+             --segment-weights instead",
+        ));
+    }
     if cfg.semantics.is_some() && cfg.segment.is_some() {
         return Err(PipelineError::config(
             "--segment-weights",
@@ -164,6 +179,41 @@ pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(PathBuf, Reco
     let dir = nrw_colmap::find_model_dir(scene)?;
     let rec = nrw_colmap::read_model(&dir, format)?;
     Ok((dir, rec))
+}
+
+/// The model with every camera replaced by the PINHOLE camera COLMAP's `image_undistorter`
+/// gives it, and the original cameras; ingest and finalize both derive it this way.
+pub fn undistort_model(
+    rec: &mut Reconstruction,
+    options: &UndistortOptions,
+    model_dir: &Path,
+) -> Result<BTreeMap<u32, nrw_colmap::Camera>> {
+    let distorted = rec.cameras.clone();
+    for cam in rec.cameras.values_mut() {
+        *cam = nrw_colmap::undistort_camera(cam, options)
+            .map_err(|e| PipelineError::input(model_dir, e.to_string()))?;
+    }
+    Ok(distorted)
+}
+
+/// The manifest's record of `--undistort` (absent without it).
+pub fn undistort_parameters(o: &UndistortOptions) -> serde_json::Value {
+    serde_json::json!({
+        "blank_pixels": o.blank_pixels,
+        "min_scale": o.min_scale,
+        "max_scale": o.max_scale,
+        "max_image_size": o.max_image_size,
+    })
+}
+
+/// The options recorded by [`undistort_parameters`], read back (finalize).
+pub fn undistort_from_parameters(v: &serde_json::Value) -> Option<UndistortOptions> {
+    Some(UndistortOptions {
+        blank_pixels: v.get("blank_pixels")?.as_f64()?,
+        min_scale: v.get("min_scale")?.as_f64()?,
+        max_scale: v.get("max_scale")?.as_f64()?,
+        max_image_size: v.get("max_image_size")?.as_u64(),
+    })
 }
 
 /// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
@@ -364,10 +414,14 @@ pub fn fingerprint(
 
 fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     check_config(cfg)?;
-    let (model_dir, rec) = load_model(&cfg.scene, cfg.format)?;
+    let (model_dir, mut rec) = load_model(&cfg.scene, cfg.format)?;
     let photos_dir = images_dir(cfg.images.as_deref(), &cfg.scene, &model_dir)?;
     let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
     let photos = photo_sizes(&rec, &photos_dir, cfg.strict, &mut warnings)?;
+    let distorted = match &cfg.undistort {
+        Some(o) => Some(undistort_model(&mut rec, o, &model_dir)?),
+        None => None,
+    };
     let (cloud, source, source_path) = point_source(cfg, &model_dir, &rec)?;
     let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
     let (enc, layout) = describe(&rec);
@@ -382,6 +436,9 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     parameters.insert("rows_per_shard".into(), cfg.rows_per_shard.into());
     if let Some(d) = &cfg.semantics {
         parameters.insert("semantics".into(), d.display().to_string().into());
+    }
+    if let Some(o) = &cfg.undistort {
+        parameters.insert("undistort".into(), undistort_parameters(o));
     }
     let segmenter = match &cfg.segment {
         Some(s) => {
@@ -419,6 +476,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
         source,
         record,
         segmenter,
+        distorted,
     })
 }
 
@@ -498,6 +556,24 @@ fn label_pngs(
     ))
 }
 
+/// The photo resampled from its own camera `from` to the undistorted PINHOLE camera `to`
+/// (a photo stored at another size than its camera's, same aspect ratio, is brought to the
+/// camera's size first).
+fn undistorted_photo(
+    photo: &RgbImage,
+    from: &nrw_colmap::Camera,
+    to: &nrw_colmap::Camera,
+) -> RgbImage {
+    let photo = resize_photo(photo, from.width as u32, from.height as u32);
+    let src = nrw_render::Rgb8 {
+        width: photo.width(),
+        height: photo.height(),
+        data: photo.into_raw(),
+    };
+    let out = nrw_render::undistort_photo(&src, from, to);
+    RgbImage::from_raw(out.width, out.height, out.data).expect("width × height × 3 bytes")
+}
+
 /// Render one image and, if kept, encode its row.
 fn process(
     cfg: &IngestConfig,
@@ -531,6 +607,10 @@ fn process(
     let name = format!("image {}", img.id);
     let decoded = load_photo(&photo_path)
         .map_err(PipelineError::from)
+        .map(|photo| match &p.distorted {
+            Some(originals) => undistorted_photo(&photo, &originals[&img.camera_id], cam),
+            None => photo,
+        })
         .and_then(|photo| {
             let labels = label_pngs(cfg, p, &name, &img.name, &photo, w, h)?;
             Ok((photo, labels))

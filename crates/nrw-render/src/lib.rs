@@ -8,11 +8,13 @@ pub mod cloud;
 mod occlusion;
 mod simd;
 pub mod splat;
+pub mod undistort;
 pub mod verdict;
 pub mod view;
 mod zbuffer;
 
 pub use cloud::{Chunk, RenderCloud, CHUNK_POINTS};
 pub use splat::{render, render_with, DeepBuffer, Kernel};
+pub use undistort::{undistort_photo, Rgb8};
 pub use verdict::{Filters, Verdict};
 pub use view::{render_size, View};

@@ -51,6 +51,20 @@ pub struct IngestArgs {
     /// With --segment-weights: network input size in pixels
     #[arg(long, default_value_t = 512)]
     pub segment_size: u32,
+    /// Store every view undistorted, as COLMAP's image_undistorter does: the PINHOLE camera
+    /// it computes (no blank pixels, scale clipped to 0.2–2) and the photo resampled to it
+    /// through the exact camera model, so photo and render align pixel for pixel with a
+    /// pinhole camera (what NeRF-W, nerfstudio and Gaussian-splatting loaders expect)
+    #[arg(long, conflicts_with = "semantics")]
+    pub undistort: bool,
+    /// With --undistort: 0 keeps only pixels that see the photo (COLMAP's default), 1 keeps
+    /// every photo pixel (black corners), values between interpolate
+    #[arg(long, default_value_t = 0.0, requires = "undistort")]
+    pub blank_pixels: f64,
+    /// With --undistort: longest side of the undistorted camera, as COLMAP's
+    /// --max_image_size [default: no limit]
+    #[arg(long, requires = "undistort")]
+    pub undistort_max_size: Option<u64>,
     /// Render so the shorter side has this many pixels (the paper: 600)
     #[arg(long, default_value_t = 600)]
     pub min_dim: u32,
@@ -100,8 +114,14 @@ impl IngestArgs {
             }),
             None => None,
         };
+        let undistort = self.undistort.then_some(nrw_colmap::UndistortOptions {
+            blank_pixels: self.blank_pixels,
+            max_image_size: self.undistort_max_size,
+            ..Default::default()
+        });
         Ok(IngestConfig {
             segment,
+            undistort,
             images: self.images.clone(),
             format: self.format.map(Into::into),
             points: self.points.clone(),

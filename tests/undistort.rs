@@ -1,0 +1,183 @@
+//! `ingest --undistort` on ../shared/data/sacre_coeur, whose dense/ folder is COLMAP 3.8's
+//! `image_undistorter` output: the dataset's cameras are dense/sparse's PINHOLE cameras, every
+//! view is stored with the pinhole camera, and its photo is dense/images at the render size.
+
+use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array};
+use nrw_dataset::reader::Dataset;
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+
+use super::{assert_same_files, column, data, files, nrw, ok, shared};
+
+#[test]
+fn ingest_undistort_stores_colmaps_pinhole_cameras_and_photos() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    let scene = data().join("sacre_coeur");
+    let dense = nrw_colmap::read_model(&scene.join("dense/sparse"), None).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    // Sparse points leave these renders ~98% empty: keep every view to compare them all.
+    ok(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--undistort",
+        "--max-empty",
+        "1",
+        "--quiet",
+    ]);
+    let f = std::fs::File::open(out.path().join("scene/cameras.parquet")).unwrap();
+    let mut cameras = 0;
+    for b in ParquetRecordBatchReaderBuilder::try_new(f)
+        .unwrap()
+        .build()
+        .unwrap()
+    {
+        let b = b.unwrap();
+        let ids = column::<UInt32Array>(&b, "camera_id");
+        let models = column::<StringArray>(&b, "model");
+        let (ws, hs) = (
+            column::<UInt32Array>(&b, "width"),
+            column::<UInt32Array>(&b, "height"),
+        );
+        let params = column::<ListArray>(&b, "params");
+        for i in 0..b.num_rows() {
+            let want = &dense.cameras[&ids.value(i)];
+            assert_eq!(models.value(i), "PINHOLE");
+            assert_eq!(
+                (ws.value(i) as u64, hs.value(i) as u64),
+                (want.width, want.height)
+            );
+            let p = params.value(i);
+            let p = p.as_any().downcast_ref::<Float64Array>().unwrap();
+            for (k, v) in want.params.iter().enumerate() {
+                assert!(
+                    (p.value(k) - v).abs() < 1e-6,
+                    "camera {}: {} vs {v}",
+                    ids.value(i),
+                    p.value(k)
+                );
+            }
+            cameras += 1;
+        }
+    }
+    assert_eq!(cameras, 10);
+    let ds = Dataset::open(out.path()).unwrap();
+    let ids = ds.ids("all").unwrap().to_vec();
+    assert_eq!(ids.len(), 10, "every view kept");
+    let (mut sum, mut n) = (0u64, 0u64);
+    for id in ids {
+        let v = ds.get(id).unwrap();
+        assert_eq!(v.model, "PINHOLE", "{}", v.name);
+        let cam = &dense.cameras[&v.camera_id];
+        let (sx, sy) = (v.scale_x, v.scale_y);
+        let scaled = [
+            cam.params[0] * sx,
+            cam.params[1] * sy,
+            cam.params[2] * sx,
+            cam.params[3] * sy,
+        ];
+        for (a, b) in v.params.iter().zip(scaled) {
+            assert!(
+                (a - b).abs() < 1e-6 * b.abs(),
+                "{}: {:?} vs {scaled:?}",
+                v.name,
+                v.params
+            );
+        }
+        let colmap = image::open(scene.join("dense/images").join(&v.name))
+            .unwrap()
+            .to_rgb8();
+        let colmap = nrw_dataset::codec::resize_photo(&colmap, v.width, v.height);
+        let ours = v.photo().unwrap();
+        for (a, b) in ours.as_raw().iter().zip(colmap.as_raw()) {
+            sum += (*a as i32 - *b as i32).unsigned_abs() as u64;
+            n += 1;
+        }
+    }
+    let mad = sum as f64 / n as f64;
+    eprintln!("stored photos against dense/images at the render size: mean absolute difference {mad:.3} levels");
+    assert!(mad < 1.5, "{mad}");
+}
+
+#[test]
+fn undistort_refuses_what_it_cannot_do_yet() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    let scene = data().join("sacre_coeur");
+    let out = tempfile::tempdir().unwrap();
+    // Usage errors (clap's exit status 2), named by flag.
+    let usage = |args: &[&str]| {
+        let o = nrw(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        String::from_utf8(o.stderr).unwrap()
+    };
+    let err = usage(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--undistort",
+        "--semantics",
+        scene.join("images").to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("--undistort") && err.contains("--semantics"),
+        "{err}"
+    );
+    let err = usage(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--blank-pixels",
+        "0.5",
+    ]);
+    assert!(err.contains("--undistort"), "{err}");
+}
+
+#[test]
+fn undistorted_units_and_finalize_write_the_bytes_of_one_process() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    let scene = data().join("sacre_coeur");
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |out: &std::path::Path, shard: Option<&str>| {
+        let mut a = vec![
+            "ingest",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--undistort",
+            "--max-empty",
+            "1",
+            "--min-dim",
+            "200",
+            "--rows-per-shard",
+            "4",
+            "--quiet",
+        ];
+        if let Some(s) = shard {
+            a.extend(["--shard", s]);
+        }
+        ok(&a);
+    };
+    let whole = tmp.path().join("whole");
+    run(&whole, None);
+    let units = tmp.path().join("units");
+    run(&units, Some("1/2"));
+    run(&units, Some("0/2"));
+    ok(&["finalize", units.to_str().unwrap()]);
+    assert_same_files(
+        &files(&whole),
+        &files(&units),
+        "undistorted: 2 units + finalize",
+    );
+    // The manifest says how the views were undistorted.
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(whole.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["parameters"]["undistort"]["blank_pixels"], 0.0, "{m}");
+}

@@ -45,10 +45,53 @@ pub fn export(
     crate::qa::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-        progress.start("export", total as u64, "views");
-        let dist = |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
-        let summary = nrw_dataset::export::export(&ds, cfg, &dist, &|| progress.inc(1))?;
+        let summary = if cfg.layout == nrw_dataset::export::Layout::Nerfw {
+            let points = scene_points(store)?;
+            progress.start("export", total as u64, "views");
+            nrw_dataset::export::export_nerfw(&ds, cfg, &points, &|| progress.inc(1))?
+        } else {
+            progress.start("export", total as u64, "views");
+            let dist =
+                |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
+            nrw_dataset::export::export(&ds, cfg, &dist, &|| progress.inc(1))?
+        };
         progress.finish();
         Ok(summary)
     })
+}
+
+/// The 3D points of the model the dataset was ingested from (named in its manifest), after
+/// checking that the model files are the ones ingest read.
+pub fn scene_points(
+    store: &nrw_dataset::Store,
+) -> Result<Vec<nrw_dataset::export::nerfw::ScenePoint>> {
+    let m = nrw_dataset::Manifest::read(store)?;
+    let format = match m.scene.encoding.as_str() {
+        "txt" => Some(nrw_colmap::Format::Text),
+        "bin" => Some(nrw_colmap::Format::Binary),
+        _ => None,
+    };
+    let dir = Path::new(&m.scene.model_dir);
+    let rec = nrw_colmap::read_model(dir, format)?;
+    for f in &rec.files {
+        let (_, sha) = nrw_dataset::manifest::sha256_file(f)?;
+        let path = f.display().to_string();
+        if !m.inputs.iter().any(|i| i.path == path && i.sha256 == sha) {
+            return Err(crate::error::PipelineError::input(
+                f,
+                "changed since this dataset was ingested from it (its SHA-256 differs from the \
+                 manifest's): the exported points would not belong to the dataset's poses",
+            ));
+        }
+    }
+    Ok(rec
+        .points
+        .values()
+        .map(|p| nrw_dataset::export::nerfw::ScenePoint {
+            id: p.id,
+            xyz: p.xyz.to_array(),
+            rgb: p.rgb,
+            error: p.error,
+        })
+        .collect())
 }

@@ -3,6 +3,7 @@
 //! is built in a hidden folder beside its destination and moved into place whole, so a reader
 //! never sees a half-written export or files left from an earlier one.
 
+pub mod nerfw;
 pub mod official;
 pub mod pickle;
 pub mod tfrecord;
@@ -34,6 +35,10 @@ pub enum Layout {
     /// `SPLIT/NAME/{photo.png, color.png, depth.exr, normal.png, semantics.png, labels.png,
     /// transient.png, meta.json}` for ordinary viewers.
     Files,
+    /// NeRF-W's Phototourism layout (`NAME.tsv`, `dense/images`, `dense/sparse`), as nerf_pl
+    /// and Ha-NeRF read it: see [`nerfw`]. Written by [`export_nerfw`], which takes the
+    /// scene's 3D points.
+    Nerfw,
 }
 
 /// What to export and how.
@@ -376,6 +381,12 @@ pub fn export(
     dist: DistMatrix,
     tick: &(dyn Fn() + Sync),
 ) -> Result<ExportSummary> {
+    if cfg.layout == Layout::Nerfw {
+        return Err(refuse(
+            &cfg.out,
+            "the nerfw layout needs the scene's 3D points: call export_nerfw",
+        ));
+    }
     let paper = cfg.layout != Layout::Files;
     let splits: Vec<(String, usize)> = ds.splits();
     if paper && !splits.iter().any(|(s, n)| s == "train" && *n > 0) {
@@ -410,6 +421,61 @@ pub fn export(
     };
     let staged = stage(&cfg.out)?;
     let result = write_all(ds, cfg, scale.as_ref(), &splits, &staged, dist, tick);
+    match result {
+        Ok(summary) => {
+            commit(&staged, &cfg.out)?;
+            Ok(summary)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&staged);
+            Err(e)
+        }
+    }
+}
+
+/// Export `ds` in NeRF-W's Phototourism layout with the scene's 3D `points`; `tick` is
+/// called once per view done.
+pub fn export_nerfw(
+    ds: &Dataset,
+    cfg: &ExportConfig,
+    points: &[nerfw::ScenePoint],
+    tick: &(dyn Fn() + Sync),
+) -> Result<ExportSummary> {
+    let splits: Vec<(String, usize)> = ds.splits();
+    if !splits.iter().any(|(s, n)| s == "train" && *n > 0) {
+        return Err(refuse(
+            &ds.dir,
+            format!(
+                "the nerfw layout needs a train split with views; run `nrw-etl split {} --val N` first",
+                ds.dir.display()
+            ),
+        ));
+    }
+    let staged = stage(&cfg.out)?;
+    let result = nerfw::write(ds, cfg, points, &splits, &staged, tick).and_then(|written| {
+        let summary = ExportSummary {
+            tool: format!("nrw-etl {}", env!("CARGO_PKG_VERSION")),
+            dataset: ds.dir.display().to_string(),
+            layout: Layout::Nerfw,
+            name: cfg.name.clone(),
+            crop: None,
+            depth: None,
+            semantics: None,
+            empty_splits: splits
+                .iter()
+                .filter(|(_, n)| *n == 0)
+                .map(|(s, _)| s.clone())
+                .collect(),
+            splits: written,
+            skipped: Vec::new(),
+            dist_pickle: None,
+        };
+        write_file(
+            &staged.join(EXPORT_JSON),
+            &serde_json::to_vec_pretty(&summary).expect("json"),
+        )?;
+        Ok(summary)
+    });
     match result {
         Ok(summary) => {
             commit(&staged, &cfg.out)?;
@@ -698,6 +764,7 @@ fn encode_view(
                 Path::new(&v.name).with_extension("").display()
             ),
         ),
+        Layout::Nerfw => unreachable!("export() refuses the nerfw layout before encoding"),
     }
 }
 

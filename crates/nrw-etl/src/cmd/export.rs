@@ -20,6 +20,8 @@ pub enum Layout {
     Tfrecord,
     /// SPLIT/NAME/{photo.png, color.png, depth.exr, normal.png, semantics.png, labels.png, transient.png, meta.json}
     Files,
+    /// NeRF-W's Phototourism layout for nerf_pl / Ha-NeRF loaders: NAME.tsv (filename, id, split, dataset), dense/images/, dense/sparse/ (one PINHOLE camera per image, the scene's points); needs a dataset ingested with --undistort (or pinhole cameras)
+    Nerfw,
 }
 
 /// `--depth` values.
@@ -37,6 +39,7 @@ pub enum Depth {
   nrw-etl export DATASET --out trevi_official --name trevi
   nrw-etl export DATASET --layout tfrecord --crop 512 --shards 8 --out tfrecords --name trevi
   nrw-etl export DATASET --no-semantics --out official   # then train with --use_semantic=False
+  nrw-etl export DATASET --layout nerfw --out trevi_nerfw --name trevi   # nerf_pl / Ha-NeRF (ingest with --undistort)
 
 The official and tfrecord layouts follow google/neural_rerendering_in_the_wild: every channel
 is scaled by its loaders as x * 2/255 - 1, so depth is written as levels 1-255 (0 = empty) by
@@ -78,6 +81,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             Layout::Official => DsLayout::Official,
             Layout::Tfrecord => DsLayout::Tfrecord,
             Layout::Files => DsLayout::Files,
+            Layout::Nerfw => DsLayout::Nerfw,
         },
         name: args
             .name

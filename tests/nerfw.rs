@@ -1,0 +1,187 @@
+//! `export --layout nerfw` read back by a transcription of nerf_pl's Phototourism loader
+//! (tests/nerfw_reader.py, with pycolmap): every tsv row resolves to its image and camera,
+//! intrinsics, poses and photos are the dataset's, every image gets a near and far bound; a
+//! dataset of distorted cameras is refused by name.
+
+use std::path::Path;
+
+use nrw_dataset::reader::Dataset;
+
+use super::{data, fails, ok, python_has, shared};
+
+/// An undistorted sacre_coeur dataset with a train/val split.
+fn undistorted_dataset(out: &Path, undistort: bool) {
+    let scene = data().join("sacre_coeur");
+    let mut a = vec![
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--max-empty",
+        "1",
+        "--min-dim",
+        "300",
+        "--quiet",
+    ];
+    if undistort {
+        a.push("--undistort");
+    }
+    ok(&a);
+    ok(&["split", out.to_str().unwrap(), "--val", "3"]);
+}
+
+#[test]
+fn nerfw_export_reads_back_as_nerf_pl_reads_phototourism() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    if !python_has("import pycolmap, numpy, PIL") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let ds_dir = tmp.path().join("ds");
+    undistorted_dataset(&ds_dir, true);
+    let exp = tmp.path().join("nerfw");
+    ok(&[
+        "export",
+        ds_dir.to_str().unwrap(),
+        "--layout",
+        "nerfw",
+        "--out",
+        exp.to_str().unwrap(),
+        "--name",
+        "sacre",
+        "--quiet",
+    ]);
+    assert!(exp.join("sacre.tsv").is_file());
+    let o = std::process::Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/nerfw_reader.py"))
+        .arg(&exp)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let read: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let ds = Dataset::open(ds_dir.as_path()).unwrap();
+    let mut seen = 0;
+    for (split, tsv) in [("train", "train"), ("val", "test")] {
+        for &id in ds.ids(split).unwrap() {
+            let v = ds.get(id).unwrap();
+            let r = &read[id.to_string()];
+            assert_eq!(r["split"], tsv, "{}", v.name);
+            assert_eq!(r["dataset"], "sacre");
+            assert_eq!(r["id_column"], id.to_string());
+            assert_eq!(r["model"], "CameraModelId.PINHOLE");
+            let k: Vec<f64> = serde_json::from_value(r["K"].clone()).unwrap();
+            assert_eq!(
+                k, v.params,
+                "{}: K is the view's pinhole intrinsics",
+                v.name
+            );
+            assert_eq!(r["image_size"], serde_json::json!([v.width, v.height]));
+            assert_eq!(r["camera_size"], serde_json::json!([v.width, v.height]));
+            // The photo is the stored one, pixel for pixel.
+            let photo = v.photo().unwrap();
+            let sha = nrw_pipeline::sha256_hex(photo.as_raw());
+            assert_eq!(r["rgb_sha"], sha, "{}", v.name);
+            // nerf_pl's c2w: inverse of [R | t], columns (y, −x, z, centre).
+            let (rig, _) = nrw_colmap::Rigid3::from_colmap(v.qvec, v.tvec).unwrap();
+            let m = rig.matrix();
+            let c = rig.centre();
+            let c2w: Vec<Vec<f64>> = serde_json::from_value(r["c2w"].clone()).unwrap();
+            for row in 0..3 {
+                // Row `row` of Rᵀ: (R[0][row], R[1][row], R[2][row]); glam is column-major.
+                let rt = |col: usize| m.col(row)[col];
+                let want = [rt(1), -rt(0), rt(2), c[row]];
+                for (a, b) in c2w[row].iter().zip(want) {
+                    assert!((a - b).abs() < 1e-9, "{}: c2w {c2w:?} vs {want:?}", v.name);
+                }
+            }
+            let (near, far) = (r["near"].as_f64().unwrap(), r["far"].as_f64().unwrap());
+            assert!(
+                near > 0.0 && far > near,
+                "{}: near {near}, far {far}",
+                v.name
+            );
+            seen += 1;
+        }
+    }
+    assert_eq!(
+        seen,
+        read.as_object().unwrap().len(),
+        "every tsv row is a view"
+    );
+    assert_eq!(seen, 10);
+}
+
+#[test]
+fn nerfw_export_refuses_distorted_cameras_by_name() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let ds_dir = tmp.path().join("ds");
+    undistorted_dataset(&ds_dir, false);
+    let exp = tmp.path().join("nerfw");
+    let err = fails(&[
+        "export",
+        ds_dir.to_str().unwrap(),
+        "--layout",
+        "nerfw",
+        "--out",
+        exp.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("SIMPLE_RADIAL") && err.contains("--undistort") && err.contains("image "),
+        "{err}"
+    );
+    assert!(!exp.exists(), "a refused export leaves nothing");
+}
+
+#[test]
+fn nerfw_export_refuses_a_model_changed_since_ingest() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let src = data().join("sacre_coeur");
+    let scene = tmp.path().join("scene");
+    std::fs::create_dir_all(scene.join("sparse/0")).unwrap();
+    std::fs::create_dir_all(scene.join("images")).unwrap();
+    for f in ["cameras.bin", "images.bin", "points3D.bin"] {
+        std::fs::copy(src.join("sparse/0").join(f), scene.join("sparse/0").join(f)).unwrap();
+    }
+    for e in std::fs::read_dir(src.join("images")).unwrap().flatten() {
+        std::fs::copy(e.path(), scene.join("images").join(e.file_name())).unwrap();
+    }
+    let ds_dir = tmp.path().join("ds");
+    ok(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        ds_dir.to_str().unwrap(),
+        "--undistort",
+        "--max-empty",
+        "1",
+        "--min-dim",
+        "200",
+        "--quiet",
+    ]);
+    ok(&["split", ds_dir.to_str().unwrap(), "--val", "3"]);
+    // The same model re-written (records in id order, not COLMAP's hash order): other bytes.
+    let rec = nrw_colmap::read_model(&scene.join("sparse/0"), None).unwrap();
+    nrw_colmap::write_model(&rec, &scene.join("sparse/0"), nrw_colmap::Format::Binary).unwrap();
+    let exp = tmp.path().join("nerfw");
+    let err = fails(&[
+        "export",
+        ds_dir.to_str().unwrap(),
+        "--layout",
+        "nerfw",
+        "--out",
+        exp.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("changed since this dataset was ingested"),
+        "{err}"
+    );
+    assert!(err.contains("sparse/0/"), "{err}");
+}

@@ -2,6 +2,8 @@
 
 #[path = "bad_inputs.rs"]
 mod bad_inputs;
+#[path = "nerfstudio.rs"]
+mod nerfstudio;
 #[path = "nerfw.rs"]
 mod nerfw;
 #[path = "support/python.rs"]

@@ -45,10 +45,10 @@ pub fn export(
     crate::qa::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-        let summary = if cfg.layout == nrw_dataset::export::Layout::Nerfw {
+        let summary = if cfg.layout.needs_points() {
             let points = scene_points(store)?;
             progress.start("export", total as u64, "views");
-            nrw_dataset::export::export_nerfw(&ds, cfg, &points, &|| progress.inc(1))?
+            nrw_dataset::export::export_with_points(&ds, cfg, &points, &|| progress.inc(1))?
         } else {
             progress.start("export", total as u64, "views");
             let dist =

@@ -3,6 +3,7 @@
 //! is built in a hidden folder beside its destination and moved into place whole, so a reader
 //! never sees a half-written export or files left from an earlier one.
 
+pub mod nerfstudio;
 pub mod nerfw;
 pub mod official;
 pub mod pickle;
@@ -36,9 +37,18 @@ pub enum Layout {
     /// transient.png, meta.json}` for ordinary viewers.
     Files,
     /// NeRF-W's Phototourism layout (`NAME.tsv`, `dense/images`, `dense/sparse`), as nerf_pl
-    /// and Ha-NeRF read it: see [`nerfw`]. Written by [`export_nerfw`], which takes the
-    /// scene's 3D points.
+    /// and Ha-NeRF read it: see [`nerfw`]. Written by [`export_with_points`].
     Nerfw,
+    /// nerfstudio's `transforms.json` with images, depth, masks and the sparse points: see
+    /// [`nerfstudio`]. Written by [`export_with_points`].
+    Nerfstudio,
+}
+
+impl Layout {
+    /// Whether the layout carries the scene's 3D points (written by [`export_with_points`]).
+    pub fn needs_points(self) -> bool {
+        matches!(self, Layout::Nerfw | Layout::Nerfstudio)
+    }
 }
 
 /// What to export and how.
@@ -381,10 +391,13 @@ pub fn export(
     dist: DistMatrix,
     tick: &(dyn Fn() + Sync),
 ) -> Result<ExportSummary> {
-    if cfg.layout == Layout::Nerfw {
+    if cfg.layout.needs_points() {
         return Err(refuse(
             &cfg.out,
-            "the nerfw layout needs the scene's 3D points: call export_nerfw",
+            format!(
+                "the {:?} layout needs the scene's 3D points: call export_with_points",
+                cfg.layout
+            ),
         ));
     }
     let paper = cfg.layout != Layout::Files;
@@ -433,9 +446,9 @@ pub fn export(
     }
 }
 
-/// Export `ds` in NeRF-W's Phototourism layout with the scene's 3D `points`; `tick` is
-/// called once per view done.
-pub fn export_nerfw(
+/// Export `ds` in a layout that carries the scene's 3D `points` (NeRF-W's, nerfstudio's);
+/// `tick` is called once per view done.
+pub fn export_with_points(
     ds: &Dataset,
     cfg: &ExportConfig,
     points: &[nerfw::ScenePoint],
@@ -446,17 +459,33 @@ pub fn export_nerfw(
         return Err(refuse(
             &ds.dir,
             format!(
-                "the nerfw layout needs a train split with views; run `nrw-etl split {} --val N` first",
+                "the {:?} layout needs a train split with views; run `nrw-etl split {} --val N` first",
+                cfg.layout,
                 ds.dir.display()
             ),
         ));
     }
     let staged = stage(&cfg.out)?;
-    let result = nerfw::write(ds, cfg, points, &splits, &staged, tick).and_then(|written| {
+    if points.is_empty() {
+        return Err(refuse(
+            &cfg.out,
+            "the scene has no 3D points (NeRF-W loaders take near and far bounds from them, \
+             splatting trainers their initial Gaussians)",
+        ));
+    }
+    let written = match cfg.layout {
+        Layout::Nerfw => nerfw::write(ds, cfg, points, &splits, &staged, tick),
+        Layout::Nerfstudio => nerfstudio::write(ds, cfg, points, &splits, &staged, tick),
+        other => Err(refuse(
+            &cfg.out,
+            format!("the {other:?} layout carries no points: call export"),
+        )),
+    };
+    let result = written.and_then(|written| {
         let summary = ExportSummary {
             tool: format!("nrw-etl {}", env!("CARGO_PKG_VERSION")),
             dataset: ds.dir.display().to_string(),
-            layout: Layout::Nerfw,
+            layout: cfg.layout,
             name: cfg.name.clone(),
             crop: None,
             depth: None,
@@ -764,7 +793,9 @@ fn encode_view(
                 Path::new(&v.name).with_extension("").display()
             ),
         ),
-        Layout::Nerfw => unreachable!("export() refuses the nerfw layout before encoding"),
+        Layout::Nerfw | Layout::Nerfstudio => {
+            unreachable!("export() refuses the layouts with points before encoding")
+        }
     }
 }
 

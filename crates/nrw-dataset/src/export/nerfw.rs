@@ -107,12 +107,6 @@ pub(super) fn write(
     staged: &Path,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<SplitExport>> {
-    if points.is_empty() {
-        return Err(refuse(
-            &cfg.out,
-            "the scene has no 3D points, from which NeRF-W loaders derive near and far bounds",
-        ));
-    }
     let mut rec = Reconstruction::default();
     let mut rows = Vec::new();
     let mut by_file: BTreeMap<String, u32> = BTreeMap::new();

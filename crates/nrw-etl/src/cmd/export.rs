@@ -22,6 +22,8 @@ pub enum Layout {
     Files,
     /// NeRF-W's Phototourism layout for nerf_pl / Ha-NeRF loaders: NAME.tsv (filename, id, split, dataset), dense/images/, dense/sparse/ (one PINHOLE camera per image, the scene's points); needs a dataset ingested with --undistort (or pinhole cameras)
     Nerfw,
+    /// nerfstudio's transforms.json (each frame's exact camera model, OpenGL camera-to-world poses with nerfstudio's applied_transform, depth/*.npy, masks/*.png from the transient mask, train/val/test_filenames) with images/ and sparse_pc.ply; refuses camera models nerfstudio cannot represent exactly (FOV, FULL_OPENCV, thin-prism fisheyes)
+    Nerfstudio,
 }
 
 /// `--depth` values.
@@ -40,6 +42,7 @@ pub enum Depth {
   nrw-etl export DATASET --layout tfrecord --crop 512 --shards 8 --out tfrecords --name trevi
   nrw-etl export DATASET --no-semantics --out official   # then train with --use_semantic=False
   nrw-etl export DATASET --layout nerfw --out trevi_nerfw --name trevi   # nerf_pl / Ha-NeRF (ingest with --undistort)
+  nrw-etl export DATASET --layout nerfstudio --out trevi_ns   # ns-train nerfacto --data trevi_ns
 
 The official and tfrecord layouts follow google/neural_rerendering_in_the_wild: every channel
 is scaled by its loaders as x * 2/255 - 1, so depth is written as levels 1-255 (0 = empty) by
@@ -82,6 +85,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             Layout::Tfrecord => DsLayout::Tfrecord,
             Layout::Files => DsLayout::Files,
             Layout::Nerfw => DsLayout::Nerfw,
+            Layout::Nerfstudio => DsLayout::Nerfstudio,
         },
         name: args
             .name

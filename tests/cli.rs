@@ -2,6 +2,8 @@
 
 #[path = "bad_inputs.rs"]
 mod bad_inputs;
+#[path = "clean.rs"]
+mod clean;
 #[path = "nerfstudio.rs"]
 mod nerfstudio;
 #[path = "nerfw.rs"]

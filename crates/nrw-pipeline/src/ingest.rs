@@ -48,6 +48,10 @@ pub struct IngestConfig {
     /// Store every view as COLMAP's `image_undistorter` would: the PINHOLE camera it computes
     /// and the photo resampled to it (`ingest --undistort`).
     pub undistort: Option<UndistortOptions>,
+    /// Statistical outlier removal before rendering: (k neighbours, σ) (`ingest --denoise`).
+    pub denoise: Option<(usize, f64)>,
+    /// Normals by PCA of k neighbours for a cloud without them (`ingest --estimate-normals`).
+    pub estimate_normals: Option<usize>,
     /// Shorter side of a render in pixels (the paper: 600).
     pub min_dim: u32,
     /// Splat radius in render pixels (the paper: 1).
@@ -76,6 +80,8 @@ impl IngestConfig {
             semantics: None,
             segment: None,
             undistort: None,
+            denoise: None,
+            estimate_normals: None,
             min_dim: 600,
             radius: 1.0,
             filters: Filters::default(),
@@ -352,13 +358,22 @@ fn unreadable_error(path: &Path, problem: String) -> PipelineError {
     .into()
 }
 
+/// A cloud as read, before clean-up: f64 positions, its channels, and per point where it
+/// is seen from (the mean centre of the cameras that observe a sparse point; the scene's
+/// mean camera centre for a dense cloud, which has no tracks).
+struct RawCloud {
+    positions: Vec<glam::DVec3>,
+    colors: Option<Vec<[u8; 3]>>,
+    normals: Option<Vec<[f32; 3]>>,
+    seen_from: Vec<glam::DVec3>,
+}
+
 /// Which cloud to render, what it is called, and the file it came from (if any).
 fn point_source(
     cfg: &IngestConfig,
     model_dir: &Path,
     rec: &Reconstruction,
-) -> Result<(RenderCloud, String, Option<PathBuf>)> {
-    let origin = rec.scene_origin();
+) -> Result<(RawCloud, String, Option<PathBuf>)> {
     let candidate = cfg.points.clone().or_else(|| {
         std::iter::once(cfg.scene.join("dense/fused.ply"))
             .chain(
@@ -370,19 +385,95 @@ fn point_source(
             )
             .find(|p| p.is_file())
     });
+    let centres: BTreeMap<u32, glam::DVec3> = rec
+        .images
+        .iter()
+        .map(|(id, i)| (*id, i.cam_from_world.centre()))
+        .collect();
+    let mean_centre = centres.values().copied().sum::<glam::DVec3>() / centres.len().max(1) as f64;
     match candidate {
         Some(p) => {
             let cloud = read_ply(&p)?;
-            Ok((RenderCloud::from_ply(origin, &cloud), "ply".into(), Some(p)))
+            let raw = RawCloud {
+                seen_from: vec![mean_centre; cloud.positions.len()],
+                positions: cloud.positions,
+                colors: cloud.colors,
+                normals: cloud.normals,
+            };
+            Ok((raw, "ply".into(), Some(p)))
         }
         None if !rec.points.is_empty() => {
-            Ok((RenderCloud::from_sparse(origin, rec), "sparse".into(), None))
+            let raw = RawCloud {
+                positions: rec.points.values().map(|p| p.xyz).collect(),
+                colors: Some(rec.points.values().map(|p| p.rgb).collect()),
+                normals: None,
+                seen_from: rec
+                    .points
+                    .values()
+                    .map(|p| {
+                        let n = p.track.len().max(1) as f64;
+                        let sum: glam::DVec3 =
+                            p.track.iter().filter_map(|t| centres.get(&t.image_id)).sum();
+                        if p.track.is_empty() { mean_centre } else { sum / n }
+                    })
+                    .collect(),
+            };
+            Ok((raw, "sparse".into(), None))
         }
         None => Err(PipelineError::input(
             model_dir,
             "nothing to render: no dense/fused.ply, no --points FILE, and the model has no 3D points",
         )),
     }
+}
+
+/// Keep the elements whose flag is set (flags and elements in the same order).
+fn keep_where<T>(v: &mut Vec<T>, keep: &[bool]) {
+    let mut flags = keep.iter();
+    v.retain(|_| *flags.next().expect("one flag per element"));
+}
+
+/// The cloud to render: outliers removed (`--denoise`), normals estimated where it has none
+/// (`--estimate-normals`), re-centred on `origin`. Returns what clean-up did, for the
+/// manifest (absent keys: not asked for).
+fn render_cloud(
+    cfg: &IngestConfig,
+    raw: RawCloud,
+    origin: glam::DVec3,
+    warnings: &mut Vec<String>,
+) -> (RenderCloud, serde_json::Map<String, serde_json::Value>) {
+    let mut report = serde_json::Map::new();
+    let RawCloud {
+        mut positions,
+        mut colors,
+        mut normals,
+        mut seen_from,
+    } = raw;
+    if let Some((k, sigma)) = cfg.denoise {
+        let (keep, r) = nrw_render::clean::statistical_outliers(&positions, origin, k, sigma);
+        keep_where(&mut positions, &keep);
+        keep_where(&mut seen_from, &keep);
+        if let Some(c) = colors.as_mut() {
+            keep_where(c, &keep);
+        }
+        if let Some(n) = normals.as_mut() {
+            keep_where(n, &keep);
+        }
+        report.insert("denoise".into(), serde_json::to_value(&r).expect("json"));
+    }
+    if let Some(k) = cfg.estimate_normals {
+        if normals.is_some() {
+            warnings.push(format!(
+                "--estimate-normals {k}: the cloud has normals of its own; they are used"
+            ));
+        } else {
+            let n = nrw_render::clean::estimate_normals(&positions, origin, k, &|i| seen_from[i]);
+            normals = Some(n);
+            report.insert("estimated_normals_k".into(), k.into());
+        }
+    }
+    let cloud = RenderCloud::new(origin, &positions, colors.as_deref(), normals.as_deref());
+    (cloud, report)
 }
 
 /// Inputs with their hashes, sorted by path.
@@ -422,7 +513,8 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
         Some(o) => Some(undistort_model(&mut rec, o, &model_dir)?),
         None => None,
     };
-    let (cloud, source, source_path) = point_source(cfg, &model_dir, &rec)?;
+    let (raw, source, source_path) = point_source(cfg, &model_dir, &rec)?;
+    let (cloud, cleaned) = render_cloud(cfg, raw, rec.scene_origin(), &mut warnings);
     let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
     let (enc, layout) = describe(&rec);
     let mut parameters = serde_json::Map::new();
@@ -440,6 +532,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     if let Some(o) = &cfg.undistort {
         parameters.insert("undistort".into(), undistort_parameters(o));
     }
+    parameters.extend(cleaned);
     let segmenter = match &cfg.segment {
         Some(s) => {
             let model = crate::segment::load_model(&s.weights)?;

@@ -4,6 +4,7 @@
 //! view or hidden behind nearer points are skipped, and lenses without distortion run no
 //! distortion code.
 
+pub mod clean;
 pub mod cloud;
 mod occlusion;
 mod simd;

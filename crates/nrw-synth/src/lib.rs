@@ -83,6 +83,40 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SynthError + '_ {
     }
 }
 
+/// Append round(`fraction` · n) floating points to a cloud of n surface points: uniform in
+/// the cloud's bounding box grown by a tenth on every side, white (the "floating white
+/// geometry" of multi-view stereo), random unit normals. Returns how many were added.
+fn add_outliers(cloud: &mut PointCloud, fraction: f64, rng: &mut ChaCha8Rng) -> usize {
+    let n = (fraction.max(0.0) * cloud.len() as f64).round() as usize;
+    if n == 0 || cloud.positions.is_empty() {
+        return 0;
+    }
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for p in &cloud.positions {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    let pad = (hi - lo) * 0.1;
+    let (lo, hi) = (lo - pad, hi + pad);
+    for _ in 0..n {
+        let t = DVec3::new(rng.random(), rng.random(), rng.random());
+        cloud.positions.push(lo + (hi - lo) * t);
+        let d = DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        )
+        .normalize_or(DVec3::Z);
+        if let Some(c) = cloud.colors.as_mut() {
+            c.push([245, 245, 245]);
+        }
+        if let Some(nm) = cloud.normals.as_mut() {
+            nm.push(d.as_vec3().to_array());
+        }
+    }
+    n
+}
+
 fn seed_for(seed: u64, stream: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(hash64(seed ^ hash64(stream)))
 }
@@ -346,7 +380,7 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
     }
 
     let dense = landmark.sample_surface(spec.geometry.points, &mut seed_for(spec.seed, 3));
-    let cloud = PointCloud {
+    let mut cloud = PointCloud {
         path: out.join("dense/fused.ply"),
         positions: dense.iter().map(|s| s.p + origin).collect(),
         colors: Some(
@@ -365,7 +399,18 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
                 .collect(),
         ),
     };
+    let outliers = spec.effects.outliers.map_or(0, |f| {
+        add_outliers(&mut cloud, f, &mut seed_for(spec.seed, 4))
+    });
     nrw_colmap::write_ply(&cloud, &cloud.path).map_err(io(&cloud.path))?;
+    write_bytes_atomic(
+        &out.join("ground_truth/outliers.json"),
+        format!(
+            "{{\"surface_points\": {}, \"outliers\": {outliers}, \"note\": \"outliers are the last vertices of dense/fused.ply\"}}\n",
+            cloud.len() - outliers
+        )
+        .as_bytes(),
+    )?;
 
     let report = SynthReport {
         out: out.to_path_buf(),

@@ -135,6 +135,10 @@ pub struct EffectsSpec {
     pub noise: Option<f64>,
     /// Write photos as JPEG at this quality (else lossless PNG).
     pub jpeg_quality: Option<u8>,
+    /// Floating points added to dense/fused.ply, as a fraction of its surface points (the
+    /// multi-view-stereo clutter `ingest --denoise` removes); they are the file's last
+    /// vertices, counted in ground_truth/outliers.json.
+    pub outliers: Option<f64>,
 }
 
 /// A time of day.

@@ -65,6 +65,17 @@ pub struct IngestArgs {
     /// --max_image_size [default: no limit]
     #[arg(long, requires = "undistort")]
     pub undistort_max_size: Option<u64>,
+    /// Remove floating points before rendering (off by default: the paper renders the raw
+    /// cloud): "K,SIGMA" drops a point when its mean distance to its K nearest neighbours
+    /// exceeds the cloud's mean by SIGMA standard deviations (Open3D's
+    /// remove_statistical_outlier; e.g. 16,2). The count removed goes into the manifest
+    #[arg(long, value_name = "K,SIGMA", value_parser = parse_denoise)]
+    pub denoise: Option<(usize, f64)>,
+    /// Estimate normals for a cloud without them (the sparse points, most PLYs from other
+    /// tools) by PCA of each point's K nearest neighbours, oriented toward the cameras that
+    /// see it; gives the deep buffer its normal channel (e.g. 16)
+    #[arg(long, value_name = "K")]
+    pub estimate_normals: Option<usize>,
     /// Render so the shorter side has this many pixels (the paper: 600)
     #[arg(long, default_value_t = 600)]
     pub min_dim: u32,
@@ -104,6 +115,27 @@ pub struct IngestArgs {
     pub pause_after_shard_ms: Option<u64>,
 }
 
+/// `--denoise K,SIGMA`: k ≥ 2 neighbours (the point itself counts), σ > 0.
+fn parse_denoise(s: &str) -> std::result::Result<(usize, f64), String> {
+    let (k, sigma) = s
+        .split_once(',')
+        .ok_or_else(|| format!("`{s}`: give K,SIGMA, e.g. 16,2"))?;
+    let k: usize = k
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{k}` is not a whole number of neighbours"))?;
+    let sigma: f64 = sigma
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{sigma}` is not a number of standard deviations"))?;
+    if k < 2 || !(sigma.is_finite() && sigma > 0.0) {
+        return Err(format!(
+            "K = {k}, SIGMA = {sigma}: K must be at least 2 (the point itself is one) and SIGMA positive"
+        ));
+    }
+    Ok((k, sigma))
+}
+
 impl IngestArgs {
     /// The stage's configuration.
     pub fn config(&self) -> Result<IngestConfig> {
@@ -119,9 +151,16 @@ impl IngestArgs {
             max_image_size: self.undistort_max_size,
             ..Default::default()
         });
+        if self.estimate_normals.is_some_and(|k| k < 3) {
+            return Err(crate::error::EtlError::Usage(
+                "--estimate-normals K needs K ≥ 3 neighbours (a plane needs three points)".into(),
+            ));
+        }
         Ok(IngestConfig {
             segment,
             undistort,
+            denoise: self.denoise,
+            estimate_normals: self.estimate_normals,
             images: self.images.clone(),
             format: self.format.map(Into::into),
             points: self.points.clone(),

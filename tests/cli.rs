@@ -474,6 +474,14 @@ fn ingest_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     nrw(&args)
 }
 
+/// Copy a scene's photo folder (flat) into `dst`, for tests that rewrite a real scene's model.
+fn copy_photos(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for e in std::fs::read_dir(src).unwrap().flatten() {
+        std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+    }
+}
+
 /// A small synthetic scene whose photos pass a lowered size filter.
 fn small_scene(dir: &Path, photos: usize) {
     let mut spec = nrw_synth::SceneSpec::demo().shrunk(photos, (120, 160), 60_000);

@@ -153,10 +153,7 @@ fn cameras_nerfstudio_cannot_represent_are_refused_by_name() {
         c.params = vec![f, f, cx, cy, 0.05];
     }
     nrw_colmap::write_model(&rec, &scene.join("sparse/0"), nrw_colmap::Format::Binary).unwrap();
-    std::fs::create_dir_all(scene.join("images")).unwrap();
-    for e in std::fs::read_dir(src.join("images")).unwrap().flatten() {
-        std::fs::copy(e.path(), scene.join("images").join(e.file_name())).unwrap();
-    }
+    super::copy_photos(&src.join("images"), &scene.join("images"));
     let ds_dir = tmp.path().join("ds");
     dataset(&scene, &ds_dir);
     let exp = tmp.path().join("ns");

@@ -146,13 +146,10 @@ fn nerfw_export_refuses_a_model_changed_since_ingest() {
     let src = data().join("sacre_coeur");
     let scene = tmp.path().join("scene");
     std::fs::create_dir_all(scene.join("sparse/0")).unwrap();
-    std::fs::create_dir_all(scene.join("images")).unwrap();
     for f in ["cameras.bin", "images.bin", "points3D.bin"] {
         std::fs::copy(src.join("sparse/0").join(f), scene.join("sparse/0").join(f)).unwrap();
     }
-    for e in std::fs::read_dir(src.join("images")).unwrap().flatten() {
-        std::fs::copy(e.path(), scene.join("images").join(e.file_name())).unwrap();
-    }
+    super::copy_photos(&src.join("images"), &scene.join("images"));
     let ds_dir = tmp.path().join("ds");
     ok(&[
         "ingest",

@@ -12,6 +12,8 @@
 
 #[path = "../../../tests/support/cpu.rs"]
 mod cpu;
+#[path = "../tests/support/truth.rs"]
+mod truth;
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -19,39 +21,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 use nrw_render::clean::{estimate_normals, statistical_outliers};
-use nrw_render::{render, RenderCloud, View};
-
-/// (landmark pixels more than 1% off the true depth, covered landmark pixels).
-fn depth_errors(dir: &Path, positions: &[DVec3]) -> (usize, usize) {
-    let rec = nrw_colmap::read_scene(dir).unwrap();
-    let origin = rec.scene_origin();
-    let rc = RenderCloud::new(origin, positions, None, None);
-    let (mut off, mut covered) = (0, 0);
-    for img in rec.images.values() {
-        let cam = &rec.cameras[&img.camera_id];
-        let view = View::new(img, cam, origin, cam.width as u32, cam.height as u32, 1.0);
-        let buf = render(&view, &rc);
-        let stem = Path::new(&img.name).with_extension("");
-        let truth = nrw_dataset::depth::read_exr(
-            &dir.join("ground_truth/depth")
-                .join(format!("{}.exr", stem.display())),
-        )
-        .unwrap();
-        let labels = image::open(
-            dir.join("ground_truth/semantics")
-                .join(format!("{}.png", stem.display())),
-        )
-        .unwrap()
-        .to_luma8();
-        for ((d, t), l) in buf.depth.iter().zip(&truth.data).zip(labels.as_raw()) {
-            if *t > 0.0 && [2, 9, 43].contains(l) {
-                covered += (*d > 0.0) as usize;
-                off += (*d > 0.0 && ((d - t) / t).abs() > 0.01) as usize;
-            }
-        }
-    }
-    (off, covered)
-}
+use truth::depth_errors;
 
 fn main() {
     let points: usize = std::env::args()
@@ -75,8 +45,8 @@ fn main() {
     let n = cloud.len();
     let mega = n as f64 / 1e6;
     let threads = rayon::current_num_threads();
-    let (base_off, base_cov) = depth_errors(dir, &cloud.positions[..surface]);
-    let (raw_off, raw_cov) = depth_errors(dir, &cloud.positions);
+    let (base_off, base_cov) = depth_errors(dir, &cloud.positions[..surface], None);
+    let (raw_off, raw_cov) = depth_errors(dir, &cloud.positions, None);
     let pct = |a: usize, b: usize| 100.0 * a as f64 / b.max(1) as f64;
     let mut md = format!(
         "# Point-cloud clean-up: what it removes, what it costs\n\n\
@@ -107,7 +77,7 @@ fn main() {
                 .filter(|(_, k)| **k)
                 .map(|(p, _)| *p)
                 .collect();
-            let (off, cov) = depth_errors(dir, &kept);
+            let (off, cov) = depth_errors(dir, &kept, None);
             let _ = writeln!(
                 md,
                 "| {k} | {sigma} | {:.3} | {:.4} | {} | {:.2}% | {cov} | {:.2} s |",

@@ -2,8 +2,12 @@
 //! analytic normals and, with `outliers = FRACTION`, floating points whose indices are known
 //! (the last vertices of dense/fused.ply, counted in ground_truth/outliers.json).
 
+#[path = "support/truth.rs"]
+mod truth;
+
 use glam::DVec3;
 use nrw_render::clean::{estimate_normals, statistical_outliers};
+use truth::depth_errors;
 
 struct Scene {
     cloud: nrw_colmap::PointCloud,
@@ -116,40 +120,6 @@ fn estimated_normals_agree_with_the_analytic_ones_and_face_the_cameras() {
     assert!(frac < 0.002 && worst_face < 135.0, "{frac} {worst_face}");
 }
 
-/// Landmark pixels (building, windows, columns) whose rendered depth is more than 1% off the
-/// true depth, and covered landmark pixels, over the scene's photos at photo size (r = 1).
-fn depth_errors(dir: &std::path::Path, positions: &[DVec3], colors: &[[u8; 3]]) -> (usize, usize) {
-    use nrw_render::{render, RenderCloud, View};
-    let rec = nrw_colmap::read_scene(dir).unwrap();
-    let origin = rec.scene_origin();
-    let rc = RenderCloud::new(origin, positions, Some(colors), None);
-    let (mut off, mut covered) = (0, 0);
-    for img in rec.images.values() {
-        let cam = &rec.cameras[&img.camera_id];
-        let view = View::new(img, cam, origin, cam.width as u32, cam.height as u32, 1.0);
-        let buf = render(&view, &rc);
-        let stem = std::path::Path::new(&img.name).with_extension("");
-        let truth = nrw_dataset::depth::read_exr(
-            &dir.join("ground_truth/depth")
-                .join(format!("{}.exr", stem.display())),
-        )
-        .unwrap();
-        let labels = image::open(
-            dir.join("ground_truth/semantics")
-                .join(format!("{}.png", stem.display())),
-        )
-        .unwrap()
-        .to_luma8();
-        for ((d, t), l) in buf.depth.iter().zip(&truth.data).zip(labels.as_raw()) {
-            if *d > 0.0 && *t > 0.0 && [2, 9, 43].contains(l) {
-                covered += 1;
-                off += (((d - t) / t).abs() > 0.01) as usize;
-            }
-        }
-    }
-    (off, covered)
-}
-
 /// The elements whose flag is set.
 fn kept<T: Copy>(v: &[T], keep: &[bool]) -> Vec<T> {
     v.iter()
@@ -170,7 +140,7 @@ fn removing_floating_points_brings_rendered_depth_back_to_the_truth() {
     let cloud = nrw_colmap::read_ply(&tmp.path().join("dense/fused.ply")).unwrap();
     let colors = cloud.colors.clone().unwrap();
     let rec = nrw_colmap::read_scene(tmp.path()).unwrap();
-    let (raw_off, raw_cov) = depth_errors(tmp.path(), &cloud.positions, &colors);
+    let (raw_off, raw_cov) = depth_errors(tmp.path(), &cloud.positions, Some(&colors));
     // The same cloud without its floating points (they are its last vertices): the floor
     // that splatting alone leaves.
     let truth: serde_json::Value = serde_json::from_slice(
@@ -178,11 +148,14 @@ fn removing_floating_points_brings_rendered_depth_back_to_the_truth() {
     )
     .unwrap();
     let surface = truth["surface_points"].as_u64().unwrap() as usize;
-    let (base_off, base_cov) =
-        depth_errors(tmp.path(), &cloud.positions[..surface], &colors[..surface]);
+    let (base_off, base_cov) = depth_errors(
+        tmp.path(),
+        &cloud.positions[..surface],
+        Some(&colors[..surface]),
+    );
     let (keep, r) = statistical_outliers(&cloud.positions, rec.scene_origin(), 16, 2.0);
     let positions: Vec<DVec3> = kept(&cloud.positions, &keep);
-    let (clean_off, clean_cov) = depth_errors(tmp.path(), &positions, &kept(&colors, &keep));
+    let (clean_off, clean_cov) = depth_errors(tmp.path(), &positions, Some(&kept(&colors, &keep)));
     let (base, raw, clean) = (
         base_off as f64 / base_cov as f64,
         raw_off as f64 / raw_cov as f64,

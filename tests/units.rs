@@ -275,3 +275,26 @@ fn the_same_unit_twice_at_once_as_a_retry_racing_its_original_corrupts_nothing()
     assert_ok(&nrw(&["finalize", out.to_str().unwrap()]));
     assert_same(&whole, &out, "units raced by their own retries");
 }
+
+#[test]
+fn finalize_refuses_a_model_changed_since_the_units_read_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 4);
+    let out = tmp.path().join("ds");
+    assert_ok(&ingest_unit(&scene, &out, Some("0/1"), &[]));
+    // The same model written again in id order: other bytes, so another SHA-256.
+    let sparse = scene.join("sparse/0");
+    let mut rec = nrw_colmap::read_model(&sparse, Some(nrw_colmap::Format::Binary)).unwrap();
+    rec.points.values_mut().next().unwrap().error += 1.0;
+    nrw_colmap::write_model(&rec, &sparse, nrw_colmap::Format::Binary).unwrap();
+    let err = fails(&["finalize", out.to_str().unwrap()]);
+    assert!(
+        err.contains("points3D.bin changed since the ingest units read it"),
+        "{err}"
+    );
+    assert!(
+        !out.join("manifest.json").exists(),
+        "a refused finalize writes no manifest"
+    );
+}

@@ -66,23 +66,13 @@ pub fn scene_points(
     store: &nrw_dataset::Store,
 ) -> Result<Vec<nrw_dataset::export::nerfw::ScenePoint>> {
     let m = nrw_dataset::Manifest::read(store)?;
-    let format = match m.scene.encoding.as_str() {
-        "txt" => Some(nrw_colmap::Format::Text),
-        "bin" => Some(nrw_colmap::Format::Binary),
-        _ => None,
-    };
-    let dir = Path::new(&m.scene.model_dir);
-    let rec = nrw_colmap::read_model(dir, format)?;
-    for f in &rec.files {
-        let (_, sha) = nrw_dataset::manifest::sha256_file(f)?;
-        let path = f.display().to_string();
-        if !m.inputs.iter().any(|i| i.path == path && i.sha256 == sha) {
-            return Err(crate::error::PipelineError::input(
-                f,
-                "changed since this dataset was ingested from it (its SHA-256 differs from the \
-                 manifest's): the exported points would not belong to the dataset's poses",
-            ));
-        }
+    let (rec, changed) = crate::ingest::reread_model(&m.scene, &m.inputs)?;
+    if let Some(f) = changed {
+        return Err(crate::error::PipelineError::input(
+            &f,
+            "changed since this dataset was ingested from it (its SHA-256 differs from the \
+             manifest's): the exported points would not belong to the dataset's poses",
+        ));
     }
     Ok(rec
         .points

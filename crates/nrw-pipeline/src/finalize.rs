@@ -206,13 +206,16 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         .scene
         .clone()
         .ok_or_else(|| units_error(dataset, "ingest unit record names no scene".into()))?;
-    let format = match scene.encoding.as_str() {
-        "txt" => Some(nrw_colmap::Format::Text),
-        "bin" => Some(nrw_colmap::Format::Binary),
-        _ => None,
-    };
-    let mut rec = nrw_colmap::read_model(Path::new(&scene.model_dir), format)?;
-    check_model_unchanged(dataset, &unit, &rec)?;
+    let (mut rec, changed) = crate::ingest::reread_model(&scene, &unit.inputs)?;
+    if let Some(f) = changed {
+        return Err(units_error(
+            dataset,
+            format!(
+                "{} changed since the ingest units read it: run the units again",
+                f.display()
+            ),
+        ));
+    }
     // `ingest --undistort` stored the undistorted PINHOLE cameras: the scene tables list those.
     if let Some(v) = unit.parameters.get("undistort") {
         let options = crate::ingest::undistort_from_parameters(v).ok_or_else(|| {
@@ -291,29 +294,6 @@ fn close_stage(dataset: &Store, stage: &str) -> Result<()> {
         .sum();
     crate::qa::record_timing(dataset, stage, seconds);
     Ok(units::clear_stage(dataset, stage)?)
-}
-
-/// The model files read now must be those the units read.
-fn check_model_unchanged(
-    dataset: &Store,
-    unit: &UnitRecord,
-    rec: &nrw_colmap::Reconstruction,
-) -> Result<()> {
-    for f in &rec.files {
-        let (_, sha) = nrw_dataset::manifest::sha256_file(f)?;
-        let path = f.display().to_string();
-        if !unit
-            .inputs
-            .iter()
-            .any(|i| i.path == path && i.sha256 == sha)
-        {
-            return Err(units_error(
-                dataset,
-                format!("{path} changed since the ingest units read it: run the units again"),
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// Merge style's units: every part present and of the units' kind, parts past the end

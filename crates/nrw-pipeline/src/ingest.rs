@@ -222,6 +222,30 @@ pub fn undistort_from_parameters(v: &serde_json::Value) -> Option<UndistortOptio
     })
 }
 
+/// The model a dataset was ingested from (its manifest's or unit record's `scene`), read
+/// again in the encoding ingest read, with the first of its files whose SHA-256 is not
+/// among `inputs` (changed since ingest), if any.
+pub fn reread_model(
+    scene: &SceneSource,
+    inputs: &[FileEntry],
+) -> Result<(Reconstruction, Option<PathBuf>)> {
+    let format = match scene.encoding.as_str() {
+        "txt" => Some(Format::Text),
+        "bin" => Some(Format::Binary),
+        _ => None,
+    };
+    let rec = nrw_colmap::read_model(Path::new(&scene.model_dir), format)?;
+    for f in &rec.files {
+        let (_, sha) = nrw_dataset::manifest::sha256_file(f)?;
+        let path = f.display().to_string();
+        if !inputs.iter().any(|i| i.path == path && i.sha256 == sha) {
+            let changed = f.clone();
+            return Ok((rec, Some(changed)));
+        }
+    }
+    Ok((rec, None))
+}
+
 /// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
 pub fn describe(rec: &Reconstruction) -> (&'static str, &'static str) {
     let enc = rec.format.map_or("?", |f| f.ext());

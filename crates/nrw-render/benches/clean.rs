@@ -6,9 +6,11 @@
 //! (1 − precision), the rendered depth against ground truth (landmark pixels more than 1% off,
 //! coverage) and the time per 10⁶ points; for normal estimation at k ∈ {8, 16, 32}, the angle
 //! to the analytic normals and the time; and against Open3D (`remove_statistical_outlier`,
-//! `estimate_normals` with the same k, same threads, same cloud, same run) when
-//! `NRW_OPEN3D_PYTHON` (default `python3`) imports open3d — a benchmark peer, never a
-//! dependency. Writes docs/bench/cloud_clean.md.
+//! `estimate_normals` with the same k, same threads, same run) on the POINTS cloud and one ten
+//! times larger, when `NRW_OPEN3D_PYTHON` (default `python3`) imports open3d — a benchmark
+//! peer, never a dependency. Both sides run as child processes that read the same PLY, so each
+//! reports its own time and memory peak. `--no-large` skips the larger cloud. Writes
+//! docs/bench/cloud_clean.md.
 
 #[path = "../../../tests/support/cpu.rs"]
 mod cpu;
@@ -24,16 +26,16 @@ use nrw_render::clean::{estimate_normals, statistical_outliers};
 use truth::depth_errors;
 
 fn main() {
-    let points: usize = std::env::args()
-        .skip(1)
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if let Some(at) = args.iter().position(|a| a == "--ours") {
+        return ours(Path::new(&args[at + 1]));
+    }
+    let points: usize = args
+        .iter()
         .find_map(|a| a.parse().ok())
         .unwrap_or(1_000_000);
     let tmp = tempfile::tempdir().unwrap();
-    let mut spec = nrw_synth::SceneSpec::demo().shrunk(4, (240, 320), points);
-    spec.observations.features = 300;
-    spec.effects.transients = None;
-    spec.effects.outliers = Some(0.02);
-    nrw_synth::generate(&spec, tmp.path(), &|| {}).unwrap();
+    landmark(points, tmp.path());
     let dir = tmp.path();
     let cloud = nrw_colmap::read_ply(&dir.join("dense/fused.ply")).unwrap();
     let truth: serde_json::Value =
@@ -131,18 +133,59 @@ fn main() {
         );
         eprintln!("normals k {k}: {secs:.2} s");
     }
-    md += &open3d_section(
-        &dir.join("dense/fused.ply"),
-        &cloud.positions,
-        origin,
-        threads,
-    );
+    md += &peer_header(threads);
+    md += &peer_row(&dir.join("dense/fused.ply"), threads);
+    drop(cloud);
+    if !args.iter().any(|a| a == "--no-large") {
+        let large = tempfile::tempdir().unwrap();
+        landmark(points * 10, large.path());
+        md += &peer_row(&large.path().join("dense/fused.ply"), threads);
+    }
+    md += &peer_footer();
     md += "\nPast 90°: surfaces no camera sees (the back wall, the roof and ledge tops above \
            every camera) are turned toward the cameras, and points at edges whose \
            neighbourhood spans two faces.\n";
     let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/bench/cloud_clean.md");
     std::fs::write(&out, md).unwrap();
     eprintln!("wrote {}", out.display());
+}
+
+/// The synthetic landmark with `points` surface points and 2% floating points, in `dir`.
+fn landmark(points: usize, dir: &Path) {
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(4, (240, 320), points);
+    spec.observations.features = 300;
+    spec.effects.transients = None;
+    spec.effects.outliers = Some(0.02);
+    nrw_synth::generate(&spec, dir, &|| {}).unwrap();
+}
+
+/// Resident-set peak of this process so far, in MB (Linux's VmHWM).
+fn peak_mb() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// Child-process side of the comparison: read the PLY, time k = 16 / σ = 2 removal and
+/// k = 16 normals on it, print the figures as JSON.
+fn ours(ply: &Path) {
+    let cloud = nrw_colmap::read_ply(ply).unwrap();
+    let origin = cloud.positions.iter().sum::<DVec3>() / cloud.len().max(1) as f64;
+    let t = Instant::now();
+    let (_, r) = statistical_outliers(&cloud.positions, origin, 16, 2.0);
+    let denoise = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let normals = estimate_normals(&cloud.positions, origin, 16, &|_| DVec3::Z);
+    let secs = t.elapsed().as_secs_f64();
+    assert_eq!(normals.len(), cloud.len());
+    println!(
+        "{}",
+        serde_json::json!({"denoise": denoise, "normals": secs, "removed": r.removed,
+                           "peak_mb": peak_mb(), "points": cloud.len()})
+    );
 }
 
 /// Open3D on the same PLY, same k and threads: times, removed count, peak memory.
@@ -156,61 +199,85 @@ print(json.dumps({"denoise": d, "normals": nt, "removed": len(pc.points) - len(i
                   "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "version": o3d.__version__}))
 "#;
 
-/// The "against Open3D" section: ours and Open3D's time for k = 16 (σ = 2) on the same cloud.
-fn open3d_section(ply: &Path, positions: &[DVec3], origin: DVec3, threads: usize) -> String {
-    let t = Instant::now();
-    let (_, r) = statistical_outliers(positions, origin, 16, 2.0);
-    let ours_d = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let _ = estimate_normals(positions, origin, 16, &|_| DVec3::Z);
-    let ours_n = t.elapsed().as_secs_f64();
-    let python = std::env::var("NRW_OPEN3D_PYTHON").unwrap_or_else(|_| "python3".into());
-    let o = std::process::Command::new(&python)
-        .args(["-c", OPEN3D])
-        .arg(ply)
+/// Run one side of the comparison as a child process; its JSON, or why there is none.
+fn child(mut cmd: std::process::Command, threads: usize) -> Result<serde_json::Value, String> {
+    let o = cmd
         .env("OMP_NUM_THREADS", threads.to_string())
-        .output();
-    let peer: Option<serde_json::Value> = match o {
-        Ok(o) if o.status.success() => serde_json::from_slice(&o.stdout).ok(),
-        Ok(o) => {
-            eprintln!(
-                "open3d not measured: {}",
-                String::from_utf8_lossy(&o.stderr)
+        .env("RAYON_NUM_THREADS", threads.to_string())
+        .output()
+        .map_err(|e| e.to_string())?;
+    if !o.status.success() {
+        return Err(String::from_utf8_lossy(&o.stderr).into_owned());
+    }
+    serde_json::from_slice(&o.stdout).map_err(|e| e.to_string())
+}
+
+/// The comparison's heading and table header.
+fn peer_header(threads: usize) -> String {
+    format!(
+        "\n## Against Open3D (k = 16, σ = 2, {threads} threads, same PLY, same run)\n\n\
+         Each side runs in its own process that reads the PLY and then times the two \
+         operations; the peak is that process's resident-set high-water mark (PLY, cloud, tree \
+         and results). Ratio = Open3D's time / ours (> 1: ours is faster).\n\n\
+         | points | operation | ours | Open3D | ratio | removed (ours / Open3D) | peak memory (ours / Open3D) |\n\
+         |---|---|---|---|---|---|---|\n"
+    )
+}
+
+/// Two rows of the comparison on one PLY, or a line saying which side could not run.
+fn peer_row(ply: &Path, threads: usize) -> String {
+    let mut me = std::process::Command::new(std::env::current_exe().unwrap());
+    me.arg("--ours").arg(ply);
+    let python = std::env::var("NRW_OPEN3D_PYTHON").unwrap_or_else(|_| "python3".into());
+    let mut peer = std::process::Command::new(&python);
+    peer.args(["-c", OPEN3D]).arg(ply);
+    let (us, them) = match (child(me, threads), child(peer, threads)) {
+        (Ok(a), Ok(b)) => (a, b),
+        (a, b) => {
+            eprintln!("comparison not measured: ours {a:?}, open3d {b:?}");
+            return format!(
+                "| {} | not measured: {} | | | | | |\n",
+                ply.display(),
+                if a.is_err() {
+                    "ours failed"
+                } else {
+                    "Open3D is not installed for `NRW_OPEN3D_PYTHON`"
+                }
             );
-            None
-        }
-        Err(e) => {
-            eprintln!("open3d not measured: {python}: {e}");
-            None
         }
     };
-    let mut md = format!(
-        "\n## Against Open3D (same {} points, k = 16, σ = 2, {threads} threads)\n\n",
-        positions.len()
-    );
-    match peer {
-        Some(p) => {
-            let f = |k: &str| p[k].as_f64().unwrap_or(f64::NAN);
-            let _ = write!(
-                md,
-                "Open3D {}. Ratio = Open3D's time / ours (> 1: ours is faster).\n\n\
-                 | operation | ours | Open3D | ratio |\n|---|---|---|---|\n\
-                 | statistical outlier removal | {ours_d:.2} s ({} removed) | {:.2} s ({} removed) | **{:.2}×** |\n\
-                 | normal estimation | {ours_n:.2} s | {:.2} s | **{:.2}×** |\n\n\
-                 Open3D's process peaked at {:.0} MB (the cloud read from PLY and its tree); ours \
-                 was not measured apart from this benchmark's process.\n",
-                p["version"].as_str().unwrap_or("?"),
-                r.removed,
-                f("denoise"),
-                p["removed"],
-                f("denoise") / ours_d,
-                f("normals"),
-                f("normals") / ours_n,
-                f("peak_mb"),
-            );
-        }
-        None => md +=
-            "Open3D not measured (its Python package is not installed for `NRW_OPEN3D_PYTHON`).\n",
-    }
-    md
+    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    let points = us["points"].as_u64().unwrap_or(0);
+    eprintln!("open3d {}: {them}; ours: {us}", them["version"]);
+    format!(
+        "| {points} | statistical outlier removal | {:.2} s | {:.2} s | **{:.2}×** | {} / {} | {:.0} MB / {:.0} MB |\n\
+         | {points} | normal estimation | {:.2} s | {:.2} s | **{:.2}×** | | |\n",
+        f(&us, "denoise"),
+        f(&them, "denoise"),
+        f(&them, "denoise") / f(&us, "denoise"),
+        us["removed"],
+        them["removed"],
+        f(&us, "peak_mb"),
+        f(&them, "peak_mb"),
+        f(&us, "normals"),
+        f(&them, "normals"),
+        f(&them, "normals") / f(&us, "normals"),
+    )
+}
+
+/// What the comparison's figures include, after its table.
+fn peer_footer() -> String {
+    let python = std::env::var("NRW_OPEN3D_PYTHON").unwrap_or_else(|_| "python3".into());
+    let version = std::process::Command::new(&python)
+        .args(["-c", "import open3d; print(open3d.__version__)"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+    format!(
+        "\nOpen3D {}: `remove_statistical_outlier(16, 2.0)` and `estimate_normals(KDTreeSearchParamKNN(16))`, \
+         each building its own KD-tree, as ours does. Ours orients toward a fixed point; Open3D \
+         orients nothing when no normals exist.\n",
+        version.as_deref().unwrap_or("(not installed)")
+    )
 }

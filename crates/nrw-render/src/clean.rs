@@ -6,7 +6,8 @@
 use std::num::NonZero;
 
 use glam::DVec3;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use kiddo::immutable::float::kdtree::ImmutableKdTree;
+use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 
 /// What statistical outlier removal found.
@@ -25,9 +26,24 @@ pub struct OutlierReport {
     pub removed: usize,
 }
 
+/// The k-d tree: f64 positions, u64 indices, leaves of 8 points (small leaves suit the
+/// bounded searches below, which visit few of them).
+type Tree = ImmutableKdTree<f64, u64, 3, 8>;
+
+/// Queries per sequential run: each run starts unbounded and then bounds every search by the
+/// previous one. A fixed size keeps the bounds, so the results, independent of the thread
+/// count.
+const RUN: usize = 4096;
+
 /// `f(i, neighbours)` for every point i, where `neighbours` are its k nearest (itself
-/// included, nearest first) as (distance, index): one parallel pass over an immutable k-d tree
-/// of the re-centred positions, nothing stored per neighbourhood.
+/// included, nearest first, ties by index) as (distance, index): one parallel pass over an
+/// immutable k-d tree of the re-centred positions, nothing stored per neighbourhood.
+///
+/// Queries go in Morton order, so consecutive ones are neighbours in space and walk the same
+/// branches of the tree, which stay in cache; and each search is bounded by the farthest of
+/// the previous query's k neighbours from this query (any k points bound the k-th nearest
+/// distance), so it prunes from its first leaf instead of its k-th point. The bound only
+/// prunes: the result is exactly the unbounded search's.
 fn map_neighbourhoods<R: Send>(
     local: &[[f64; 3]],
     k: usize,
@@ -36,25 +52,50 @@ fn map_neighbourhoods<R: Send>(
     if local.is_empty() || k == 0 {
         return (0..local.len()).map(|i| f(i, &[])).collect();
     }
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(local);
+    let tree: Tree = ImmutableKdTree::new_from_slice(local);
     let k = NonZero::new(k.min(local.len())).expect("k ≥ 1");
-    // Queries in Morton order: consecutive queries walk the same branches of the tree, which
-    // stay in cache (the points themselves may come in any order).
     let order = morton_order(local);
     let mut out: Vec<(usize, R)> = order
-        .par_iter()
-        .map_init(Vec::new, |found, &i| {
-            found.clear();
-            found.extend(
-                tree.nearest_n::<SquaredEuclidean>(&local[i], k)
-                    .into_iter()
-                    .map(|n| (n.distance.sqrt(), n.item as usize)),
-            );
-            (i, f(i, found))
+        .par_chunks(RUN)
+        .flat_map_iter(|run| {
+            let mut found: Vec<(f64, usize)> = Vec::with_capacity(k.get());
+            run.iter()
+                .map(|&i| {
+                    let q = &local[i];
+                    let bound = search_bound(q, found.iter().map(|n| &local[n.1]), k.get());
+                    found.clear();
+                    found.extend(
+                        tree.nearest_n_within::<SquaredEuclidean>(q, bound, k, false)
+                            .into_iter()
+                            .map(|n| (n.distance, n.item as usize)),
+                    );
+                    found.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    found.iter_mut().for_each(|n| n.0 = n.0.sqrt());
+                    (i, f(i, &found))
+                })
+                .collect::<Vec<_>>()
         })
         .collect();
     out.sort_unstable_by_key(|(i, _)| *i);
     out.into_iter().map(|(_, r)| r).collect()
+}
+
+/// The squared radius that holds `q`'s k nearest neighbours when `previous` are k points:
+/// the farthest of them from `q`, widened by one part in 10⁹ so that rounding cannot exclude
+/// the k-th; unbounded when there are fewer than k (a run's first query).
+fn search_bound<'a>(q: &[f64; 3], previous: impl Iterator<Item = &'a [f64; 3]>, k: usize) -> f64 {
+    let mut count = 0;
+    let mut far = 0f64;
+    for p in previous {
+        let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2);
+        far = far.max(d2);
+        count += 1;
+    }
+    if count < k || !far.is_finite() {
+        f64::INFINITY
+    } else {
+        far * (1.0 + 1e-9)
+    }
 }
 
 /// Point indices sorted by the Morton code of their position on a 2²¹ grid over the bounds.
@@ -238,6 +279,49 @@ mod tests {
                 offset + DVec3::new(x, y, 0.0)
             })
             .collect()
+    }
+
+    #[test]
+    fn bounded_searches_find_exactly_the_k_nearest_distances() {
+        // Clustered points with exact duplicates, more than one run
+        // of queries long: every neighbourhood's distances equal a brute-force search's.
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut local: Vec<[f64; 3]> = (0..RUN + 1500)
+            .map(|i| {
+                let c = (i % 7) as f64 * 3.0;
+                [c + next(), c * 0.5 + next() * 0.2, next() * 0.01]
+            })
+            .collect();
+        local.extend_from_within(..300);
+        let k = 9;
+        let got = map_neighbourhoods(&local, k, |_, ns| {
+            ns.iter().map(|n| n.0).collect::<Vec<_>>()
+        });
+        for (i, q) in local.iter().enumerate().step_by(7) {
+            let mut all: Vec<f64> = local
+                .iter()
+                .map(|p| {
+                    ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt()
+                })
+                .collect();
+            all.sort_by(f64::total_cmp);
+            assert_eq!(got[i], all[..k], "point {i}");
+        }
+        // The same neighbours, ties included, whatever the thread count.
+        let with = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| map_neighbourhoods(&local, k, |_, ns| ns.to_vec()))
+        };
+        assert_eq!(with(1), with(3));
     }
 
     #[test]

@@ -283,7 +283,7 @@ fn finalize_refuses_a_model_changed_since_the_units_read_it() {
     small_scene(&scene, 4);
     let out = tmp.path().join("ds");
     assert_ok(&ingest_unit(&scene, &out, Some("0/1"), &[]));
-    // The same model written again in id order: other bytes, so another SHA-256.
+    // One point's error changed and the model written again: other bytes, another SHA-256.
     let sparse = scene.join("sparse/0");
     let mut rec = nrw_colmap::read_model(&sparse, Some(nrw_colmap::Format::Binary)).unwrap();
     rec.points.values_mut().next().unwrap().error += 1.0;

@@ -133,15 +133,17 @@ fn main() {
         );
         eprintln!("normals k {k}: {secs:.2} s");
     }
-    md += &peer_header(threads);
-    md += &peer_row(&dir.join("dense/fused.ply"), threads);
     drop(cloud);
-    if !args.iter().any(|a| a == "--no-large") {
-        let large = tempfile::tempdir().unwrap();
-        landmark(points * 10, large.path());
-        md += &peer_row(&large.path().join("dense/fused.ply"), threads);
-    }
-    md += &peer_footer();
+    let large = (!args.iter().any(|a| a == "--no-large")).then(|| {
+        let d = tempfile::tempdir().unwrap();
+        landmark(points * 10, d.path());
+        d
+    });
+    let plys: Vec<std::path::PathBuf> = std::iter::once(dir)
+        .chain(large.as_ref().map(|d| d.path()))
+        .map(|d| d.join("dense/fused.ply"))
+        .collect();
+    md += &open3d_section(&plys, threads);
     md += "\nPast 90°: surfaces no camera sees (the back wall, the roof and ledge tops above \
            every camera) are turned toward the cameras, and points at edges whose \
            neighbourhood spans two faces.\n";
@@ -212,72 +214,66 @@ fn child(mut cmd: std::process::Command, threads: usize) -> Result<serde_json::V
     serde_json::from_slice(&o.stdout).map_err(|e| e.to_string())
 }
 
-/// The comparison's heading and table header.
-fn peer_header(threads: usize) -> String {
-    format!(
+/// The comparison on each PLY: both sides as child processes, their times, removed counts
+/// and memory peaks, and the Open3D version they reported.
+fn open3d_section(plys: &[std::path::PathBuf], threads: usize) -> String {
+    let python = std::env::var("NRW_OPEN3D_PYTHON").unwrap_or_else(|_| "python3".into());
+    let mut md = format!(
         "\n## Against Open3D (k = 16, σ = 2, {threads} threads, same PLY, same run)\n\n\
          Each side runs in its own process that reads the PLY and then times the two \
          operations; the peak is that process's resident-set high-water mark (PLY, cloud, tree \
          and results). Ratio = Open3D's time / ours (> 1: ours is faster).\n\n\
          | points | operation | ours | Open3D | ratio | removed (ours / Open3D) | peak memory (ours / Open3D) |\n\
          |---|---|---|---|---|---|---|\n"
-    )
-}
-
-/// Two rows of the comparison on one PLY, or a line saying which side could not run.
-fn peer_row(ply: &Path, threads: usize) -> String {
-    let mut me = std::process::Command::new(std::env::current_exe().unwrap());
-    me.arg("--ours").arg(ply);
-    let python = std::env::var("NRW_OPEN3D_PYTHON").unwrap_or_else(|_| "python3".into());
-    let mut peer = std::process::Command::new(&python);
-    peer.args(["-c", OPEN3D]).arg(ply);
-    let (us, them) = match (child(me, threads), child(peer, threads)) {
-        (Ok(a), Ok(b)) => (a, b),
-        (a, b) => {
-            eprintln!("comparison not measured: ours {a:?}, open3d {b:?}");
-            return format!(
-                "| {} | not measured: {} | | | | | |\n",
-                ply.display(),
-                if a.is_err() {
+    );
+    let mut version = None;
+    for ply in plys {
+        let mut me = std::process::Command::new(std::env::current_exe().unwrap());
+        me.arg("--ours").arg(ply);
+        let mut peer = std::process::Command::new(&python);
+        peer.args(["-c", OPEN3D]).arg(ply);
+        match (child(me, threads), child(peer, threads)) {
+            (Ok(us), Ok(them)) => {
+                eprintln!("open3d: {them}; ours: {us}");
+                md += &peer_rows(&us, &them);
+                version = them["version"].as_str().map(str::to_string);
+            }
+            (a, b) => {
+                eprintln!("comparison not measured: ours {a:?}, open3d {b:?}");
+                let why = if a.is_err() {
                     "ours failed"
                 } else {
                     "Open3D is not installed for `NRW_OPEN3D_PYTHON`"
-                }
-            );
+                };
+                md += &format!("| {} | not measured: {why} | | | | | |\n", ply.display());
+            }
         }
-    };
-    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-    let points = us["points"].as_u64().unwrap_or(0);
-    eprintln!("open3d {}: {them}; ours: {us}", them["version"]);
-    format!(
-        "| {points} | statistical outlier removal | {:.2} s | {:.2} s | **{:.2}×** | {} / {} | {:.0} MB / {:.0} MB |\n\
-         | {points} | normal estimation | {:.2} s | {:.2} s | **{:.2}×** | | |\n",
-        f(&us, "denoise"),
-        f(&them, "denoise"),
-        f(&them, "denoise") / f(&us, "denoise"),
-        us["removed"],
-        them["removed"],
-        f(&us, "peak_mb"),
-        f(&them, "peak_mb"),
-        f(&us, "normals"),
-        f(&them, "normals"),
-        f(&them, "normals") / f(&us, "normals"),
-    )
-}
-
-/// What the comparison's figures include, after its table.
-fn peer_footer() -> String {
-    let python = std::env::var("NRW_OPEN3D_PYTHON").unwrap_or_else(|_| "python3".into());
-    let version = std::process::Command::new(&python)
-        .args(["-c", "import open3d; print(open3d.__version__)"])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
-    format!(
+    }
+    md += &format!(
         "\nOpen3D {}: `remove_statistical_outlier(16, 2.0)` and `estimate_normals(KDTreeSearchParamKNN(16))`, \
          each building its own KD-tree, as ours does. Ours orients toward a fixed point; Open3D \
          orients nothing when no normals exist.\n",
-        version.as_deref().unwrap_or("(not installed)")
+        version.as_deref().unwrap_or("(not measured)")
+    );
+    md
+}
+
+/// The two table rows of one measured PLY, from both sides' JSON.
+fn peer_rows(us: &serde_json::Value, them: &serde_json::Value) -> String {
+    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    let points = us["points"].as_u64().unwrap_or(0);
+    format!(
+        "| {points} | statistical outlier removal | {:.2} s | {:.2} s | **{:.2}×** | {} / {} | {:.0} MB / {:.0} MB |\n\
+         | {points} | normal estimation | {:.2} s | {:.2} s | **{:.2}×** | | |\n",
+        f(us, "denoise"),
+        f(them, "denoise"),
+        f(them, "denoise") / f(us, "denoise"),
+        us["removed"],
+        them["removed"],
+        f(us, "peak_mb"),
+        f(them, "peak_mb"),
+        f(us, "normals"),
+        f(them, "normals"),
+        f(them, "normals") / f(us, "normals"),
     )
 }

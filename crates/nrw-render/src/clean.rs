@@ -281,10 +281,8 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn bounded_searches_find_exactly_the_k_nearest_distances() {
-        // Clustered points with exact duplicates, more than one run
-        // of queries long: every neighbourhood's distances equal a brute-force search's.
+    /// `n` points in 7 thin clusters, from a fixed xorshift sequence.
+    fn clusters(n: usize) -> Vec<DVec3> {
         let mut state = 0x2545_f491_4f6c_dd1d_u64;
         let mut next = || {
             state ^= state << 13;
@@ -292,12 +290,40 @@ mod tests {
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
-        let mut local: Vec<[f64; 3]> = (0..RUN + 1500)
+        (0..n)
             .map(|i| {
                 let c = (i % 7) as f64 * 3.0;
-                [c + next(), c * 0.5 + next() * 0.2, next() * 0.01]
+                DVec3::new(c + next(), c * 0.5 + next() * 0.2, next() * 0.01)
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn a_utm_offset_cloud_gives_the_centred_clouds_results() {
+        let centred = clusters(3000);
+        let utm = DVec3::new(4.5e5, 5.4e6, 120.0);
+        let far: Vec<DVec3> = centred.iter().map(|p| *p + utm).collect();
+        let mid = DVec3::new(9.0, 4.5, 0.0);
+        let (keep_a, a) = statistical_outliers(&centred, mid, 16, 1.0);
+        let (keep_b, b) = statistical_outliers(&far, mid + utm, 16, 1.0);
+        assert!(a.removed > 0, "{a:?}");
+        assert_eq!(keep_a, keep_b);
+        assert!(
+            (a.threshold - b.threshold).abs() < 1e-9 * a.threshold,
+            "{a:?} {b:?}"
+        );
+        let view = |pts: &[DVec3]| estimate_normals(pts, pts[0], 16, &|i| pts[i] + DVec3::Z);
+        for (n, m) in view(&centred).iter().zip(&view(&far)) {
+            let (n, m) = (glam::Vec3::from(*n), glam::Vec3::from(*m));
+            assert!(n.dot(m) > 1.0 - 1e-6, "{n} {m}");
+        }
+    }
+
+    #[test]
+    fn bounded_searches_find_exactly_the_k_nearest_distances() {
+        // Clustered points with exact duplicates, more than one run
+        // of queries long: every neighbourhood's distances equal a brute-force search's.
+        let mut local: Vec<[f64; 3]> = clusters(RUN + 1500).iter().map(|p| p.to_array()).collect();
         local.extend_from_within(..300);
         let k = 9;
         let got = map_neighbourhoods(&local, k, |_, ns| {
@@ -339,7 +365,6 @@ mod tests {
 
     #[test]
     fn a_far_point_is_an_outlier_and_a_plane_has_no_outliers_far_from_the_origin() {
-        // The same cloud centred and at UTM-like coordinates gives the same verdicts.
         for offset in [DVec3::ZERO, DVec3::new(4.5e5, 5.4e6, 120.0)] {
             let mut pts = grid(30, offset);
             pts.push(offset + DVec3::new(1.5, 1.5, 5.0));

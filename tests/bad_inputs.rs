@@ -416,7 +416,10 @@ fn a_flipped_byte_in_any_payload_column_stops_verify_and_every_reader() {
                 "export files",
                 vec!["export", b, "--layout", "files", "--out", e, "--quiet"],
             ),
-            ("export official", vec!["export", b, "--out", e, "--quiet"]),
+            (
+                "export official",
+                vec!["export", b, "--out", e, "--crop", "none", "--quiet"],
+            ),
             ("qa", vec!["qa", b]),
         ] {
             assert_named(&fails(&args), shard, column, who);

@@ -169,6 +169,8 @@ fn every_stage(m: &Moto, scene: &Path, ds: &str, export: &Path, ingest_extra: &[
         "scene",
         "--quiet",
         "--no-semantics",
+        "--crop",
+        "none",
     ]));
 }
 

@@ -81,10 +81,15 @@ fn label_maps_are_the_librarys_in_the_format_ingest_reads_and_resume_to_the_same
         assert_eq!(ours.color(), image::ColorType::L8, "{}", rel.display());
         let gt = image::open(truth.join(&rel)).unwrap();
         assert_eq!((ours.width(), ours.height()), (gt.width(), gt.height()));
-        let photo = image::open(scene.join("images").join(rel.with_extension("jpg")))
-            .or_else(|_| image::open(scene.join("images").join(rel.with_extension("png"))))
-            .unwrap()
-            .to_rgb8();
+        // Decoded as segment decodes it (libjpeg-turbo's pixels, Pillow's).
+        let photo =
+            nrw_dataset::codec::load_photo(&scene.join("images").join(rel.with_extension("jpg")))
+                .or_else(|_| {
+                    nrw_dataset::codec::load_photo(
+                        &scene.join("images").join(rel.with_extension("png")),
+                    )
+                })
+                .unwrap();
         let want = nrw_segment::segment(
             &model,
             &photo,

@@ -10,6 +10,7 @@ pub mod descriptors;
 pub mod error;
 pub mod export;
 pub mod footer;
+pub mod jpeg;
 pub mod manifest;
 pub mod parquet_io;
 pub mod probe;

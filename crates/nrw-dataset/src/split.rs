@@ -125,6 +125,183 @@ pub fn assign(
     Ok((out, change))
 }
 
+/// One row of a published Phototourism split file that nerf_pl keeps (it has an id).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TsvRow {
+    /// 1-based line number in the file, for messages.
+    pub line: usize,
+    pub filename: String,
+    /// Our split: `train`, or `val` for the file's `test`.
+    pub split: String,
+}
+
+/// Lines a split file may have: far above any Phototourism scene, a bound on a hostile file.
+pub const MAX_TSV_ROWS: usize = 10_000_000;
+
+/// Parse NeRF-W's split file (`filename  id  split  dataset`, tab-separated, header row) as
+/// nerf_pl's final loader (branch `nerfw`, `datasets/phototourism.py`) reads it: rows whose
+/// `id` is empty or NaN are dropped (`files[~files['id'].isnull()]`); `train` and `test` are
+/// the two sets. Any other split value is refused, naming its line.
+pub fn parse_phototourism_tsv(path: &std::path::Path, text: &str) -> Result<Vec<TsvRow>> {
+    let bad = |line: usize, field: &str, problem: String| DatasetError::Value {
+        path: path.into(),
+        record: format!("line {line}"),
+        field: field.into(),
+        problem,
+    };
+    let mut lines = text.lines().enumerate();
+    let (_, header) = lines
+        .next()
+        .ok_or_else(|| bad(1, "header", "the file is empty".into()))?;
+    let cols: Vec<&str> = header.split('\t').map(str::trim).collect();
+    let col = |name: &str| {
+        cols.iter().position(|c| *c == name).ok_or_else(|| {
+            bad(
+                1,
+                name,
+                format!("no `{name}` column in the header {cols:?} (NeRF-W's split files have filename, id, split, dataset)"),
+            )
+        })
+    };
+    let (f, i, s) = (col("filename")?, col("id")?, col("split")?);
+    let mut out = Vec::new();
+    for (k, l) in lines {
+        let line = k + 1;
+        if line > MAX_TSV_ROWS {
+            return Err(bad(
+                line,
+                "filename",
+                format!("more than {MAX_TSV_ROWS} rows"),
+            ));
+        }
+        if l.trim().is_empty() {
+            continue;
+        }
+        let v: Vec<&str> = l.split('\t').collect();
+        let get = |c: usize| v.get(c).map_or("", |x| x.trim());
+        let id = get(i);
+        if id.is_empty() || id.eq_ignore_ascii_case("nan") {
+            continue;
+        }
+        let filename = get(f);
+        if filename.is_empty() {
+            return Err(bad(line, "filename", "empty".into()));
+        }
+        let split = match get(s) {
+            "train" => "train",
+            "test" => "val",
+            other => {
+                return Err(bad(
+                    line,
+                    "split",
+                    format!("{other:?} is neither train nor test"),
+                ))
+            }
+        };
+        out.push(TsvRow {
+            line,
+            filename: filename.into(),
+            split: split.into(),
+        });
+    }
+    Ok(out)
+}
+
+/// The photo a split-file name stands for: the model's image name itself, or the one photo
+/// with the same name but for the extension (an export may have re-encoded it, `a.jpg` →
+/// `a.png`). None when no photo, or more than one, matches.
+fn match_name<'a>(
+    name: &str,
+    exact: &BTreeMap<&'a str, u32>,
+    by_stem: &BTreeMap<String, Vec<(&'a str, u32)>>,
+) -> Option<(&'a str, u32)> {
+    if let Some((&n, &id)) = exact.get_key_value(name) {
+        return Some((n, id));
+    }
+    match by_stem.get(&stem(name))?.as_slice() {
+        [one] => Some(*one),
+        _ => None,
+    }
+}
+
+fn stem(name: &str) -> String {
+    let p = std::path::Path::new(name);
+    p.with_extension("").to_string_lossy().into_owned()
+}
+
+/// What a split from a file assigned, and the listed photos it could not assign.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct TsvAssignment {
+    pub rows: Vec<Assignment>,
+    /// Listed photos that are in the model but not kept (dropped by ingest's filters).
+    pub not_kept: Vec<String>,
+    /// Kept photos the file does not list (they are in no split, as in nerf_pl).
+    pub unlisted: usize,
+}
+
+/// Assign exactly the sets a split file lists. `model` is every image (id, name) of the
+/// scene, `kept` the ids ingest kept. A name that is not in the model is refused (up to five
+/// named, with the count), as is a photo listed twice.
+pub fn assign_from_tsv(
+    path: &std::path::Path,
+    rows: &[TsvRow],
+    model: &[(u32, String)],
+    kept: &std::collections::BTreeSet<u32>,
+) -> Result<TsvAssignment> {
+    let exact: BTreeMap<&str, u32> = model.iter().map(|(i, n)| (n.as_str(), *i)).collect();
+    let mut by_stem: BTreeMap<String, Vec<(&str, u32)>> = BTreeMap::new();
+    for (i, n) in model {
+        by_stem.entry(stem(n)).or_default().push((n.as_str(), *i));
+    }
+    let mut out = TsvAssignment::default();
+    let mut unknown = Vec::new();
+    let mut seen: BTreeMap<u32, usize> = BTreeMap::new();
+    for r in rows {
+        let Some((name, id)) = match_name(&r.filename, &exact, &by_stem) else {
+            unknown.push(format!("{:?} (line {})", r.filename, r.line));
+            continue;
+        };
+        if let Some(first) = seen.insert(id, r.line) {
+            return Err(DatasetError::Value {
+                path: path.into(),
+                record: format!("line {}", r.line),
+                field: "filename".into(),
+                problem: format!("{:?} is listed again (first on line {first})", r.filename),
+            });
+        }
+        if !kept.contains(&id) {
+            out.not_kept.push(name.to_string());
+            continue;
+        }
+        out.rows.push(Assignment {
+            image_id: id,
+            name: name.to_string(),
+            split: r.split.clone(),
+            seed: 0,
+        });
+    }
+    if !unknown.is_empty() {
+        return Err(DatasetError::Value {
+            path: path.into(),
+            record: unknown[0].clone(),
+            field: "filename".into(),
+            problem: format!(
+                "{} name(s) match no image of the scene's model: {}",
+                unknown.len(),
+                unknown
+                    .iter()
+                    .take(5)
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        });
+    }
+    out.unlisted = kept.len() - out.rows.len();
+    out.rows.sort_by_key(|a| a.image_id);
+    Ok(out)
+}
+
 /// Write `splits.parquet` atomically.
 pub fn write_splits(dir: &Store, rows: &[Assignment]) -> Result<crate::manifest::FileEntry> {
     let batch = RecordBatch::try_new(
@@ -237,5 +414,61 @@ mod tests {
         assert_eq!((none.len(), c.new_val), (5, 0));
         let (tiny, _) = assign(&photos(1), &[], 1, 1).unwrap();
         assert_eq!(tiny[0].split, "val");
+    }
+
+    #[test]
+    fn a_phototourism_tsv_assigns_exactly_its_sets() {
+        let p = std::path::Path::new("brandenburg.tsv");
+        let text = "filename\tid\tsplit\tdataset\n\
+                    a.jpg\t1\ttrain\tb\n\
+                    b.jpg\t\ttrain\tb\n\
+                    c.jpg\tnan\ttest\tb\n\
+                    d.png\t4\ttest\tb\n\
+                    e.jpg\t5\ttrain\tb\n";
+        let rows = parse_phototourism_tsv(p, text).unwrap();
+        assert_eq!(
+            rows.len(),
+            3,
+            "rows without id are dropped, as nerf_pl does"
+        );
+        let model: Vec<(u32, String)> = ["a.jpg", "b.jpg", "c.jpg", "d.jpg", "e.jpg", "f.jpg"]
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (i as u32 + 10, n.to_string()))
+            .collect();
+        let kept = [10, 11, 12, 13, 15].into_iter().collect();
+        let a = assign_from_tsv(p, &rows, &model, &kept).unwrap();
+        let got: Vec<(&str, &str)> = a
+            .rows
+            .iter()
+            .map(|r| (r.name.as_str(), r.split.as_str()))
+            .collect();
+        // d.png is d.jpg re-encoded; e.jpg is listed but dropped by ingest.
+        assert_eq!(got, [("a.jpg", "train"), ("d.jpg", "val")]);
+        assert_eq!(a.not_kept, ["e.jpg"]);
+        assert_eq!(a.unlisted, 3);
+        let unknown = parse_phototourism_tsv(p, "filename\tid\tsplit\nzz.jpg\t3\ttrain\n").unwrap();
+        let e = assign_from_tsv(p, &unknown, &model, &kept)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("\"zz.jpg\" (line 2)") && e.contains("match no image"),
+            "{e}"
+        );
+        let e = parse_phototourism_tsv(p, "filename\tid\tsplit\na.jpg\t1\tval\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2") && e.contains("`split`"), "{e}");
+        let e = parse_phototourism_tsv(p, "name\tid\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no `filename` column"), "{e}");
+        let twice =
+            parse_phototourism_tsv(p, "filename\tid\tsplit\na.jpg\t1\ttrain\na.jpg\t1\ttest\n")
+                .unwrap();
+        let e = assign_from_tsv(p, &twice, &model, &kept)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("listed again (first on line 2)"), "{e}");
     }
 }

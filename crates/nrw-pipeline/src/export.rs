@@ -28,7 +28,7 @@ pub fn official(dataset: &Path, out: &Path) -> ExportConfig {
         layout: nrw_dataset::export::Layout::Official,
         out: out.into(),
         name: default_name(dataset),
-        crop: None,
+        crop: Some(nrw_dataset::export::official::PUBLISHED_CROP),
         semantics: true,
         depth: nrw_dataset::export::official::DepthMapping::Linear,
         shards: 1,

@@ -215,6 +215,9 @@ fn export_config(
     };
     Ok(ExportConfig {
         layout,
+        // The files layout keeps views whole; the paper's layouts take the published crop.
+        crop: (layout != nrw_dataset::export::Layout::Files)
+            .then_some(nrw_dataset::export::official::PUBLISHED_CROP),
         // A run that segments its photos exports their labels.
         semantics: e.semantics || segmented,
         ..crate::export::official(dataset, out)

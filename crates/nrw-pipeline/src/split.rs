@@ -15,6 +15,9 @@ pub struct SplitConfig {
     pub val: usize,
     /// Same seed, same split on any machine.
     pub seed: u64,
+    /// A published split file (NeRF-W's Phototourism `*.tsv`) to take the sets from instead
+    /// of drawing them; it replaces any earlier split.
+    pub from_tsv: Option<PathBuf>,
 }
 
 impl SplitConfig {
@@ -24,6 +27,7 @@ impl SplitConfig {
             dataset: dataset.into(),
             val: 100,
             seed: 0,
+            from_tsv: None,
         }
     }
 }
@@ -38,12 +42,68 @@ pub struct SplitSummary {
     pub new: usize,
     /// Photos assigned earlier that are no longer kept (removed from the split).
     pub gone: Vec<String>,
+    /// Photos a split file lists that ingest did not keep (not assigned).
+    pub listed_not_kept: Vec<String>,
+    /// Kept photos a split file does not list (in no split, as in nerf_pl).
+    pub unlisted: usize,
+}
+
+/// Largest split file read: a Phototourism tsv is a few hundred kB.
+const MAX_TSV_BYTES: u64 = 1 << 30;
+
+/// Assign exactly the train/test sets of a published split file.
+fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> {
+    use sha2::{Digest, Sha256};
+    let io = |e| PipelineError::from(nrw_dataset::DatasetError::io(tsv, e));
+    let len = std::fs::metadata(tsv).map_err(io)?.len();
+    if len > MAX_TSV_BYTES {
+        return Err(PipelineError::dataset(
+            tsv,
+            format!("{len} bytes is more than a split file's {MAX_TSV_BYTES}"),
+        ));
+    }
+    let bytes = std::fs::read(tsv).map_err(io)?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|e| PipelineError::dataset(tsv, format!("not UTF-8 text: {e}")))?;
+    let rows = nrw_dataset::split::parse_phototourism_tsv(tsv, text)?;
+    let verdicts = nrw_dataset::scene::read_verdicts(store)?;
+    let kept = verdicts
+        .iter()
+        .filter(|(_, _, v)| v == nrw_dataset::scene::VERDICT_KEPT)
+        .map(|(id, _, _)| *id)
+        .collect();
+    let model: Vec<(u32, String)> = verdicts.into_iter().map(|(i, n, _)| (i, n)).collect();
+    let a = nrw_dataset::split::assign_from_tsv(tsv, &rows, &model, &kept)?;
+    let mut manifest = Manifest::read(store)?;
+    manifest.replace_table(write_splits(store, &a.rows)?);
+    manifest.parameters.insert(
+        "split_from_tsv".into(),
+        serde_json::json!({
+            "file": tsv.file_name().map(|n| n.to_string_lossy().into_owned()),
+            "sha256": Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect::<String>(),
+        }),
+    );
+    manifest.parameters.remove("split_val");
+    manifest.write(store)?;
+    let val = a.rows.iter().filter(|r| r.split == "val").count();
+    Ok(SplitSummary {
+        train: a.rows.len() - val,
+        val,
+        kept: 0,
+        new: a.rows.len(),
+        gone: Vec::new(),
+        listed_not_kept: a.not_kept,
+        unlisted: a.unlisted,
+    })
 }
 
 /// Assign the kept photos and list the table in the manifest.
 pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
     let store = &Store::open_path(&cfg.dataset)?;
     crate::qa::timed(store, "split", || {
+        if let Some(tsv) = &cfg.from_tsv {
+            return split_from_tsv(tsv, store);
+        }
         let mut manifest = Manifest::read(store)?;
         let kept: Vec<(u32, String)> = nrw_dataset::scene::read_verdicts(store)?
             .into_iter()
@@ -65,6 +125,8 @@ pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
             kept: change.kept_train + change.kept_val,
             new: change.new_train + change.new_val,
             gone: change.gone,
+            listed_not_kept: Vec::new(),
+            unlisted: 0,
         })
     })
 }

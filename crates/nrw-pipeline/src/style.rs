@@ -11,7 +11,7 @@ use nrw_dataset::descriptors::{
 use nrw_dataset::reader::Dataset;
 use nrw_dataset::units::{self, UnitRecord};
 use nrw_dataset::{Manifest, Store};
-use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg};
+use nrw_style::{describe, Convention, Parallelism, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result};
@@ -71,6 +71,12 @@ pub fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
         ))),
         (true, Some(p)) => {
             let net = Vgg::load(p)?;
+            if let Some(want) = tier.convention().filter(|c| *c != net.convention) {
+                return Err(PipelineError::Weights {
+                    path: p.into(),
+                    problem: convention_mismatch(tier, want),
+                });
+            }
             if let Some(arch) = tier.arch().filter(|a| *a != net.arch) {
                 return Err(PipelineError::Weights {
                     path: p.into(),
@@ -84,6 +90,20 @@ pub fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
             }
             Ok(Some(net))
         }
+    }
+}
+
+/// Why a weights file of the other convention is refused for `tier`.
+fn convention_mismatch(tier: &Tier, want: Convention) -> String {
+    match want {
+        Convention::Caffe => format!(
+            "tier {} reproduces the published code's distance, which runs tensorflow-vgg's Caffe-trained vgg16.npy (the file its README downloads); these are torchvision weights, which expect other input",
+            tier.name()
+        ),
+        Convention::Torchvision => format!(
+            "this is tensorflow-vgg's vgg16.npy (Caffe convention), which only the official tiers run; tier {} takes torchvision VGG weights as safetensors",
+            tier.name()
+        ),
     }
 }
 

@@ -28,7 +28,8 @@ pub enum Tier {
     /// Mean and covariance of RGB in [0, 1] (9 numbers): no network, no weights.
     ColorStats,
     /// The paper's published definition (`style_loss.compute_pairwise_style_loss_v2`): a
-    /// `crop` × `crop` centre crop of the stored photo (no resize), input v·2/255 − 1, VGG16
+    /// `crop` × `crop` centre crop of the stored photo (no resize), input v·2/255 − 1 into
+    /// the published VGG16 (tensorflow-vgg's Caffe weights and input, [`Preprocess::Caffe`]),
     /// Grams of relu1_2 … relu5_2 over C·H·W, distance Σ_layers mean((G_a − G_b)²). Each
     /// layer's packed Gram is divided by C so the squared L2 distance is that mean.
     Official { crop: u32 },
@@ -129,12 +130,22 @@ impl Tier {
         }
     }
 
-    /// The input scaling the tier runs with: the official tier fixes its own (v·2/255 − 1),
-    /// the others take the caller's.
+    /// The input scaling the tier runs with: the official tier fixes its own (the published
+    /// code's, into Caffe weights), the others take the caller's.
     pub fn preprocess(&self, asked: Preprocess) -> Preprocess {
         match self {
-            Tier::Official { .. } => Preprocess::MinusOneToOne,
+            Tier::Official { .. } => Preprocess::Caffe,
             _ => asked,
+        }
+    }
+
+    /// The weights convention the tier needs: the official tier reproduces the published
+    /// code, which runs tensorflow-vgg's Caffe weights; the others run torchvision's.
+    pub fn convention(&self) -> Option<crate::Convention> {
+        match self {
+            Tier::Official { .. } => Some(crate::Convention::Caffe),
+            Tier::Vgg { .. } => Some(crate::Convention::Torchvision),
+            Tier::ColorStats => None,
         }
     }
 }
@@ -213,8 +224,7 @@ pub fn describe<B: Backend + ?Sized>(
             })?;
             let n = *crop as usize;
             let all: Vec<usize> = (0..STYLE_LAYERS.len()).collect();
-            let grams =
-                net.style_grams(&to_input(&img, Preprocess::MinusOneToOne), n, n, &all, par);
+            let grams = net.style_grams(&to_input(&img, Preprocess::Caffe), n, n, &all, par);
             let mut out = Vec::new();
             for (c, g) in &grams {
                 // mean over the C × C entries = ‖·‖²_F / C², so each Gram is scaled by 1/C.

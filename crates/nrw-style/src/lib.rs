@@ -5,6 +5,7 @@
 pub mod backend;
 pub mod descriptor;
 pub mod error;
+pub mod npy;
 mod pool;
 pub mod preprocess;
 pub mod vgg;
@@ -15,7 +16,7 @@ pub use descriptor::{central_crop, describe, distance2, Tier};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};
-pub use vgg::{gram, Activation, Arch, ConvAlgo, Vgg, STYLE_LAYERS};
+pub use vgg::{gram, Activation, Arch, ConvAlgo, Convention, Vgg, STYLE_LAYERS};
 
 /// The five Gram matrices (relu1_2 … relu5_2) of a preprocessed CHW input, f64, row-major.
 pub fn grams(

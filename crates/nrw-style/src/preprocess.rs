@@ -15,6 +15,20 @@ pub enum Preprocess {
     Imagenet,
     /// v/127.5 − 1: the official NRW code's scaling.
     MinusOneToOne,
+    /// The published code's whole path into tensorflow-vgg's Caffe weights: x = v·2/255 − 1
+    /// (`style_loss.py`), then (x + 1)·255/2 minus the Caffe mean of the channel (its
+    /// `vgg16.py`), each step in f32 as NumPy and TensorFlow compute it. Channels stay RGB:
+    /// the weights' conv1_1 is reordered instead.
+    Caffe,
+}
+
+/// The Caffe means tensorflow-vgg subtracts, in RGB order (its VGG_MEAN is B, G, R).
+pub const CAFFE_MEAN_RGB: [f32; 3] = [123.68, 116.779, 103.939];
+
+/// One RGB8 sample through the published code's f32 steps (see [`Preprocess::Caffe`]).
+fn caffe(v: u8, c: usize) -> f32 {
+    let x = v as f32 * 2.0 / 255.0 - 1.0;
+    (x + 1.0) * 255.0 / 2.0 - CAFFE_MEAN_RGB[c]
 }
 
 /// Largest image `style --image` takes as given: peak memory is about 1 KiB per pixel
@@ -60,6 +74,7 @@ pub fn to_input_01(img: &image::Rgb32FImage, p: Preprocess) -> Vec<f32> {
             out[c * w * h + i] = match p {
                 Preprocess::Imagenet => (v - IMAGENET_MEAN[c]) / IMAGENET_STD[c],
                 Preprocess::MinusOneToOne => v * 2.0 - 1.0,
+                Preprocess::Caffe => (v * 2.0 - 1.0 + 1.0) * 255.0 / 2.0 - CAFFE_MEAN_RGB[c],
             };
         }
     }
@@ -77,6 +92,7 @@ pub fn to_input(img: &RgbImage, p: Preprocess) -> Vec<f32> {
             out[c * w * h + i] = match p {
                 Preprocess::Imagenet => (v / 255.0 - IMAGENET_MEAN[c]) / IMAGENET_STD[c],
                 Preprocess::MinusOneToOne => v / 127.5 - 1.0,
+                Preprocess::Caffe => caffe(px[c], c),
             };
         }
     }

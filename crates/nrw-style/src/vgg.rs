@@ -200,10 +200,22 @@ impl Activation {
     }
 }
 
+/// Which convention a weights file was trained with: it decides the input the network expects.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Convention {
+    /// torchvision's (safetensors): RGB in [0, 1], ImageNet mean and std.
+    Torchvision,
+    /// Caffe's, as tensorflow-vgg's `vgg16.npy` (the published code's weights): 0…255 minus
+    /// the Caffe means. Its conv1_1 is stored for BGR input and is reordered to RGB at load.
+    Caffe,
+}
+
 /// A VGG's convolutions up to conv5_2 (the last one relu5_2 needs).
 #[derive(Debug, Clone)]
 pub struct Vgg {
     pub arch: Arch,
+    /// The input convention of the weights, which tiers check before running.
+    pub convention: Convention,
     pub convs: Vec<Conv>,
     /// How the convolutions run.
     pub algo: ConvAlgo,
@@ -220,17 +232,29 @@ impl Vgg {
         Vgg::load_with(path, ConvAlgo::default())
     }
 
-    /// [`Vgg::load`] with the convolutions run by `algo`.
+    /// [`Vgg::load`] with the convolutions run by `algo`. A NumPy `.npy` file is read as
+    /// tensorflow-vgg's `vgg16.npy` (Caffe convention), anything else as safetensors.
     pub fn load_with(path: &Path, algo: ConvAlgo) -> Result<Vgg> {
         use sha2::{Digest, Sha256};
         let bytes = std::fs::read(path).map_err(|e| StyleError::Io {
             path: path.into(),
             source: e,
         })?;
-        let sha256 = Sha256::digest(&bytes)
+        let sha256: String = Sha256::digest(&bytes)
             .iter()
             .map(|b| format!("{b:02x}"))
             .collect();
+        if bytes.starts_with(b"\x93NUMPY") {
+            let convs = npy_convs(path, &bytes, algo)?;
+            return Ok(Vgg {
+                arch: Arch::Vgg16,
+                convention: Convention::Caffe,
+                convs,
+                algo,
+                path: path.into(),
+                sha256,
+            });
+        }
         let st =
             safetensors::SafeTensors::deserialize(&bytes).map_err(|e| StyleError::Weights {
                 path: path.into(),
@@ -273,6 +297,7 @@ impl Vgg {
         }
         Ok(Vgg {
             arch,
+            convention: Convention::Torchvision,
             convs,
             algo,
             path: path.into(),
@@ -672,6 +697,70 @@ pub fn gram(c: usize, n: usize, f: &[f32], par: Parallelism) -> Vec<f64> {
     }
     g.iter_mut().for_each(|v| *v *= scale);
     g
+}
+
+/// tensorflow-vgg's layer names of VGG16, in order; the first twelve reach relu5_2.
+pub const VGG16_NPY_LAYERS: [&str; 16] = [
+    "conv1_1", "conv1_2", "conv2_1", "conv2_2", "conv3_1", "conv3_2", "conv3_3", "conv4_1",
+    "conv4_2", "conv4_3", "conv5_1", "conv5_2", "conv5_3", "fc6", "fc7", "fc8",
+];
+
+/// The convolutions up to conv5_2 of a `vgg16.npy`: W (3, 3, in, out) → OIHW, conv1_1's
+/// input channels reordered from BGR to RGB (a permutation: no value changes). A key that is
+/// not a VGG16 layer is refused by name.
+fn npy_convs(path: &Path, bytes: &[u8], algo: ConvAlgo) -> Result<Vec<Conv>> {
+    let bad = |problem: String| StyleError::Weights {
+        path: path.into(),
+        problem,
+    };
+    let layers = crate::npy::read_layers(bytes).map_err(&bad)?;
+    if let Some(k) = layers
+        .keys()
+        .find(|k| !VGG16_NPY_LAYERS.contains(&k.as_str()))
+    {
+        return Err(bad(format!(
+            "layer '{k}' is not one of tensorflow-vgg's VGG16 layers (conv1_1 … conv5_3, fc6 … fc8)"
+        )));
+    }
+    let mut convs = Vec::new();
+    let mut in_ch = 3;
+    for ((_, out_ch), name) in Arch::Vgg16
+        .convs_to_relu5_2()
+        .into_iter()
+        .zip(VGG16_NPY_LAYERS)
+    {
+        let l = layers
+            .get(name)
+            .ok_or_else(|| bad(format!("layer '{name}' is missing")))?;
+        let [w, b] = l.as_slice() else {
+            return Err(bad(format!(
+                "layer '{name}' has {} arrays, not [W, b]",
+                l.len()
+            )));
+        };
+        if w.shape != [3, 3, in_ch, out_ch] || b.shape != [out_ch] {
+            return Err(bad(format!(
+                "layer '{name}' has W {:?} and b {:?}, expected [3, 3, {in_ch}, {out_ch}] and [{out_ch}]",
+                w.shape, b.shape
+            )));
+        }
+        let mut oihw = vec![0f32; w.data.len()];
+        for kh in 0..3 {
+            for kw in 0..3 {
+                for i in 0..in_ch {
+                    // conv1_1 reads BGR in the file; our input is RGB.
+                    let src_i = if in_ch == 3 { 2 - i } else { i };
+                    for o in 0..out_ch {
+                        oihw[((o * in_ch + i) * 3 + kh) * 3 + kw] =
+                            w.data[((kh * 3 + kw) * in_ch + src_i) * out_ch + o];
+                    }
+                }
+            }
+        }
+        convs.push(Conv::with_algo(out_ch, in_ch, &oihw, b.data.clone(), algo));
+        in_ch = out_ch;
+    }
+    Ok(convs)
 }
 
 #[cfg(test)]

@@ -1,6 +1,8 @@
 //! The `official` tier against a float64 reference: tests/vgg_f64.py runs VGG16 in numpy
-//! float64 on the published code's input (centre crop, v·2/255 − 1) after checking itself
-//! against the PyTorch float64 fixtures in ../shared/fixtures/vgg16.
+//! float64 on the published code's input (centre crop, v·2/255 − 1, then its VGG's Caffe step)
+//! after checking itself against the PyTorch float64 fixtures in ../shared/fixtures/vgg16. Our
+//! side reads the same weights from a `vgg16.npy` that numpy wrote in tensorflow-vgg's layout
+//! (tests/make_vgg16_npy.py), so the reader, the BGR reordering and the input step are tested.
 
 #[path = "../../../tests/support/python.rs"]
 mod python;
@@ -25,8 +27,17 @@ fn official_grams_match_a_float64_vgg16_that_matches_pytorch() {
         return;
     }
     let weights = shared().join("weights/vgg16_imagenet.safetensors");
-    let net = Vgg::load(&weights).unwrap();
     let tmp = tempfile::tempdir().unwrap();
+    let npy = tmp.path().join("vgg16.npy");
+    let o = Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/make_vgg16_npy.py"))
+        .arg(&weights)
+        .arg(&npy)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let net = Vgg::load(&npy).unwrap();
+    assert_eq!(net.convention, nrw_style::Convention::Caffe);
     // 320 × 240 takes an off-centre-parity crop; 256 × 256 a crop of the whole photo.
     for (stem, crop) in [
         ("02928139_3448003521_320x240", 96u32),

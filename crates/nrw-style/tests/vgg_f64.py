@@ -5,9 +5,11 @@ usage: vgg_f64.py WEIGHTS FIXTURE_DIR STEM CROP OURS.f32
 1. Checks itself against the PyTorch float64 fixture (STEM.safetensors: the fixture's own
    input through torchvision's VGG16, Grams of relu1_2 ... relu5_2).
 2. Computes the published code's style Grams of STEM.png (style_loss.compute_pairwise_
-   style_loss_v2: CROP x CROP centre crop by utils.get_central_crop, img * 2/255 - 1 in float32,
-   G = F^T F / (C H W)) and compares our official descriptor (OURS.f32: little-endian f32, per
-   layer the upper triangle of G / C, off-diagonals times sqrt(2)).
+   style_loss_v2: CROP x CROP centre crop by utils.get_central_crop, img * 2/255 - 1 in float32;
+   its VGG's (x + 1) * 255 / 2 minus the Caffe means, in float32, channels kept RGB here as the
+   weights are; G = F^T F / (C H W)) and compares our official descriptor (OURS.f32:
+   little-endian f32, per layer the upper triangle of G / C, off-diagonals times sqrt(2)),
+   which ran the same weights read from tensorflow-vgg's vgg16.npy layout (BGR conv1_1).
 Prints JSON: worst relative difference (max |a - b| / max |b|) per layer for both checks.
 """
 import json, struct, sys
@@ -75,6 +77,9 @@ def main():
     h, w, _ = img.shape
     st_y, st_x = (h - crop) // 2, (w - crop) // 2
     img = img[st_y:st_y + crop, st_x:st_x + crop, :]
+    # The published VGG's input step (vgg16.py, as ../shared/paper-code/README.md describes it).
+    img = (img + np.float32(1)) * np.float32(255.0) / np.float32(2.0)
+    img = img - np.array([123.68, 116.779, 103.939], dtype=np.float32)  # R, G, B Caffe means
     ref = grams(weights, img.transpose(2, 0, 1).astype(np.float64))
     d = np.fromfile(ours_path, dtype='<f4').astype(np.float64)
     at, official = 0, {}

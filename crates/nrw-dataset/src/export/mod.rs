@@ -49,6 +49,11 @@ impl Layout {
     pub fn needs_points(self) -> bool {
         matches!(self, Layout::Nerfw | Layout::Nerfstudio)
     }
+
+    /// Whether the layout is one the paper's published code reads (official, tfrecord).
+    pub fn paper(self) -> bool {
+        matches!(self, Layout::Official | Layout::Tfrecord)
+    }
 }
 
 /// What to export and how.
@@ -78,7 +83,7 @@ impl ExportConfig {
             layout: Layout::Official,
             out,
             name,
-            crop: None,
+            crop: Some(official::PUBLISHED_CROP),
             semantics: true,
             depth: DepthMapping::Linear,
             shards: 1,
@@ -725,6 +730,11 @@ fn write_split(
                 }
                 let mut jobs: Vec<(usize, usize, &View)> = Vec::new(); // (index, position, view)
                 for v in &batch {
+                    // A missing label map is refused before any size check: it is the
+                    // dataset's problem, whatever the crop.
+                    if cfg.semantics && cfg.layout.paper() && v.labels_png.is_none() {
+                        return Err(no_semantics(v));
+                    }
                     let fits = cfg.layout == Layout::Files
                         || cfg.crop.is_none_or(|c| v.width >= c && v.height >= c);
                     if fits {

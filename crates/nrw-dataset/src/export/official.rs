@@ -39,6 +39,11 @@ pub fn official_colors() -> &'static [[u8; 3]; 151] {
     })
 }
 
+/// The crop the published pipeline leaves every channel at: `segment_dataset.py` writes
+/// `*_seg_rgb.png` as the 512 × 512 centre crop, `dataset_utils.AlignedRenderedDataset` crops
+/// the other channels to it, and `pretrain_appearance` crops all but seg to its resolution.
+pub const PUBLISHED_CROP: u32 = 512;
+
 /// ADE20K class ids → the official colour-coded RGB image (`*_seg_rgb.png`).
 pub fn official_seg_rgb(labels: &GrayImage) -> RgbImage {
     let t = official_colors();

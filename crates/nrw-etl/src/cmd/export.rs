@@ -11,6 +11,12 @@ use nrw_dataset::export::{ExportConfig, ExportSummary, Layout as DsLayout};
 
 use crate::error::Result;
 
+/// Fewest train views the published triplet sampler can index (`randint(1, 5 + 1)`).
+const PUBLISHED_MIN_TRAIN: usize = 6;
+
+/// The crop of the official and tfrecord layouts when none is asked: the published pipeline's.
+const DEFAULT_CROP: u32 = nrw_dataset::export::official::PUBLISHED_CROP;
+
 /// `--layout` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Layout {
@@ -35,11 +41,29 @@ pub enum Depth {
     Inverse,
 }
 
+/// `--crop` values: a side in pixels, or `none`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Crop {
+    Side(u32),
+    None,
+}
+
+fn parse_crop(s: &str) -> std::result::Result<Crop, String> {
+    match s {
+        "none" => Ok(Crop::None),
+        n => n
+            .parse::<u32>()
+            .map(Crop::Side)
+            .map_err(|_| format!("{n:?} is neither a side in pixels (e.g. 512) nor `none`")),
+    }
+}
+
 /// Arguments of `export`.
 #[derive(Debug, Args)]
 #[command(after_help = "Examples:
   nrw-etl export DATASET --out trevi_official --name trevi
-  nrw-etl export DATASET --layout tfrecord --crop 512 --shards 8 --out tfrecords --name trevi
+  nrw-etl export DATASET --layout tfrecord --shards 8 --out tfrecords --name trevi
+  nrw-etl export DATASET --crop 256 --out trevi256   # for --train_resolution=256
   nrw-etl export DATASET --no-semantics --out official   # then train with --use_semantic=False
   nrw-etl export DATASET --layout nerfw --out trevi_nerfw --name trevi   # nerf_pl / Ha-NeRF (ingest with --undistort)
   nrw-etl export DATASET --layout nerfstudio --out trevi_ns   # ns-train nerfacto --data trevi_ns
@@ -60,9 +84,14 @@ pub struct ExportArgs {
     /// Dataset name the published code is run with (--dataset_name): NAME_train.tfrecord, dist_NAME.pckl [default: the dataset folder's name]
     #[arg(long)]
     pub name: Option<String>,
-    /// Centre crop of every channel, as the published code's 512 × 512 (official, tfrecord); smaller views are skipped and listed
-    #[arg(long)]
-    pub crop: Option<u32>,
+    /// Centre crop of every channel, official and tfrecord layouts [default: 512, the published
+    /// pipeline's: its segmentation writes *_seg_rgb.png as the 512 centre crop, so its
+    /// pretraining, which crops every channel but that one, reads only crops of the training
+    /// resolution]. Use the resolution you train at (e.g. 256 for --train_resolution=256);
+    /// views smaller than the crop are skipped and listed. `none` keeps the stored size, which
+    /// dataset_utils.py converts but pretrain_appearance.py cannot read
+    #[arg(long, value_parser = parse_crop)]
+    pub crop: Option<Crop>,
     /// Export without semantics (no *_seg_rgb.png; empty `seg` in TFRecords): train with --use_semantic=False
     #[arg(long)]
     pub no_semantics: bool,
@@ -91,7 +120,12 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             .name
             .clone()
             .unwrap_or_else(|| nrw_pipeline::export::default_name(&args.dataset)),
-        crop: args.crop,
+        crop: match (args.crop, args.layout) {
+            (Some(Crop::Side(n)), _) => Some(n),
+            (Some(Crop::None), _) => None,
+            (None, Layout::Official | Layout::Tfrecord) => Some(DEFAULT_CROP),
+            (None, _) => None,
+        },
         semantics: !args.no_semantics,
         depth: match args.depth {
             Depth::Inverse => DepthMapping::Inverse,
@@ -131,6 +165,16 @@ pub fn print_summary(dataset: &std::path::Path, out: &std::path::Path, s: &Expor
     for e in &s.empty_splits {
         eprintln!(
             "split {e} has no view: not written (the published code's {e} glob will find nothing; `nrw-etl split DATASET --val N` holds out N photos)"
+        );
+    }
+    let train = s
+        .splits
+        .iter()
+        .find(|p| p.split == "train")
+        .map_or(0, |p| p.image_ids.len());
+    if s.dist_pickle.is_some() && train < PUBLISHED_MIN_TRAIN {
+        eprintln!(
+            "warning: {train} train views: the published get_triplet_input_fn draws positives at sorted index 1..5 and fails (IndexError) below {PUBLISHED_MIN_TRAIN}"
         );
     }
     match &s.dist_pickle {

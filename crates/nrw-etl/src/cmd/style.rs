@@ -35,11 +35,14 @@ pub struct StyleArgs {
     pub dataset: Option<PathBuf>,
     /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>], the same with vgg19,
     /// official[-N] (the published code's distance: N×N centre crop, default 512, no resize,
-    /// v·2/255 − 1, per-layer mean squared Gram difference; needed for the official export's
-    /// dist_<name>.pckl), or color-stats (no weights needed)
+    /// v·2/255 − 1 into tensorflow-vgg's Caffe VGG16, per-layer mean squared Gram difference;
+    /// needs that vgg16.npy; for the official export's dist_<name>.pckl), or color-stats (no
+    /// weights needed)
     #[arg(long, default_value = "vgg16-512")]
     pub tier: String,
-    /// VGG16 or VGG19 weights: safetensors with torchvision names (features.N.weight / .bias); never downloaded
+    /// Weights, never downloaded: VGG16 or VGG19 safetensors with torchvision names
+    /// (features.N.weight / .bias) for the vgg tiers; the published code's vgg16.npy
+    /// (tensorflow-vgg, the file its README links) for the official tiers
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Replace existing descriptors of another tier or weights
@@ -51,7 +54,7 @@ pub struct StyleArgs {
     /// With --image: output safetensors with f32 tensors gram_relu1_2 … gram_relu5_2
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Network input scaling: torchvision's ImageNet mean/std, or the official code's v/127.5 − 1 (recorded with the descriptors; the official tier always uses the latter)
+    /// Network input scaling: torchvision's ImageNet mean/std, or the official code's v/127.5 − 1 (recorded with the descriptors; the official tiers always use the published code's own)
     #[arg(long, value_enum, default_value = "imagenet")]
     pub preprocess: Pre,
     /// Photos per descriptor part (the unit of resumption and of --shard work units)

@@ -1,0 +1,730 @@
+//! The published code's VGG16 weights, `vgg16.npy` (machrisaa/tensorflow-vgg), read as users
+//! have it: a NumPy `.npy` file holding a 0-d object array whose one element is a pickled dict
+//! `{'conv1_1': [W, b], …}` with W as (3, 3, in, out) float32 and b as (out,) float32.
+//!
+//! Pickle is a program, not a format: `pickle.load` calls whatever globals it names. This
+//! reader never calls anything. It interprets the opcodes that NumPy's pickles use into plain
+//! values, allows exactly the globals that rebuild an ndarray and its dtype (refusing any other
+//! by name), and checks every length against the bytes that are left before it allocates.
+
+use std::collections::BTreeMap;
+
+/// What a pickled value is, once interpreted without calling anything.
+#[derive(Debug, Clone)]
+enum Obj {
+    None,
+    Bool(bool),
+    Int(i64),
+    Float,
+    /// Text: Python 3 `str`, or a Python 2 `str` read as Latin-1 (as `np.load(encoding='latin1')`).
+    Str(String),
+    /// A byte payload, as a range of the file (no copy).
+    Bytes(std::ops::Range<usize>),
+    Tuple(Vec<usize>),
+    List(Vec<usize>),
+    Dict(Vec<(usize, usize)>),
+    /// One of the allowed globals.
+    Global(Allowed),
+    /// `callable(*args)`, kept symbolic; `state` is what a later BUILD gave it.
+    Call {
+        callable: Allowed,
+        args: usize,
+        state: Option<usize>,
+    },
+    Mark,
+}
+
+/// The only globals a NumPy array's pickle needs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Allowed {
+    Reconstruct,
+    Ndarray,
+    Dtype,
+    FromBuffer,
+}
+
+fn allowed(module: &str, name: &str) -> Option<Allowed> {
+    let numpy_core = matches!(module, "numpy.core.multiarray" | "numpy._core.multiarray");
+    let numeric = matches!(module, "numpy.core.numeric" | "numpy._core.numeric");
+    match (module, name) {
+        (_, "_reconstruct") if numpy_core => Some(Allowed::Reconstruct),
+        (_, "_frombuffer") if numeric => Some(Allowed::FromBuffer),
+        ("numpy", "ndarray") => Some(Allowed::Ndarray),
+        ("numpy", "dtype") => Some(Allowed::Dtype),
+        _ => None,
+    }
+}
+
+/// A float32 array read from the file: its shape and its values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct F32Array {
+    pub shape: Vec<usize>,
+    pub data: Vec<f32>,
+}
+
+/// Why a `.npy` weights file could not be read (the caller adds the path).
+pub type NpyError = String;
+
+/// Largest number of opcodes interpreted: far above a VGG's few hundred, a bound on a hostile file.
+const MAX_OPS: usize = 10_000_000;
+
+/// Read a `vgg16.npy`: layer name → (W, b) float32 arrays, in the file's layout.
+pub fn read_layers(bytes: &[u8]) -> Result<BTreeMap<String, Vec<F32Array>>, NpyError> {
+    let body = npy_object_body(bytes)?;
+    let mut vm = Vm::new(bytes, body);
+    let top = vm.run()?;
+    // np.save of a dict: a 0-d object ndarray whose state holds the list [dict].
+    let dict = vm.object_array_item(top)?;
+    let Obj::Dict(items) = vm.objs[dict].clone() else {
+        return Err(format!(
+            "the array's element is {}, not the dict of layers {{'conv1_1': [W, b], …}} that tensorflow-vgg writes",
+            vm.kind(dict)
+        ));
+    };
+    let mut out = BTreeMap::new();
+    for (k, v) in items {
+        let name = vm.text(k).ok_or_else(|| {
+            format!(
+                "a key of the dict is {}, not a layer name such as 'conv1_1'",
+                vm.kind(k)
+            )
+        })?;
+        let parts = match &vm.objs[v] {
+            Obj::List(p) | Obj::Tuple(p) => p.clone(),
+            _ => return Err(format!("layer '{name}' is {}, not [W, b]", vm.kind(v))),
+        };
+        let arrays = parts
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| {
+                vm.f32_array(p)
+                    .map_err(|e| format!("layer '{name}', item {i}: {e}"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        out.insert(name, arrays);
+    }
+    Ok(out)
+}
+
+/// The pickle bytes of a `.npy` file whose header says a 0-d object array.
+fn npy_object_body(b: &[u8]) -> Result<std::ops::Range<usize>, NpyError> {
+    if b.len() < 10 || &b[..6] != b"\x93NUMPY" {
+        return Err("not a NumPy .npy file (no \\x93NUMPY magic)".into());
+    }
+    let (len, start): (usize, usize) = match b[6] {
+        1 => (u16::from_le_bytes([b[8], b[9]]) as usize, 10),
+        2 | 3 if b.len() >= 12 => (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12),
+        v => return Err(format!(".npy format version {v} is not one NumPy writes")),
+    };
+    let header = b
+        .get(start..start.saturating_add(len))
+        .ok_or("the .npy header runs past the end of the file")?;
+    let header = String::from_utf8_lossy(header);
+    let compact: String = header.chars().filter(|c| !c.is_whitespace()).collect();
+    if !compact.contains("'descr':'|O'") || !compact.contains("'shape':()") {
+        return Err(format!(
+            "the .npy header is {}: tensorflow-vgg's vgg16.npy is a 0-d object array ('descr': '|O', 'shape': ()) holding a dict of layers",
+            header.trim()
+        ));
+    }
+    Ok(start + len..b.len())
+}
+
+/// A pickle interpreter over an arena of [`Obj`]s: the stack and the memo hold indices, so a
+/// BUILD or SETITEMS on a memoised object is seen by every later reference to it.
+struct Vm<'a> {
+    b: &'a [u8],
+    at: usize,
+    end: usize,
+    objs: Vec<Obj>,
+    stack: Vec<usize>,
+    memo: BTreeMap<u32, usize>,
+}
+
+impl<'a> Vm<'a> {
+    fn new(b: &'a [u8], body: std::ops::Range<usize>) -> Vm<'a> {
+        Vm {
+            b,
+            at: body.start,
+            end: body.end,
+            objs: Vec::new(),
+            stack: Vec::new(),
+            memo: BTreeMap::new(),
+        }
+    }
+
+    fn take(&mut self, n: usize) -> Result<std::ops::Range<usize>, NpyError> {
+        if n > self.end - self.at {
+            return Err(format!(
+                "pickle at byte {}: a length of {n} runs past the end of the file",
+                self.at
+            ));
+        }
+        let r = self.at..self.at + n;
+        self.at += n;
+        Ok(r)
+    }
+
+    fn u8(&mut self) -> Result<u8, NpyError> {
+        Ok(self.b[self.take(1)?.start])
+    }
+
+    fn le<const N: usize>(&mut self) -> Result<[u8; N], NpyError> {
+        let r = self.take(N)?;
+        Ok(self.b[r].try_into().expect("N bytes"))
+    }
+
+    fn line(&mut self) -> Result<String, NpyError> {
+        let rest = &self.b[self.at..self.end];
+        let n = rest
+            .iter()
+            .position(|&c| c == b'\n')
+            .ok_or("pickle: a GLOBAL's name has no end of line")?;
+        let s = String::from_utf8_lossy(&rest[..n]).into_owned();
+        self.at += n + 1;
+        Ok(s)
+    }
+
+    fn push(&mut self, o: Obj) {
+        self.objs.push(o);
+        self.stack.push(self.objs.len() - 1);
+    }
+
+    fn pop(&mut self) -> Result<usize, NpyError> {
+        self.stack
+            .pop()
+            .ok_or_else(|| format!("pickle at byte {}: the stack is empty", self.at))
+    }
+
+    fn top(&self) -> Result<usize, NpyError> {
+        self.stack
+            .last()
+            .copied()
+            .ok_or_else(|| format!("pickle at byte {}: the stack is empty", self.at))
+    }
+
+    /// Everything above the last MARK, which is removed.
+    fn pop_mark(&mut self) -> Result<Vec<usize>, NpyError> {
+        let m = self
+            .stack
+            .iter()
+            .rposition(|&i| matches!(self.objs[i], Obj::Mark))
+            .ok_or_else(|| format!("pickle at byte {}: no MARK to pop to", self.at))?;
+        let items = self.stack.split_off(m + 1);
+        self.stack.pop();
+        Ok(items)
+    }
+
+    fn bytes(&mut self, n: usize) -> Result<(), NpyError> {
+        let r = self.take(n)?;
+        self.push(Obj::Bytes(r));
+        Ok(())
+    }
+
+    fn unicode(&mut self, n: usize) -> Result<(), NpyError> {
+        let r = self.take(n)?;
+        let s = std::str::from_utf8(&self.b[r])
+            .map_err(|_| format!("pickle at byte {}: a string is not UTF-8", self.at))?;
+        self.push(Obj::Str(s.into()));
+        Ok(())
+    }
+
+    fn global(&mut self, module: &str, name: &str) -> Result<(), NpyError> {
+        let g = allowed(module, name).ok_or_else(|| {
+            format!(
+                "the pickle names `{module}.{name}`; a weights file needs only NumPy's array globals, so it is refused (nothing in it was run)"
+            )
+        })?;
+        self.push(Obj::Global(g));
+        Ok(())
+    }
+
+    fn len_u32(&mut self) -> Result<usize, NpyError> {
+        Ok(u32::from_le_bytes(self.le()?) as usize)
+    }
+
+    fn len_u64(&mut self) -> Result<usize, NpyError> {
+        usize::try_from(u64::from_le_bytes(self.le()?))
+            .map_err(|_| "pickle: a length does not fit in memory".into())
+    }
+
+    /// Interpret up to STOP; the value left on the stack.
+    fn run(&mut self) -> Result<usize, NpyError> {
+        for _ in 0..MAX_OPS {
+            let at = self.at;
+            let op = self.u8()?;
+            match op {
+                0x80 => {
+                    self.u8()?; // PROTO
+                }
+                0x95 => {
+                    self.le::<8>()?; // FRAME: a hint only
+                }
+                b'.' => return self.pop(),
+                b'(' => self.push(Obj::Mark),
+                b'N' => self.push(Obj::None),
+                0x88 => self.push(Obj::Bool(true)),
+                0x89 => self.push(Obj::Bool(false)),
+                b'K' => {
+                    let v = self.u8()?;
+                    self.push(Obj::Int(v as i64))
+                }
+                b'M' => {
+                    let v = u16::from_le_bytes(self.le()?);
+                    self.push(Obj::Int(v as i64))
+                }
+                b'J' => {
+                    let v = i32::from_le_bytes(self.le()?);
+                    self.push(Obj::Int(v as i64))
+                }
+                0x8a => {
+                    let n = self.u8()? as usize;
+                    let r = self.take(n)?;
+                    if n > 8 {
+                        return Err(format!("pickle at byte {at}: an integer of {n} bytes"));
+                    }
+                    let mut v: i64 = 0;
+                    for (i, &c) in self.b[r.clone()].iter().enumerate() {
+                        v |= (c as i64) << (8 * i);
+                    }
+                    if n > 0 && n < 8 && self.b[r.end - 1] & 0x80 != 0 {
+                        v -= 1i64 << (8 * n);
+                    }
+                    self.push(Obj::Int(v))
+                }
+                b'G' => {
+                    self.le::<8>()?; // a float: no weights file needs its value
+                    self.push(Obj::Float)
+                }
+                // Python 2 `str` (SHORT_BINSTRING, BINSTRING) and bytes: payloads.
+                b'U' | b'C' => {
+                    let n = self.u8()? as usize;
+                    self.bytes(n)?
+                }
+                b'T' | b'B' => {
+                    let n = self.len_u32()?;
+                    self.bytes(n)?
+                }
+                0x8e | 0x96 => {
+                    let n = self.len_u64()?;
+                    self.bytes(n)?
+                }
+                0x8c => {
+                    let n = self.u8()? as usize;
+                    self.unicode(n)?
+                }
+                b'X' => {
+                    let n = self.len_u32()?;
+                    self.unicode(n)?
+                }
+                0x8d => {
+                    let n = self.len_u64()?;
+                    self.unicode(n)?
+                }
+                b'c' => {
+                    let (m, n) = (self.line()?, self.line()?);
+                    self.global(&m, &n)?
+                }
+                0x93 => {
+                    let (n, m) = (self.pop()?, self.pop()?);
+                    let (Some(m), Some(n)) = (self.text(m), self.text(n)) else {
+                        return Err(format!("pickle at byte {at}: STACK_GLOBAL of non-text"));
+                    };
+                    self.global(&m, &n)?
+                }
+                b')' => self.push(Obj::Tuple(vec![])),
+                b']' => self.push(Obj::List(vec![])),
+                b'}' => self.push(Obj::Dict(vec![])),
+                b't' => {
+                    let items = self.pop_mark()?;
+                    self.push(Obj::Tuple(items))
+                }
+                b'l' => {
+                    let items = self.pop_mark()?;
+                    self.push(Obj::List(items))
+                }
+                0x85..=0x87 => {
+                    let n = (op - 0x84) as usize;
+                    if self.stack.len() < n {
+                        return Err(format!("pickle at byte {at}: TUPLE{n} on a short stack"));
+                    }
+                    let items = self.stack.split_off(self.stack.len() - n);
+                    self.push(Obj::Tuple(items))
+                }
+                b'a' => {
+                    let v = self.pop()?;
+                    let l = self.top()?;
+                    self.list_mut(l, at)?.push(v)
+                }
+                b'e' => {
+                    let items = self.pop_mark()?;
+                    let l = self.top()?;
+                    self.list_mut(l, at)?.extend(items)
+                }
+                b'd' => {
+                    let items = self.pop_mark()?;
+                    let pairs = pairs(&items, at)?;
+                    self.push(Obj::Dict(pairs))
+                }
+                b's' => {
+                    let v = self.pop()?;
+                    let k = self.pop()?;
+                    let d = self.top()?;
+                    self.dict_mut(d, at)?.push((k, v))
+                }
+                b'u' => {
+                    let items = self.pop_mark()?;
+                    let p = pairs(&items, at)?;
+                    let d = self.top()?;
+                    self.dict_mut(d, at)?.extend(p)
+                }
+                b'q' => {
+                    let k = self.u8()? as u32;
+                    self.memo.insert(k, self.top()?);
+                }
+                b'r' => {
+                    let k = u32::from_le_bytes(self.le()?);
+                    self.memo.insert(k, self.top()?);
+                }
+                0x94 => {
+                    let k = self.memo.len() as u32;
+                    self.memo.insert(k, self.top()?);
+                }
+                b'h' | b'j' => {
+                    let k = if op == b'h' {
+                        self.u8()? as u32
+                    } else {
+                        u32::from_le_bytes(self.le()?)
+                    };
+                    let i = *self
+                        .memo
+                        .get(&k)
+                        .ok_or_else(|| format!("pickle at byte {at}: memo {k} was never stored"))?;
+                    self.stack.push(i)
+                }
+                b'R' | 0x81 => {
+                    let args = self.pop()?;
+                    let f = self.pop()?;
+                    let Obj::Global(callable) = self.objs[f] else {
+                        return Err(format!("pickle at byte {at}: a call of {}", self.kind(f)));
+                    };
+                    self.push(Obj::Call {
+                        callable,
+                        args,
+                        state: None,
+                    })
+                }
+                b'b' => {
+                    let s = self.pop()?;
+                    let o = self.top()?;
+                    match &mut self.objs[o] {
+                        Obj::Call { state, .. } => *state = Some(s),
+                        _ => return Err(format!("pickle at byte {at}: BUILD on a plain value")),
+                    }
+                }
+                _ => {
+                    return Err(format!(
+                    "pickle at byte {at}: opcode 0x{op:02x} is not one NumPy's array pickles use"
+                ))
+                }
+            }
+        }
+        Err(format!("pickle: more than {MAX_OPS} opcodes"))
+    }
+
+    fn list_mut(&mut self, i: usize, at: usize) -> Result<&mut Vec<usize>, NpyError> {
+        match &mut self.objs[i] {
+            Obj::List(v) => Ok(v),
+            _ => Err(format!("pickle at byte {at}: APPEND to a non-list")),
+        }
+    }
+
+    fn dict_mut(&mut self, i: usize, at: usize) -> Result<&mut Vec<(usize, usize)>, NpyError> {
+        match &mut self.objs[i] {
+            Obj::Dict(v) => Ok(v),
+            _ => Err(format!("pickle at byte {at}: SETITEM on a non-dict")),
+        }
+    }
+
+    /// Text of a str, or of a Python 2 str (bytes) read as Latin-1.
+    fn text(&self, i: usize) -> Option<String> {
+        match &self.objs[i] {
+            Obj::Str(s) => Some(s.clone()),
+            Obj::Bytes(r) => Some(self.b[r.clone()].iter().map(|&c| c as char).collect()),
+            _ => None,
+        }
+    }
+
+    fn kind(&self, i: usize) -> &'static str {
+        match &self.objs[i] {
+            Obj::None => "None",
+            Obj::Bool(_) => "a bool",
+            Obj::Int(_) => "an int",
+            Obj::Float => "a float",
+            Obj::Str(_) => "a str",
+            Obj::Bytes(_) => "bytes",
+            Obj::Tuple(_) => "a tuple",
+            Obj::List(_) => "a list",
+            Obj::Dict(_) => "a dict",
+            Obj::Global(_) => "a global",
+            Obj::Call { .. } => "an object",
+            Obj::Mark => "a MARK",
+        }
+    }
+
+    fn tuple(&self, i: usize) -> Option<&[usize]> {
+        match &self.objs[i] {
+            Obj::Tuple(v) => Some(v),
+            _ => None,
+        }
+    }
+
+    fn int(&self, i: usize) -> Option<i64> {
+        match self.objs[i] {
+            Obj::Int(v) => Some(v),
+            _ => None,
+        }
+    }
+
+    /// (dtype string, byte order) of a `numpy.dtype(...)` object.
+    fn dtype(&self, i: usize) -> Result<(String, String), NpyError> {
+        let Obj::Call {
+            callable: Allowed::Dtype,
+            args,
+            state,
+        } = &self.objs[i]
+        else {
+            return Err(format!("its dtype is {}", self.kind(i)));
+        };
+        let name = self
+            .tuple(*args)
+            .and_then(|a| a.first())
+            .and_then(|&a| self.text(a))
+            .ok_or("its dtype has no name")?;
+        let order = state
+            .and_then(|s| self.tuple(s).map(|t| t.to_vec()))
+            .and_then(|t| t.get(1).and_then(|&o| self.text(o)))
+            .unwrap_or_else(|| "|".into());
+        Ok((name, order))
+    }
+
+    /// (shape, dtype object, data object) of a `_reconstruct(ndarray, …)` after its BUILD.
+    fn ndarray_state(&self, i: usize) -> Result<(Vec<usize>, usize, usize), NpyError> {
+        let Obj::Call {
+            callable: Allowed::Reconstruct,
+            args,
+            state: Some(state),
+        } = &self.objs[i]
+        else {
+            return Err(format!("{} where an ndarray was expected", self.kind(i)));
+        };
+        let a = self.tuple(*args).unwrap_or(&[]);
+        if !matches!(
+            a.first().map(|&c| &self.objs[c]),
+            Some(Obj::Global(Allowed::Ndarray))
+        ) {
+            return Err("an _reconstruct of something other than numpy.ndarray".into());
+        }
+        let s = self
+            .tuple(*state)
+            .ok_or("an ndarray state that is not a tuple")?;
+        if s.len() != 5 {
+            return Err(format!("an ndarray state of {} items, not 5", s.len()));
+        }
+        if matches!(self.objs[s[3]], Obj::Bool(true)) {
+            return Err("a Fortran-ordered array (tensorflow-vgg writes C order)".into());
+        }
+        let shape = self
+            .tuple(s[1])
+            .ok_or("an ndarray shape that is not a tuple")?
+            .iter()
+            .map(|&d| {
+                self.int(d)
+                    .and_then(|v| usize::try_from(v).ok())
+                    .ok_or("a negative or non-integer dimension")
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok((shape, s[2], s[4]))
+    }
+
+    /// The one element of a 0-d object array.
+    fn object_array_item(&self, i: usize) -> Result<usize, NpyError> {
+        let (shape, dtype, data) = self.ndarray_state(i)?;
+        let (name, _) = self.dtype(dtype)?;
+        if !shape.is_empty() || name != "O8" && name != "O4" {
+            return Err(format!(
+                "the pickle holds a {name} array of shape {shape:?}, not the 0-d object array tensorflow-vgg writes"
+            ));
+        }
+        match &self.objs[data] {
+            Obj::List(v) if v.len() == 1 => Ok(v[0]),
+            _ => Err("the object array holds no single element".into()),
+        }
+    }
+
+    /// A float32 ndarray, by `_reconstruct` (protocols 2–4) or `_frombuffer` (protocol 5).
+    fn f32_array(&self, i: usize) -> Result<F32Array, NpyError> {
+        let (shape, dtype, data) = match &self.objs[i] {
+            Obj::Call {
+                callable: Allowed::FromBuffer,
+                args,
+                ..
+            } => {
+                let a = self.tuple(*args).ok_or("a _frombuffer without arguments")?;
+                let [buf, dt, shape, order] = a else {
+                    return Err("a _frombuffer of other than 4 arguments".into());
+                };
+                if self.text(*order).as_deref() != Some("C") {
+                    return Err("a Fortran-ordered array (tensorflow-vgg writes C order)".into());
+                }
+                let shape = self
+                    .tuple(*shape)
+                    .ok_or("a shape that is not a tuple")?
+                    .iter()
+                    .map(|&d| self.int(d).and_then(|v| usize::try_from(v).ok()))
+                    .collect::<Option<Vec<_>>>()
+                    .ok_or("a negative or non-integer dimension")?;
+                (shape, *dt, *buf)
+            }
+            _ => self.ndarray_state(i)?,
+        };
+        let (name, order) = self.dtype(dtype)?;
+        if name != "f4" || order == ">" {
+            return Err(format!(
+                "a {order}{name} array; tensorflow-vgg's weights are little-endian float32 (f4)"
+            ));
+        }
+        let Obj::Bytes(r) = &self.objs[data] else {
+            return Err(format!("array data is {}, not bytes", self.kind(data)));
+        };
+        let n = shape
+            .iter()
+            .try_fold(1usize, |a, &d| a.checked_mul(d))
+            .ok_or("an array shape whose size overflows")?;
+        if n.checked_mul(4) != Some(r.len()) {
+            return Err(format!(
+                "an array of shape {shape:?} with {} data bytes (expected {})",
+                r.len(),
+                n.saturating_mul(4)
+            ));
+        }
+        let data = self.b[r.clone()]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        Ok(F32Array { shape, data })
+    }
+}
+
+fn pairs(items: &[usize], at: usize) -> Result<Vec<(usize, usize)>, NpyError> {
+    if !items.len().is_multiple_of(2) {
+        return Err(format!("pickle at byte {at}: an odd number of dict items"));
+    }
+    Ok(items.chunks_exact(2).map(|p| (p[0], p[1])).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A Python 2 protocol-2 pickle, as tensorflow-vgg's file was written: BINSTRING keys
+    /// and data, `numpy.core.multiarray` globals by GLOBAL, BINPUT/BINGET memo.
+    fn py2_file() -> Vec<u8> {
+        let mut p = vec![0x80, 2];
+        let global = |p: &mut Vec<u8>, m: &str, n: &str| {
+            p.push(b'c');
+            p.extend(format!("{m}\n{n}\n").bytes());
+        };
+        let array = |p: &mut Vec<u8>, shape: &[u8], data: &[f32], name: &str| {
+            global(p, "numpy.core.multiarray", "_reconstruct");
+            global(p, "numpy", "ndarray");
+            p.extend([b'K', 0, 0x85, b'U', 1, b'b', 0x87, b'R']);
+            p.extend([b'(', b'K', 1, b'(']);
+            for &d in shape {
+                p.extend([b'K', d]);
+            }
+            p.push(b't');
+            global(p, "numpy", "dtype");
+            p.extend([b'U', 2]);
+            p.extend(name.bytes());
+            p.extend([b'K', 0, b'K', 1, 0x87, b'R']);
+            p.extend([b'(', b'K', 3, b'U', 1, b'<', b'N', b'N', b'N', b'J']);
+            p.extend((-1i32).to_le_bytes());
+            p.push(b'J');
+            p.extend((-1i32).to_le_bytes());
+            p.extend([b'K', 0, b't', b'b', 0x89, b'T']);
+            p.extend(((data.len() * 4) as u32).to_le_bytes());
+            p.extend(data.iter().flat_map(|v| v.to_le_bytes()));
+            p.extend([b't', b'b']);
+        };
+        global(&mut p, "numpy.core.multiarray", "_reconstruct");
+        p.extend([b'q', 0]);
+        global(&mut p, "numpy", "ndarray");
+        p.extend([b'K', 0, 0x85, b'U', 1, b'b', 0x87, b'R']);
+        p.extend([b'(', b'K', 1, b')']);
+        global(&mut p, "numpy", "dtype");
+        p.extend([b'U', 2, b'O', b'8', b'K', 0, b'K', 1, 0x87, b'R']);
+        p.extend([b'(', b'K', 3, b'U', 1, b'|', b'N', b'N', b'N', b'J']);
+        p.extend((-1i32).to_le_bytes());
+        p.push(b'J');
+        p.extend((-1i32).to_le_bytes());
+        p.extend([b'K', 63, b't', b'b', 0x89, b']', b'(', b'}', b'(']);
+        p.extend([b'U', 7]);
+        p.extend(b"conv1_1");
+        p.push(b']');
+        p.push(b'(');
+        array(&mut p, &[1, 1, 2, 1], &[1.5, -2.0], "f4");
+        array(&mut p, &[1], &[0.25], "f4");
+        p.extend([b'e', b'u', b'e', b't', b'b', b'.']);
+        npy(&p)
+    }
+
+    fn npy(pickle: &[u8]) -> Vec<u8> {
+        let mut h = "{'descr': '|O', 'fortran_order': False, 'shape': (), }".to_string();
+        while !(10 + h.len() + 1).is_multiple_of(64) {
+            h.push(' ');
+        }
+        h.push('\n');
+        let mut f = b"\x93NUMPY\x01\x00".to_vec();
+        f.extend((h.len() as u16).to_le_bytes());
+        f.extend(h.bytes());
+        f.extend(pickle);
+        f
+    }
+
+    #[test]
+    fn a_python2_pickle_reads_as_numpy_reads_it() {
+        let layers = read_layers(&py2_file()).unwrap();
+        let l = &layers["conv1_1"];
+        assert_eq!(l[0].shape, vec![1, 1, 2, 1]);
+        assert_eq!(l[0].data, vec![1.5, -2.0]);
+        assert_eq!(l[1].data, vec![0.25]);
+    }
+
+    #[test]
+    fn other_globals_are_refused_by_name_and_never_run() {
+        let mut g = py2_file();
+        let at = g.windows(12).position(|w| w == b"numpy\ndtype\n").unwrap();
+        g.splice(at..at + 12, b"os\nsystem\n".iter().copied());
+        let e = read_layers(&g).unwrap_err();
+        assert!(e.contains("`os.system`") && e.contains("refused"), "{e}");
+    }
+
+    #[test]
+    fn truncated_and_hostile_lengths_are_errors_not_allocations() {
+        let f = py2_file();
+        for cut in [11, 80, 200, f.len() - 2] {
+            assert!(read_layers(&f[..cut]).is_err(), "cut at {cut}");
+        }
+        let mut g = f.clone();
+        let at = g.iter().rposition(|&c| c == b'T').unwrap();
+        g[at + 1..at + 5].copy_from_slice(&u32::MAX.to_le_bytes());
+        let e = read_layers(&g).unwrap_err();
+        assert!(e.contains("runs past the end"), "{e}");
+        let e = read_layers(b"\x93NUMPY\x01\x00\x10\x00{'descr': '<f4'}").unwrap_err();
+        assert!(e.contains("object array") || e.contains("header"), "{e}");
+        assert!(read_layers(b"PK\x03\x04 a zip")
+            .unwrap_err()
+            .contains("magic"));
+    }
+}

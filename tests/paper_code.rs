@@ -204,3 +204,78 @@ fn the_published_code_reads_the_default_official_export_of_sceaux_castle() {
     let kept = nrw_dataset::reader::Dataset::open(&ds).unwrap().len() as u64;
     assert_published_reads(&v, kept - 2, 2);
 }
+
+#[test]
+fn each_tier_refuses_weights_of_the_other_convention_by_name() {
+    let Some(st) = shared::shared("weights/vgg16_imagenet.safetensors") else {
+        return;
+    };
+    if !python_has("import numpy") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let npy = test_npy(tmp.path());
+    let ds = tmp.path().join("ds");
+    let scene = tmp.path().join("scene");
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(3, (120, 150), 20_000);
+    spec.observations.features = 300;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    ok(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        ds.to_str().unwrap(),
+        "--min-dim",
+        "96",
+        "--min-photo-side",
+        "100",
+        "--max-empty",
+        "1.0",
+        "--quiet",
+    ]);
+    let d = ds.to_str().unwrap();
+    let e = super::fails(&[
+        "style",
+        d,
+        "--tier",
+        "official-64",
+        "--weights",
+        st.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("vgg16_imagenet.safetensors")
+            && e.contains("tensorflow-vgg's Caffe-trained vgg16.npy")
+            && e.contains("torchvision weights"),
+        "{e}"
+    );
+    let e = super::fails(&[
+        "style",
+        d,
+        "--tier",
+        "vgg16-64",
+        "--weights",
+        npy.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("vgg16.npy") && e.contains("only the official tiers run"),
+        "{e}"
+    );
+    // A pickle that names anything but NumPy's array globals is refused, nothing run.
+    let evil = tmp.path().join("evil.npy");
+    let mut bytes = std::fs::read(&npy).unwrap();
+    let at = bytes.windows(7).position(|w| w == b"ndarray").unwrap();
+    bytes[at..at + 7].copy_from_slice(b"getattr");
+    std::fs::write(&evil, &bytes).unwrap();
+    let e = super::fails(&[
+        "style",
+        d,
+        "--tier",
+        "official-64",
+        "--weights",
+        evil.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("evil.npy") && e.contains("`numpy.getattr`") && e.contains("refused"),
+        "{e}"
+    );
+}

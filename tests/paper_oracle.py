@@ -237,6 +237,30 @@ def check_dist(pretrain, root, name, out_dist, npy):
     return out
 
 
+def time_published_dist(style_loss, a):
+    """compute_pairwise_style_loss_v2 on the exported train references, timed (wall seconds,
+    peak resident MB of this process), against our dist_NAME.pckl."""
+    import pickle
+    import resource
+    import time
+    refs = sorted(glob.glob(os.path.join(a.official, 'train', '*_reference.png')))
+    t = time.perf_counter()
+    published = style_loss.compute_pairwise_style_loss_v2(refs)
+    seconds = time.perf_counter() - t
+    ours = pickle.load(open(os.path.join(a.official, 'dist_%s.pckl' % a.name), 'rb'))['dist_matrix']
+    n = len(refs)
+    off = ~np.eye(n, dtype=bool)
+    rel = np.abs(ours - published)[off] / np.abs(published)[off]
+    import tensorflow as tf2
+    return {'n': n, 'seconds': seconds,
+            'peak_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+            'worst_relative': float(rel.max()), 'median_relative': float(np.median(rel)),
+            'same_order': all(np.array_equal(np.argsort(ours[i], kind='stable'),
+                                             np.argsort(published[i], kind='stable'))
+                              for i in range(n)),
+            'tensorflow': tf2.__version__}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--paper', required=True)
@@ -249,6 +273,8 @@ def main():
     ap.add_argument('--no-semantics', action='store_true')
     ap.add_argument('--npy', help="tensorflow-vgg's vgg16.npy: recompute the published distance")
     ap.add_argument('--out-dist')
+    ap.add_argument('--only-dist', action='store_true',
+                    help='benchmark: only the published distance, timed, against our pickle')
     a = ap.parse_args()
     os.environ.setdefault('TF_CPP_MIN_LOG_LEVEL', '2')
     sys.path.insert(0, a.paper)
@@ -266,6 +292,14 @@ def main():
     if a.npy:
         argv.append('--vgg16_path=%s' % a.npy)
     flags.FLAGS(argv)
+    if a.only_dist:
+        real_stdout, sys.stdout = sys.stdout, sys.stderr
+        try:
+            out = time_published_dist(mods['style_loss'], a)
+        finally:
+            sys.stdout = real_stdout
+        json.dump(out, sys.stdout)
+        return
     labels = stored_labels(a.dataset) if a.dataset and a.resolution else {}
     meta_dir = a.official or a.tfrecord
     export = json.load(open(os.path.join(meta_dir, 'export.json')))

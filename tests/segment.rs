@@ -355,6 +355,7 @@ fn the_paper_pipeline_with_segment_weights_labels_its_photos_and_exports_them() 
             .replace("min_photo_side = 450", "min_photo_side = 100")
             .replace("max_empty = 0.85", "max_empty = 1.0")
             .replace("segment_size = 512", "segment_size = 64")
+            .replace("semantics = false", "semantics = false\ncrop = \"none\"")
             .replace("\"vgg16-512\"", "\"color-stats\""),
     )
     .unwrap();

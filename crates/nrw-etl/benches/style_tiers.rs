@@ -117,8 +117,21 @@ fn real(root: &Path) -> Scene {
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let net = Vgg::load(&root.join("../shared/weights/vgg16_imagenet.safetensors")).unwrap();
+    let weights = root.join("../shared/weights/vgg16_imagenet.safetensors");
+    let net = Vgg::load(&weights).unwrap();
     let tmp = tempfile::tempdir().unwrap();
+    // The official tiers run the published code's convention (tensorflow-vgg's vgg16.npy,
+    // Caffe input). No Caffe-trained file is here offline: the same ImageNet weights are put
+    // in that layout, so these rows show the official *definition* on these weights.
+    let npy = tmp.path().join("vgg16.npy");
+    let o = std::process::Command::new("python3")
+        .arg(root.join("tests/make_vgg16_npy.py"))
+        .arg(&weights)
+        .arg(&npy)
+        .output()
+        .expect("python3 with numpy");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let caffe = Vgg::load(&npy).unwrap();
     let scenes = [synthetic(quick, tmp.path()), real(&root)];
     let tiers = [
         "vgg16-512",
@@ -134,7 +147,7 @@ fn main() {
     ];
     let mut md = String::from("# Style descriptor tiers: accuracy versus time\n\n");
     let _ = writeln!(md, "Machine: {}.\n", cpu::describe());
-    let _ = writeln!(md, "Regenerate: `cargo bench -p nrw-etl --bench style_tiers`. Reference tier: VGG16 on a 512×512 centre crop, five layers (relu1_2 … relu5_2), the paper's choice. `official` is the paper's published distance (`style_loss.compute_pairwise_style_loss_v2`): a 512 × 512 centre crop without resizing, input v·2/255 − 1, each layer's squared Gram difference averaged over its C² entries (so relu1_2 weighs 64× more relative to relu5_2 than in the reference tier); `official-256` crops 256 × 256. Photos are stored with shorter side 600 px, as ingest stores them. Time: median per photo, one photo per core on 2 cores (wall time / photos × 2). Recall@k: the fraction of the reference's k nearest neighbours a tier also returns (k capped at N − 1). Class@5 (synthetic only): the fraction of a photo's 5 nearest neighbours with the same simulated time of day.\n");
+    let _ = writeln!(md, "Regenerate: `cargo bench -p nrw-etl --bench style_tiers`. Reference tier: VGG16 on a 512×512 centre crop, five layers (relu1_2 … relu5_2), the paper's choice. `official` is the paper's published distance (`style_loss.compute_pairwise_style_loss_v2`): a 512 × 512 centre crop without resizing, input v·2/255 − 1 into the published VGG (tensorflow-vgg: (x + 1)·255/2, BGR, minus the Caffe means), each layer's squared Gram difference averaged over its C² entries (so relu1_2 weighs 64× more relative to relu5_2 than in the reference tier); `official-256` crops 256 × 256.\n\nWeights each tier expects: the `vgg16-*`/`vgg19-*` tiers take torchvision's ImageNet VGG as safetensors (`features.N.weight`, ImageNet mean/std input); the `official` tiers take tensorflow-vgg's `vgg16.npy` (Caffe-trained, the file the published README downloads), and each refuses the other's file. No Caffe-trained `vgg16.npy` is available offline here, so the official rows below run the *same ImageNet weights* put in tensorflow-vgg's layout (tests/make_vgg16_npy.py) with the Caffe input: they measure the official definition (crop, input, per-layer means), not the published weights; recall with the real Caffe weights is not measured. Photos are stored with shorter side 600 px, as ingest stores them. Time: median per photo, one photo per core on 2 cores (wall time / photos × 2). Recall@k: the fraction of the reference's k nearest neighbours a tier also returns (k capped at N − 1). Class@5 (synthetic only): the fraction of a photo's 5 nearest neighbours with the same simulated time of day.\n");
     let mut points: Vec<(String, f64, f64)> = Vec::new();
     for scene in &scenes {
         let _ = writeln!(md, "\n## {}\n\n| tier | dim | ms / photo | recall@5 | recall@20 | class@5 |\n|---|---|---|---|---|---|", scene.name);
@@ -146,14 +159,13 @@ fn main() {
                 .photos
                 .par_iter()
                 .map(|p| {
-                    describe(
-                        &tier,
-                        Some(&net),
-                        p,
-                        Preprocess::Imagenet,
-                        Parallelism::None,
-                    )
-                    .expect("tier photos are at least 16×16")
+                    let n = if matches!(tier, Tier::Official { .. }) {
+                        &caffe
+                    } else {
+                        &net
+                    };
+                    describe(&tier, Some(n), p, Preprocess::Imagenet, Parallelism::None)
+                        .expect("tier photos are at least 16×16")
                 })
                 .collect();
             let ms = t.elapsed().as_secs_f64() * 1e3 / scene.photos.len() as f64

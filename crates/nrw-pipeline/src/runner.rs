@@ -80,6 +80,25 @@ pub struct ExportStage {
     /// false: export without semantics (train with --use_semantic=False)
     #[serde(default = "yes")]
     pub semantics: bool,
+    /// Centre crop of every channel (official, tfrecord): a side in pixels for
+    /// `--train_resolution`, or "none" to keep the stored size; the published 512 when absent.
+    #[serde(default)]
+    pub crop: Option<CropSetting>,
+}
+
+/// `[export] crop`: a side in pixels, or the word "none".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(untagged)]
+pub enum CropSetting {
+    Side(u32),
+    Word(NoCrop),
+}
+
+/// The one word `[export] crop` takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NoCrop {
+    None,
 }
 
 /// `[qa]`: the report into DIR/qa.
@@ -129,6 +148,7 @@ impl Pipeline {
             export: Some(ExportStage {
                 layout: "official".into(),
                 semantics: true,
+                crop: None,
             }),
             qa: Some(QaStage {}),
         }
@@ -216,8 +236,12 @@ fn export_config(
     Ok(ExportConfig {
         layout,
         // The files layout keeps views whole; the paper's layouts take the published crop.
-        crop: (layout != nrw_dataset::export::Layout::Files)
-            .then_some(nrw_dataset::export::official::PUBLISHED_CROP),
+        crop: match (e.crop, layout) {
+            (Some(CropSetting::Side(n)), _) => Some(n),
+            (_, nrw_dataset::export::Layout::Files) => None,
+            (Some(CropSetting::Word(NoCrop::None)), _) => None,
+            (None, _) => Some(nrw_dataset::export::official::PUBLISHED_CROP),
+        },
         // A run that segments its photos exports their labels.
         semantics: e.semantics || segmented,
         ..crate::export::official(dataset, out)

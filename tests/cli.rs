@@ -26,6 +26,8 @@ mod shared;
 mod undistort;
 #[path = "units.rs"]
 mod units;
+#[path = "untrusted.rs"]
+mod untrusted;
 #[path = "verify.rs"]
 mod verify;
 

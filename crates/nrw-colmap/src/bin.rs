@@ -244,6 +244,7 @@ pub(crate) fn read_images(
             stored_quat_norm,
             points2d,
         };
+        crate::names::check_model_name(path, rec, "name", &img.name)?;
         match out.entry(id) {
             Entry::Occupied(_) => return Err(duplicate(path, rec, "image", id as u64)),
             Entry::Vacant(v) => {

@@ -8,6 +8,7 @@ pub mod camera;
 pub mod error;
 mod load;
 pub mod model;
+pub mod names;
 mod parse;
 pub mod ply;
 pub mod pose;

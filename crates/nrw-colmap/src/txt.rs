@@ -243,6 +243,7 @@ pub(crate) fn read_images(
             stored_quat_norm,
             points2d,
         };
+        crate::names::check_model_name(path, rec, "NAME", &img.name)?;
         if out.insert(id, img).is_some() {
             return Err(duplicate(path, rec, "image", id as u64));
         }

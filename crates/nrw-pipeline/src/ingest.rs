@@ -62,6 +62,9 @@ pub struct IngestConfig {
     pub rows_per_shard: usize,
     /// Make an unreadable photo or label map an error instead of an `unreadable` verdict.
     pub strict: bool,
+    /// Read a photo that is a symbolic link out of the images folder (refused by default: a
+    /// model's names cannot make ingest read files the user did not put there).
+    pub follow_outside_links: bool,
     /// Stop after this many groups, as an interruption would (resume tests).
     pub stop_after_groups: Option<usize>,
     /// Sleep this long after each group (so tests can kill a unit mid-way).
@@ -87,6 +90,7 @@ impl IngestConfig {
             filters: Filters::default(),
             rows_per_shard: 64,
             strict: false,
+            follow_outside_links: false,
             stop_after_groups: None,
             pause_after_group: None,
         }
@@ -299,6 +303,14 @@ fn header_size(path: &Path) -> std::result::Result<(u32, u32), String> {
         .map_err(|e| format!("cannot read the photo's size: {}", e.to_string().trim()))
 }
 
+/// The photo of `img` inside `dir`, or an error naming the image: the one place a model's
+/// image name becomes a path (names are checked when the model is read; links out of the
+/// folder are refused here unless `follow_outside_links`).
+fn photo_path(dir: &Path, img: &nrw_colmap::Image, follow_outside_links: bool) -> Result<PathBuf> {
+    nrw_colmap::names::photo_path(dir, &img.name, follow_outside_links)
+        .map_err(|p| PipelineError::input(dir, format!("image {}: field `name`: {p}", img.id)))
+}
+
 /// Registered photos' sizes from their headers, and those whose header cannot be read.
 struct PhotoSizes {
     sizes: BTreeMap<u32, (u32, u32)>,
@@ -310,14 +322,15 @@ struct PhotoSizes {
 fn photo_sizes(
     rec: &Reconstruction,
     dir: &Path,
-    strict: bool,
+    cfg: &IngestConfig,
     warnings: &mut Vec<String>,
 ) -> Result<PhotoSizes> {
+    let strict = cfg.strict;
     let mut photos = BTreeMap::new();
     let mut unreadable = BTreeMap::new();
     let mut missing = Vec::new();
     for img in rec.images.values() {
-        let path = dir.join(&img.name);
+        let path = photo_path(dir, img, cfg.follow_outside_links)?;
         if !path.is_file() {
             missing.push(img.name.clone());
             continue;
@@ -532,7 +545,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     let (model_dir, mut rec) = load_model(&cfg.scene, cfg.format)?;
     let photos_dir = images_dir(cfg.images.as_deref(), &cfg.scene, &model_dir)?;
     let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
-    let photos = photo_sizes(&rec, &photos_dir, cfg.strict, &mut warnings)?;
+    let photos = photo_sizes(&rec, &photos_dir, cfg, &mut warnings)?;
     let distorted = match &cfg.undistort {
         Some(o) => Some(undistort_model(&mut rec, o, &model_dir)?),
         None => None,
@@ -699,7 +712,7 @@ fn process(
 ) -> Result<(ImageOutcome, Option<ViewRow>)> {
     let img = &p.rec.images[&image_id];
     let cam = &p.rec.cameras[&img.camera_id];
-    let photo_path = p.photos_dir.join(&img.name);
+    let photo_path = photo_path(&p.photos_dir, img, cfg.follow_outside_links)?;
     if let Some(problem) = p.unreadable.get(&image_id) {
         return Ok((unreadable(&photo_path, problem.clone()), None));
     }

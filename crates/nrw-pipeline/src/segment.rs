@@ -37,6 +37,8 @@ pub struct SegmentConfig {
     pub mode: Mode,
     /// Make an unreadable photo an error instead of a warning.
     pub strict: bool,
+    /// Read a photo that is a symbolic link out of the images folder (refused by default).
+    pub follow_outside_links: bool,
     /// The work unit this process does (`Unit::WHOLE`: every photo).
     pub unit: crate::Unit,
 }
@@ -56,6 +58,7 @@ impl SegmentConfig {
             out: out.into(),
             mode: Mode::default(),
             strict: false,
+            follow_outside_links: false,
             unit: crate::Unit::WHOLE,
         }
     }
@@ -224,7 +227,8 @@ fn segment_one(
     photos: &Path,
     name: &str,
 ) -> Result<Option<String>> {
-    let path = photos.join(name);
+    let path = nrw_colmap::names::photo_path(photos, name, cfg.follow_outside_links)
+        .map_err(|p| PipelineError::input(photos, p))?;
     let photo = match nrw_dataset::codec::load_photo(&path) {
         Ok(p) => p,
         Err(nrw_dataset::DatasetError::Unreadable { path, problem }) if !cfg.strict => {

@@ -218,6 +218,23 @@ fn commit(staged: &Path, out: &Path) -> Result<()> {
     Ok(())
 }
 
+/// `root/rel`, refusing a `rel` that is not a relative path of normal components
+/// ([`nrw_colmap::names::check_name`]): every file an export writes is joined here, so no
+/// name from a dataset (or an export's `--name`) can put a file outside the export folder.
+pub fn join_under(root: &Path, rel: &str) -> Result<std::path::PathBuf> {
+    nrw_colmap::names::join_checked(root, rel).map_err(|problem| DatasetError::Value {
+        path: root.into(),
+        record: "output file".into(),
+        field: "name".into(),
+        problem,
+    })
+}
+
+/// Write `bytes` to `root/rel` (through [`join_under`]), creating its folders.
+fn write_under(root: &Path, rel: &str, bytes: &[u8]) -> Result<()> {
+    write_file(&join_under(root, rel)?, bytes)
+}
+
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     if let Some(d) = path.parent() {
         std::fs::create_dir_all(d).map_err(|e| DatasetError::io(d, e))?;
@@ -504,8 +521,9 @@ pub fn export_with_points(
             skipped: Vec::new(),
             dist_pickle: None,
         };
-        write_file(
-            &staged.join(EXPORT_JSON),
+        write_under(
+            &staged,
+            EXPORT_JSON,
             &serde_json::to_vec_pretty(&summary).expect("json"),
         )?;
         Ok(summary)
@@ -599,15 +617,13 @@ fn write_all(
         if let Some(m) = dist(&train.image_ids)? {
             let n = train.image_ids.len();
             let file = format!("dist_{}.pckl", cfg.name);
-            write_file(
-                &staged.join(&file),
-                &pickle::matrix_dict("dist_matrix", n, &m),
-            )?;
+            write_under(staged, &file, &pickle::matrix_dict("dist_matrix", n, &m))?;
             summary.dist_pickle = Some(file);
         }
     }
-    write_file(
-        &staged.join(EXPORT_JSON),
+    write_under(
+        staged,
+        EXPORT_JSON,
         &serde_json::to_vec_pretty(&summary).expect("json"),
     )?;
     Ok(summary)
@@ -627,7 +643,7 @@ impl Sink<'_> {
         use std::io::Write;
         for (rel, bytes) in files {
             if self.records.is_empty() {
-                write_file(&self.staged.join(&rel), &bytes)?;
+                write_under(self.staged, &rel, &bytes)?;
                 self.files.push(rel);
             } else {
                 let shard = pos * self.records.len() / self.views;
@@ -684,7 +700,7 @@ fn write_split(
     if cfg.layout == Layout::Tfrecord {
         for i in 0..cfg.shards {
             let rel = tfrecord_name(&cfg.name, split, i, cfg.shards);
-            let p = staged.join(&rel);
+            let p = join_under(staged, &rel)?;
             let f = std::fs::File::create(&p).map_err(|e| DatasetError::io(&p, e))?;
             sink.records
                 .push((rel, std::io::BufWriter::with_capacity(1 << 20, f)));

@@ -24,7 +24,7 @@ use nrw_colmap::{CameraModel, PointCloud, Rigid3};
 use serde_json::{json, Map, Value};
 
 use super::nerfw::ScenePoint;
-use super::{refuse, write_file, ExportConfig, SplitExport};
+use super::{join_under, refuse, write_under, ExportConfig, SplitExport};
 use crate::error::{DatasetError, Result};
 use crate::reader::{Dataset, View};
 
@@ -154,14 +154,11 @@ fn npy_f32(h: u32, w: u32, data: &[f32]) -> Vec<u8> {
 fn frame(v: &View, staged: &Path) -> Result<(String, Value)> {
     let s = stem(&v.name);
     let image = format!("images/{s}.png");
-    write_file(&staged.join(&image), &v.photo_png)?;
+    write_under(staged, &image, &v.photo_png)?;
     let depth = v.depth()?;
     let scaled: Vec<f32> = depth.data.iter().map(|z| z * DEPTH_SCALE).collect();
     let depth_file = format!("depth/{s}.npy");
-    write_file(
-        &staged.join(&depth_file),
-        &npy_f32(v.height, v.width, &scaled),
-    )?;
+    write_under(staged, &depth_file, &npy_f32(v.height, v.width, &scaled))?;
     let pose = transform_matrix(v.qvec, v.tvec).ok_or_else(|| DatasetError::Value {
         path: v.name.clone().into(),
         record: format!("image {}", v.image_id),
@@ -177,7 +174,7 @@ fn frame(v: &View, staged: &Path) -> Result<(String, Value)> {
         let mask: Vec<u8> = t.as_raw().iter().map(|m| 255 - m).collect();
         let mask_file = format!("masks/{s}.png");
         let png = crate::codec::encode_gray(&v.name, v.width, v.height, &mask)?;
-        write_file(&staged.join(&mask_file), &png)?;
+        write_under(staged, &mask_file, &png)?;
         f.insert("mask_path".into(), mask_file.into());
     }
     Ok((image, Value::Object(f)))
@@ -243,14 +240,15 @@ pub(super) fn write(
         .clone();
     lists.insert("test_filenames".into(), val);
     let ply = "sparse_pc.ply";
-    write_points(points, &staged.join(ply))?;
+    write_points(points, &join_under(staged, ply)?)?;
     let mut top = Map::new();
     top.insert("frames".into(), Value::Array(frames));
     top.insert("applied_transform".into(), json!(APPLIED_TRANSFORM));
     top.insert("ply_file_path".into(), ply.into());
     top.extend(lists);
-    write_file(
-        &staged.join("transforms.json"),
+    write_under(
+        staged,
+        "transforms.json",
         &serde_json::to_vec_pretty(&Value::Object(top)).expect("json"),
     )?;
     Ok(out)

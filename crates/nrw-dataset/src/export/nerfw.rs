@@ -22,7 +22,7 @@ use std::path::Path;
 
 use nrw_colmap::{Camera, CameraModel, Format, Image, Point3D, Reconstruction, Rigid3};
 
-use super::{refuse, write_file, ExportConfig, SplitExport};
+use super::{refuse, write_under, ExportConfig, SplitExport};
 use crate::error::{DatasetError, Result};
 use crate::reader::{Dataset, View};
 
@@ -133,7 +133,7 @@ pub(super) fn write(
             rec.cameras.insert(id, pinhole(&v)?);
             rec.images.insert(id, model_image(&v, &file)?);
             let rel = format!("dense/images/{file}");
-            write_file(&staged.join(&rel), &v.photo_png)?;
+            write_under(staged, &rel, &v.photo_png)?;
             rows.push(format!("{file}\t{id}\t{}\t{}", tsv_split(split), cfg.name));
             s.image_ids.push(id);
             s.names.push(v.name.clone());
@@ -158,6 +158,6 @@ pub(super) fn write(
     nrw_colmap::write_model(&rec, &sparse, Format::Binary)
         .map_err(|e| DatasetError::io(&sparse, e))?;
     let tsv = format!("filename\tid\tsplit\tdataset\n{}\n", rows.join("\n"));
-    write_file(&staged.join(format!("{}.tsv", cfg.name)), tsv.as_bytes())?;
+    write_under(staged, &format!("{}.tsv", cfg.name), tsv.as_bytes())?;
     Ok(out)
 }

@@ -96,6 +96,10 @@ pub struct IngestArgs {
     /// cannot be decoded whole, instead of dropping its view as `unreadable` and going on
     #[arg(long)]
     pub strict: bool,
+    /// Read photos that are symbolic links out of the images folder (refused by default: a
+    /// model's image names cannot make the tool read files you did not put there)
+    #[arg(long)]
+    pub follow_outside_links: bool,
     #[command(flatten)]
     pub shard: ShardArgs,
     /// Worker threads [default: all cores]; output bytes do not depend on it
@@ -173,6 +177,7 @@ impl IngestArgs {
             },
             rows_per_shard: self.rows_per_shard,
             strict: self.strict,
+            follow_outside_links: self.follow_outside_links,
             stop_after_groups: self.stop_after_shards,
             pause_after_group: self
                 .pause_after_shard_ms

@@ -76,6 +76,10 @@ pub struct SegmentArgs {
     /// Stop with an error at the first photo that cannot be decoded, instead of warning
     #[arg(long)]
     pub strict: bool,
+    /// Read photos that are symbolic links out of the images folder (refused by default: a
+    /// model's image names cannot make the tool read files you did not put there)
+    #[arg(long)]
+    pub follow_outside_links: bool,
     #[command(flatten)]
     pub shard: ShardArgs,
     /// Worker threads [default: all cores]; the maps do not depend on it
@@ -96,6 +100,7 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
         format: args.format.map(Into::into),
         mode: mode(args.mode, args.size)?,
         strict: args.strict,
+        follow_outside_links: args.follow_outside_links,
         unit: args.shard.unit()?.unwrap_or(nrw_pipeline::Unit::WHOLE),
         scene: args.scene.clone(),
         ..SegmentConfig::new("", &args.weights, &args.out)

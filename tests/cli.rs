@@ -1371,9 +1371,34 @@ fn official_export_refuses_bad_requests_and_never_leaves_stale_files() {
         "64",
         "--quiet",
     ]);
-    let img = image::open(out.join("train/0000_depth.png")).unwrap();
-    assert_eq!((img.width(), img.height()), (64, 64));
     assert_eq!(export_json(&out)["crop"], 64);
+    // Every channel of every view is the same 64 × 64 window of the uncropped export, at the
+    // published start ((side − 64) // 2 in x and y): offsets and alignment, not only sizes.
+    let whole = tmp.path().join("whole");
+    ok(&[
+        "export",
+        p,
+        "--out",
+        whole.to_str().unwrap(),
+        "--no-semantics",
+        "--crop",
+        "none",
+        "--quiet",
+    ]);
+    let mut checked = 0;
+    for f in listing(&whole).iter().filter(|f| f.ends_with(".png")) {
+        let full = image::open(whole.join(f)).unwrap();
+        let cut = image::open(out.join(f)).unwrap();
+        assert_eq!((cut.width(), cut.height()), (64, 64), "{f}");
+        assert_eq!(cut.color(), full.color(), "{f}");
+        let (x, y) = ((full.width() - 64) / 2, (full.height() - 64) / 2);
+        assert!(
+            cut.as_bytes() == full.crop_imm(x, y, 64, 64).as_bytes(),
+            "{f}: not the centre window at ({x}, {y})"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 5 * 3, "reference, color and depth of 5 views");
     // Replacing an export with a smaller one leaves none of the earlier files.
     let smaller = small_dataset(tmp.path(), 3, false);
     ok(&["split", smaller.to_str().unwrap(), "--val", "1"]);

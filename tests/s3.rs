@@ -269,6 +269,9 @@ fn bad_endpoints_buckets_and_credentials_name_the_url_and_keep_secrets() {
             .output()
             .unwrap()
     };
+    // The bucket exists before the failed attempts, so that "nothing was written" can be
+    // checked after them (a listing of a bucket made afterwards would be empty anyway).
+    m.bucket("nrw");
     // Nothing listens there.
     let dead = format!("http://127.0.0.1:{}", free_port());
     let t0 = std::time::Instant::now();
@@ -296,9 +299,11 @@ fn bad_endpoints_buckets_and_credentials_name_the_url_and_keep_secrets() {
         err.contains("s3://nrw/ds") && err.contains("access denied"),
         "{err}"
     );
-    // Nothing was written by any of them.
-    m.bucket("nrw");
-    assert!(m.files("s3://nrw/ds").is_empty());
+    // Nothing was written by any of them: the bucket made first is empty, and the missing
+    // bucket was not created (a second attempt finds it missing still).
+    assert!(m.files("s3://nrw").is_empty());
+    let err = assert_fails(&ingest(&m, "s3://no-such-bucket/ds", &[]));
+    assert!(err.contains("the bucket does not exist"), "{err}");
 }
 
 #[test]

@@ -203,3 +203,98 @@ fn removing_floating_points_brings_rendered_depth_back_to_the_truth() {
     // Denoising takes back at least half of what the floating points cost.
     assert!(raw - clean > 0.5 * (raw - base), "{base} {raw} {clean}");
 }
+
+/// Open3D's `RemoveStatisticalOutliers` (open3d/geometry/PointCloud.cpp), by brute force:
+/// each point's k nearest by exhaustive search, the point itself included (SearchKNN returns
+/// it at distance 0); its mean distance over the k; the cloud's mean of those and their
+/// Bessel-corrected deviation (n − 1); kept when its mean is `< mean + σ·std` (strictly) and
+/// `> 0`. Returns (keep, mean, std).
+fn open3d_by_brute_force(pts: &[DVec3], k: usize, sigma: f64) -> (Vec<bool>, f64, f64) {
+    let n = pts.len();
+    let avg: Vec<f64> = (0..n)
+        .map(|i| {
+            let mut d: Vec<f64> = pts.iter().map(|q| (*q - pts[i]).length()).collect();
+            d.sort_by(|a, b| a.total_cmp(b));
+            d[..k.min(n)].iter().sum::<f64>() / k.min(n) as f64
+        })
+        .collect();
+    let mean = avg.iter().filter(|a| **a > 0.0).sum::<f64>() / n as f64;
+    let sq: f64 = avg
+        .iter()
+        .map(|a| if *a > 0.0 { (a - mean).powi(2) } else { 0.0 })
+        .sum();
+    let std = (sq / (n - 1) as f64).sqrt();
+    let t = mean + sigma * std;
+    (avg.iter().map(|a| *a > 0.0 && *a < t).collect(), mean, std)
+}
+
+#[test]
+fn outlier_removal_is_open3ds_definition_checked_by_brute_force() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(26);
+    // A noisy plane with a few far points: no duplicates, no ties at the threshold.
+    let mut pts: Vec<DVec3> = (0..1500)
+        .map(|_| {
+            DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-0.01..0.01),
+            )
+        })
+        .collect();
+    for _ in 0..40 {
+        pts.push(DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(0.1..0.5),
+        ));
+    }
+    for (k, sigma) in [(8, 1.0), (16, 2.0), (30, 0.5)] {
+        let (keep, rep) = statistical_outliers(&pts, DVec3::ZERO, k, sigma);
+        let (want, mean, std) = open3d_by_brute_force(&pts, k, sigma);
+        assert!(
+            (rep.mean - mean).abs() <= 1e-12 * mean,
+            "k {k}: mean {} vs {mean}",
+            rep.mean
+        );
+        assert!(
+            (rep.std - std).abs() <= 1e-9 * std,
+            "k {k}: std {} vs {std}",
+            rep.std
+        );
+        let differ = keep.iter().zip(&want).filter(|(a, b)| a != b).count();
+        assert_eq!(
+            differ, 0,
+            "k {k}, σ {sigma}: {differ} verdicts differ from Open3D's"
+        );
+        assert!(
+            rep.removed > 0 && rep.removed < pts.len() / 4,
+            "k {k}: {}",
+            rep.removed
+        );
+        // Not counting the point itself (k − 1 neighbours over k − 1) gives other means.
+        let excl: f64 = (0..pts.len())
+            .map(|i| {
+                let mut d: Vec<f64> = pts.iter().map(|q| (*q - pts[i]).length()).collect();
+                d.sort_by(|a, b| a.total_cmp(b));
+                d[1..k].iter().sum::<f64>() / (k - 1) as f64
+            })
+            .sum::<f64>()
+            / pts.len() as f64;
+        assert!(
+            (rep.mean - excl).abs() > 1e-6 * excl,
+            "k {k}: self is counted"
+        );
+    }
+    // Where the definitions part, on purpose (docs/rendering.md): points whose means all
+    // equal the threshold (deviation 0; here two points, k = 2) are kept here (≤) and all
+    // removed by Open3D's strict `<`; exact duplicates (mean 0) are kept here, dropped there.
+    for (cloud, k) in [(vec![DVec3::ZERO, DVec3::X], 2), (vec![DVec3::ZERO; 5], 3)] {
+        let (keep, _) = statistical_outliers(&cloud, DVec3::ZERO, k, 2.0);
+        let (want, _, _) = open3d_by_brute_force(&cloud, k, 2.0);
+        assert!(
+            keep.iter().all(|k| *k) && want.iter().all(|k| !*k),
+            "{cloud:?}"
+        );
+    }
+}

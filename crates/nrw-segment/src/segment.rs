@@ -173,6 +173,12 @@ fn center_crop(
     Ok(out)
 }
 
+/// Where `slide` windows of `win` pixels start along an axis of `len`: every two thirds of a
+/// window (rounded down to the logits' grid of 4), plus one window flush with the end.
+pub fn slide_windows(len: usize, win: usize) -> Vec<usize> {
+    starts(len, win, ((2 * win / 3) / 4 * 4).max(4))
+}
+
 /// Window starts along an axis of `len` (a multiple of 4): every `stride`, plus one flush
 /// with the end.
 fn starts(len: usize, win: usize, stride: usize) -> Vec<usize> {
@@ -184,8 +190,10 @@ fn starts(len: usize, win: usize, stride: usize) -> Vec<usize> {
     v
 }
 
-/// Averaged logits over the scaled photo, at a quarter of its size.
-fn slide_logits(
+/// `slide` mode's logits: the photo scaled to shorter side `size`, windows at
+/// [`slide_windows`], each grid cell the mean of the windows' logits that cover it; at a
+/// quarter of the scaled size.
+pub fn slide_logits(
     model: &Segformer,
     photo: &RgbImage,
     size: u32,
@@ -204,12 +212,11 @@ fn slide_logits(
     };
     let scaled = pil_bilinear(photo, sw, sh);
     let s = size as usize;
-    let stride = ((2 * s / 3) / 4 * 4).max(4);
     let (gw, gh) = (sw as usize / 4, sh as usize / 4);
     let mut sum = Map::zeros(gh, gw, crate::config::ADE_CLASSES);
     let mut count = vec![0u32; gw * gh];
-    for y0 in starts(sh as usize, s, stride) {
-        for x0 in starts(sw as usize, s, stride) {
+    for y0 in slide_windows(sh as usize, s) {
+        for x0 in slide_windows(sw as usize, s) {
             let win =
                 image::imageops::crop_imm(&scaled, x0 as u32, y0 as u32, size, size).to_image();
             let l = model.logits(&normalize(&win), s, s, par);

@@ -185,13 +185,57 @@ fn whole_mode_is_a_resize_to_the_aspect_kept_size() {
 
 #[test]
 fn overlapping_windows_average_their_logits() {
-    // A photo two windows wide: the averaged logits must differ from any single window's
-    // where they overlap, and the map still covers the whole photo.
+    // A photo 164 × 64 at window 64 (no rescale): windows every 40 pixels (two thirds of 64,
+    // on the grid of 4), the last flush with the right edge: x = 0, 40, 80, 100.
+    use nrw_segment::segment::{slide_logits, slide_windows};
+    assert_eq!(slide_windows(164, 64), [0, 40, 80, 100]);
+    assert_eq!(slide_windows(64, 64), [0]);
+    assert_eq!(slide_windows(100, 64), [0, 36]);
     let m = model();
-    let p = noise(100, 64, 10);
-    let slid = segment(&m, &p, Mode::Slide { size: 64 }, "p", Parallelism::None).unwrap();
-    assert_eq!((slid.width(), slid.height()), (100, 64));
-    assert!(slid.as_raw().iter().all(|&v| (1..=150).contains(&v)));
+    let p = noise(164, 64, 10);
+    let slid = slide_logits(&m, &p, 64, "p", Parallelism::None).unwrap();
+    assert_eq!((slid.w, slid.h), (41, 16));
+    // Each window's logits by hand, summed and averaged where windows overlap.
+    let starts = [0u32, 40, 80, 100];
+    let wins: Vec<Map> = starts
+        .iter()
+        .map(|&x0| {
+            let w = image::imageops::crop_imm(&p, x0, 0, 64, 64).to_image();
+            m.logits(&preprocess::normalize(&w), 64, 64, Parallelism::None)
+        })
+        .collect();
+    let mut overlapped = 0;
+    for gy in 0..16 {
+        for gx in 0..41usize {
+            let cover: Vec<(usize, usize)> = starts
+                .iter()
+                .enumerate()
+                .filter(|(_, &x0)| (x0 as usize / 4..x0 as usize / 4 + 16).contains(&gx))
+                .map(|(k, &x0)| (k, gx - x0 as usize / 4))
+                .collect();
+            assert!(!cover.is_empty(), "cell {gx} is covered");
+            if cover.len() > 1 {
+                overlapped += 1;
+            }
+            for c in 0..slid.c {
+                let mut sum = 0f32;
+                for &(k, lx) in &cover {
+                    sum += wins[k].data[(gy * 16 + lx) * slid.c + c];
+                }
+                let want = sum * (1.0 / cover.len() as f32);
+                let got = slid.data[(gy * 41 + gx) * slid.c + c];
+                assert!(
+                    (got - want).abs() <= 1e-5 * want.abs().max(1.0),
+                    "cell ({gx}, {gy}) class {c}: {got} vs {want} from windows {cover:?}"
+                );
+            }
+        }
+    }
+    // Grid columns 10–15 lie under two windows, 20–35 under two or three (25 under three).
+    assert_eq!(overlapped, 16 * (6 + 16));
+    // The label map covers the whole photo.
+    let labels = segment(&m, &p, Mode::Slide { size: 64 }, "p", Parallelism::None).unwrap();
+    assert_eq!((labels.width(), labels.height()), (164, 64));
 }
 
 #[test]

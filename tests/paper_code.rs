@@ -131,19 +131,24 @@ fn assert_published_reads(v: &serde_json::Value, train: u64, val: u64) {
     assert_eq!(d["same_order"], true, "neighbour order differs: {v}");
 }
 
-#[test]
-fn the_published_code_reads_the_default_official_export_of_a_synthetic_scene() {
-    let Some(_) = shared::shared("paper-code") else {
-        return;
-    };
-    let Some(_) = shared::shared("weights") else {
-        return;
-    };
+/// A temporary folder with a test `vgg16.npy` in it, when the published code, the weights
+/// and TensorFlow are here (a skip that says so otherwise; CI requires them).
+fn published_code_here() -> Option<(tempfile::TempDir, PathBuf)> {
+    shared::shared("paper-code")?;
+    shared::shared("weights")?;
     if !python_has(PAPER_DEPS) {
-        return;
+        return None;
     }
     let tmp = tempfile::tempdir().unwrap();
     let npy = test_npy(tmp.path());
+    Some((tmp, npy))
+}
+
+#[test]
+fn the_published_code_reads_the_default_official_export_of_a_synthetic_scene() {
+    let Some((tmp, npy)) = published_code_here() else {
+        return;
+    };
     let scene = tmp.path().join("scene");
     // 8 photos, 6 for training: the published sampler draws positives at sorted index 1…5.
     let mut spec = nrw_synth::SceneSpec::demo().shrunk(8, (600, 700), 60_000);
@@ -178,17 +183,9 @@ fn the_published_code_reads_the_default_official_export_of_a_synthetic_scene() {
 
 #[test]
 fn the_published_code_reads_the_default_official_export_of_sceaux_castle() {
-    let Some(_) = shared::shared("paper-code") else {
+    let Some((tmp, npy)) = published_code_here() else {
         return;
     };
-    let Some(_) = shared::shared("weights") else {
-        return;
-    };
-    if !python_has(PAPER_DEPS) {
-        return;
-    }
-    let tmp = tempfile::tempdir().unwrap();
-    let npy = test_npy(tmp.path());
     let ds = tmp.path().join("ds");
     let seg = repo().join("tests/fixtures/segformer_tiny");
     ok(&[

@@ -44,22 +44,14 @@ fn rename(rec: &mut nrw_colmap::Reconstruction, scene: &Path, id: u32, name: &st
     img.name = name.into();
 }
 
-fn ingest_args<'a>(scene: &'a Path, out: &'a Path, extra: &[&'a str]) -> Vec<&'a str> {
-    let mut a = vec![
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--min-dim",
-        "96",
-        "--min-photo-side",
-        "100",
-        "--max-empty",
-        "1.0",
-        "--quiet",
-    ];
-    a.extend(extra);
-    a
+/// `ingest` of the small scene (every view kept); its stderr when it fails, else None.
+fn ingest(scene: &Path, out: &Path, extra: &[&str]) -> Option<String> {
+    let o = super::ingest_small(
+        scene,
+        out,
+        &[&["--max-empty", "1.0", "--quiet"], extra].concat(),
+    );
+    (!o.status.success()).then(|| String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
 #[test]
@@ -90,7 +82,7 @@ fn escaping_and_absolute_names_are_refused_naming_the_image_and_nothing_outside_
         });
         let before = files(tmp.path());
         let out = b.join("out");
-        let e = fails(&ingest_args(&scene, &out, &[]));
+        let e = ingest(&scene, &out, &[]).expect("refused");
         assert!(
             e.contains("images.txt") && e.contains("field `NAME`") && e.contains(&hostile),
             "{case}: {e}"
@@ -123,14 +115,14 @@ fn a_photo_linking_out_of_the_images_folder_is_refused_unless_allowed() {
         std::os::unix::fs::symlink(&kept, &photo).unwrap();
     });
     let out = tmp.path().join("out");
-    let e = fails(&ingest_args(&scene, &out, &[]));
+    let e = ingest(&scene, &out, &[]).expect("refused");
     assert!(
         e.contains("outside the images folder")
             && e.contains("real.jpg")
             && e.contains("--follow-outside-links"),
         "{e}"
     );
-    ok(&ingest_args(&scene, &out, &["--follow-outside-links"]));
+    assert_eq!(ingest(&scene, &out, &["--follow-outside-links"]), None);
     let labels = tmp.path().join("labels");
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/segformer_tiny");
     let e = fails(&[
@@ -154,7 +146,7 @@ fn a_subfolder_name_works_end_to_end_in_every_export_layout() {
     });
     let out = tmp.path().join("ds");
     // Undistorted, so the nerfw layout takes it (pinhole cameras only).
-    ok(&ingest_args(&scene, &out, &["--undistort"]));
+    assert_eq!(ingest(&scene, &out, &["--undistort"]), None);
     let d = out.to_str().unwrap();
     ok(&["split", d, "--val", "1"]);
     let ds = nrw_dataset::reader::Dataset::open(&out).unwrap();

@@ -1074,22 +1074,8 @@ fn published_records(args: &[&str]) -> Option<serde_json::Value> {
     if !python_has(paper_code::PAPER_DEPS) {
         return None;
     }
-    let paper = shared::shared("paper-code")?;
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/paper_oracle.py");
-    let o = Command::new("python3")
-        .arg(script)
-        .arg("--paper")
-        .arg(paper)
-        .args(args)
-        .env("TF_CPP_MIN_LOG_LEVEL", "2")
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "paper_oracle.py {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    Some(serde_json::from_slice(&o.stdout).unwrap())
+    shared::shared("paper-code")?;
+    Some(paper_code::paper_oracle(args))
 }
 
 /// Files under `dir`, relative, sorted.

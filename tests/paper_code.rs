@@ -31,7 +31,25 @@ fn test_npy(dir: &Path) -> PathBuf {
     npy
 }
 
-/// Run tests/paper_oracle.py on an export; its JSON summary.
+/// Run tests/paper_oracle.py with `args` (after `--paper`); its JSON summary.
+pub fn paper_oracle(args: &[&str]) -> serde_json::Value {
+    let o = Command::new("python3")
+        .arg(repo().join("tests/paper_oracle.py"))
+        .arg("--paper")
+        .arg(shared::shared_path("paper-code"))
+        .args(args)
+        .env("TF_CPP_MIN_LOG_LEVEL", "2")
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "the published code failed on our export ({args:?}):\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+/// The oracle on an official and a tfrecord export of `dataset` at training resolution `res`.
 fn oracle(
     dataset: &Path,
     official: &Path,
@@ -39,27 +57,21 @@ fn oracle(
     npy: &Path,
     res: u32,
 ) -> serde_json::Value {
-    let o = Command::new("python3")
-        .arg(repo().join("tests/paper_oracle.py"))
-        .args([
-            "--paper",
-            shared::shared_path("paper-code").to_str().unwrap(),
-        ])
-        .args(["--official", official.to_str().unwrap()])
-        .args(["--tfrecord", tfrecord.to_str().unwrap()])
-        .args(["--dataset", dataset.to_str().unwrap()])
-        .args(["--name", "scene"])
-        .args(["--resolution", &res.to_string()])
-        .args(["--npy", npy.to_str().unwrap()])
-        .env("TF_CPP_MIN_LOG_LEVEL", "2")
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "the published code failed on our export:\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap()
+    let res = res.to_string();
+    paper_oracle(&[
+        "--official",
+        official.to_str().unwrap(),
+        "--tfrecord",
+        tfrecord.to_str().unwrap(),
+        "--dataset",
+        dataset.to_str().unwrap(),
+        "--name",
+        "scene",
+        "--resolution",
+        &res,
+        "--npy",
+        npy.to_str().unwrap(),
+    ])
 }
 
 /// split, official style, the default official export and a tfrecord export, then the oracle.

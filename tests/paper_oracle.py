@@ -116,11 +116,6 @@ def stored_labels(dataset):
     return out
 
 
-def run_tf(tf, tensors):
-    with tf.Session() as sess:
-        return sess.run(tensors)
-
-
 def parse_records(tf, data, path, use_sem):
     """Every record of a TFRecord file through data._parser_rendered_dataset."""
     ds = tf.data.TFRecordDataset([path]).map(
@@ -137,7 +132,7 @@ def parse_records(tf, data, path, use_sem):
                 return out
 
 
-def check_records(tf, data, records, resolution, use_sem):
+def check_records(records, resolution, use_sem):
     """Parsed records have every channel in [-1, 1], the published channel counts and size."""
     for k, f in enumerate(records):
         for key in ('conditional_input', 'expected_output', 'peek_input'):
@@ -152,7 +147,7 @@ def check_records(tf, data, records, resolution, use_sem):
 
 def check_split(tf, mods, a, split, labels, ids, tmp):
     """One split through the published converter, parser and pretraining reader."""
-    data, dataset_utils, pretrain, segment, utils = mods
+    data, dataset_utils = mods[:2]
     use_sem = not a.no_semantics
     out = {}
     parsed = None
@@ -161,12 +156,12 @@ def check_split(tf, mods, a, split, labels, ids, tmp):
         it = dataset_utils.AlignedRenderedDataset(os.path.join(a.official, split, '*_color.png'))
         rec = dataset_utils._generate_tfrecord_dataset(it, 'oracle_%s.tfrecord' % split, tmp)
         parsed = parse_records(tf, data, rec, True)
-        check_records(tf, data, parsed, a.resolution, True)
+        check_records(parsed, a.resolution, True)
         out['views'] = len(parsed)
     if a.tfrecord:
         files = sorted(glob.glob(os.path.join(a.tfrecord, a.name + '*_%s.tfrecord' % split)))
         ours = [x for fn in files for x in parse_records(tf, data, fn, use_sem)]
-        check_records(tf, data, ours, a.resolution, use_sem)
+        check_records(ours, a.resolution, use_sem)
         out['records'] = len(ours)
         if parsed is not None:
             assert len(ours) == len(parsed), (split, len(ours), len(parsed))

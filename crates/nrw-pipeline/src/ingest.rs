@@ -712,7 +712,8 @@ fn process(
 ) -> Result<(ImageOutcome, Option<ViewRow>)> {
     let img = &p.rec.images[&image_id];
     let cam = &p.rec.cameras[&img.camera_id];
-    let photo_path = photo_path(&p.photos_dir, img, cfg.follow_outside_links)?;
+    // Every image's path was checked (name, links) when its size was read in `photo_sizes`.
+    let photo_path = p.photos_dir.join(&img.name);
     if let Some(problem) = p.unreadable.get(&image_id) {
         return Ok((unreadable(&photo_path, problem.clone()), None));
     }

@@ -236,11 +236,10 @@ fn export_config(
     Ok(ExportConfig {
         layout,
         // The files layout keeps views whole; the paper's layouts take the published crop.
-        crop: match (e.crop, layout) {
-            (Some(CropSetting::Side(n)), _) => Some(n),
-            (_, nrw_dataset::export::Layout::Files) => None,
-            (Some(CropSetting::Word(NoCrop::None)), _) => None,
-            (None, _) => Some(nrw_dataset::export::official::PUBLISHED_CROP),
+        crop: match e.crop {
+            Some(CropSetting::Side(n)) => Some(n),
+            Some(CropSetting::Word(NoCrop::None)) => None,
+            None => layout.default_crop(),
         },
         // A run that segments its photos exports their labels.
         semantics: e.semantics || segmented,

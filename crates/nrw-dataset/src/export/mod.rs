@@ -54,6 +54,12 @@ impl Layout {
     pub fn paper(self) -> bool {
         matches!(self, Layout::Official | Layout::Tfrecord)
     }
+
+    /// The crop when none is asked: the published 512 for the paper's layouts, none (views
+    /// kept whole) for the others.
+    pub fn default_crop(self) -> Option<u32> {
+        self.paper().then_some(official::PUBLISHED_CROP)
+    }
 }
 
 /// What to export and how.

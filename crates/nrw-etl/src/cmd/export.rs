@@ -14,9 +14,6 @@ use crate::error::Result;
 /// Fewest train views the published triplet sampler can index (`randint(1, 5 + 1)`).
 const PUBLISHED_MIN_TRAIN: usize = 6;
 
-/// The crop of the official and tfrecord layouts when none is asked: the published pipeline's.
-const DEFAULT_CROP: u32 = nrw_dataset::export::official::PUBLISHED_CROP;
-
 /// `--layout` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Layout {
@@ -108,23 +105,23 @@ pub struct ExportArgs {
 
 /// Run `export`.
 pub fn run(args: &ExportArgs) -> Result<()> {
+    let layout = match args.layout {
+        Layout::Official => DsLayout::Official,
+        Layout::Tfrecord => DsLayout::Tfrecord,
+        Layout::Files => DsLayout::Files,
+        Layout::Nerfw => DsLayout::Nerfw,
+        Layout::Nerfstudio => DsLayout::Nerfstudio,
+    };
     let cfg = ExportConfig {
-        layout: match args.layout {
-            Layout::Official => DsLayout::Official,
-            Layout::Tfrecord => DsLayout::Tfrecord,
-            Layout::Files => DsLayout::Files,
-            Layout::Nerfw => DsLayout::Nerfw,
-            Layout::Nerfstudio => DsLayout::Nerfstudio,
-        },
+        layout,
         name: args
             .name
             .clone()
             .unwrap_or_else(|| nrw_pipeline::export::default_name(&args.dataset)),
-        crop: match (args.crop, args.layout) {
-            (Some(Crop::Side(n)), _) => Some(n),
-            (Some(Crop::None), _) => None,
-            (None, Layout::Official | Layout::Tfrecord) => Some(DEFAULT_CROP),
-            (None, _) => None,
+        crop: match args.crop {
+            Some(Crop::Side(n)) => Some(n),
+            Some(Crop::None) => None,
+            None => layout.default_crop(),
         },
         semantics: !args.no_semantics,
         depth: match args.depth {

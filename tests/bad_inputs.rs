@@ -561,7 +561,8 @@ fn output_that_cannot_be_written_is_an_error_naming_the_path_and_leaves_nothing(
     }
 }
 
-/// Run a command, SIGKILL it once `ready` sees its output begin, then return.
+/// Run a command, SIGKILL it once `ready` sees its output begin, then return; `ready` must
+/// see it before the command ends on its own.
 fn kill_when(mut cmd: Command, ready: &dyn Fn() -> bool) {
     let mut child = cmd
         .stdout(std::process::Stdio::null())
@@ -569,14 +570,65 @@ fn kill_when(mut cmd: Command, ready: &dyn Fn() -> bool) {
         .spawn()
         .unwrap();
     let t0 = std::time::Instant::now();
-    while !ready() && t0.elapsed().as_secs() < 120 {
-        if child.try_wait().unwrap().is_some() {
-            break;
-        }
+    while !ready() {
+        assert!(t0.elapsed().as_secs() < 120, "{cmd:?}: never ready");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "{cmd:?} ended before it was killed"
+        );
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
-    let _ = child.kill(); // SIGKILL
-    let _ = child.wait();
+    assert!(child.try_wait().unwrap().is_none(), "{cmd:?} still running");
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+}
+
+/// Run a command that pauses before each commit (the hidden `--pause-before-commit-ms`),
+/// and SIGKILL it during its `n`th pause: its output of that commit is written but not yet
+/// in place. Returns the target it was about to commit.
+fn kill_at_commit(mut cmd: Command, n: usize) -> String {
+    use std::io::BufRead;
+    let mut child = cmd
+        // Every commit pauses, so a short pause: long enough to kill in, short enough for
+        // the commits before the `n`th.
+        .args(["--pause-before-commit-ms", "2000"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut seen = 0;
+    for line in lines {
+        let line = line.unwrap();
+        let Some((_, target)) = line.split_once(" before committing ") else {
+            continue;
+        };
+        seen += 1;
+        if seen == n {
+            assert!(
+                child.try_wait().unwrap().is_none(),
+                "{cmd:?} still running at commit {n}"
+            );
+            child.kill().unwrap(); // SIGKILL
+            child.wait().unwrap();
+            return target.to_string();
+        }
+    }
+    panic!(
+        "{cmd:?} ended after {seen} commits, before commit {n}: {:?}",
+        child.wait()
+    );
+}
+
+/// `(written, already there)` from a style run's summary line.
+fn style_parts(stderr: &str) -> (usize, usize) {
+    let tail = stderr.rsplit_once('(').expect("summary").1;
+    let n: Vec<usize> = tail
+        .split(|c: char| !c.is_ascii_digit())
+        .filter(|t| !t.is_empty())
+        .map(|t| t.parse().unwrap())
+        .collect();
+    (n[0], n[1])
 }
 
 #[test]
@@ -603,34 +655,66 @@ fn stages_killed_with_sigkill_then_rerun_write_the_same_bytes() {
             "2",
             "--quiet",
         ];
-        let style = ["style", d, "--tier", "color-stats", "--quiet"];
-        let stages: Vec<(Vec<&str>, Option<Vec<&str>>)> = vec![
-            (ingest.to_vec(), Some(vec!["--pause-after-shard-ms", "300"])),
-            (vec!["split", d, "--val", "2"], None),
-            (style.to_vec(), None),
-            (vec!["triplets", d, "--k", "2"], None),
+        let style = [
+            "style",
+            d,
+            "--tier",
+            "color-stats",
+            "--photos-per-part",
+            "2",
+        ];
+        // Each stage with the commits it is killed at (1 = during its first).
+        let stages: Vec<(Vec<&str>, &[usize])> = vec![
+            (vec!["split", d, "--val", "2"], &[1, 2]),
+            (style.to_vec(), &[1, 3]),
+            (vec!["triplets", d, "--k", "2"], &[1, 2]),
             (
                 vec!["export", d, "--layout", "files", "--out", &exp, "--quiet"],
-                None,
+                &[1],
             ),
         ];
-        for (args, slow) in stages {
+        if kill {
+            // Ingest is killed once its first group is recorded (it pauses after each).
+            let mut cmd = Command::new(env!("CARGO_BIN_EXE_nrw-etl"));
+            cmd.args(ingest).args(["--pause-after-shard-ms", "1000"]);
+            let records = ds.join(".units/ingest");
+            kill_when(cmd, &|| {
+                records.read_dir().is_ok_and(|d| {
+                    d.flatten()
+                        .any(|e| e.file_name().to_string_lossy().starts_with("group-"))
+                })
+            });
+            let o = nrw(&[&ingest[..ingest.len() - 1], &["--json"]].concat());
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert!(j["resumed_groups"].as_u64().unwrap() >= 1, "{j}");
+        } else {
+            ok(&ingest);
+        }
+        for (args, commits) in stages {
             if kill {
-                // Ingest is killed once its first shard lands (it pauses after each); the
-                // others, which write a file or two, after 2, 10 and 40 ms of their run.
-                let delays: &[u64] = if slow.is_some() { &[0] } else { &[2, 10, 40] };
-                for &ms in delays {
+                for &n in commits {
                     let mut cmd = Command::new(env!("CARGO_BIN_EXE_nrw-etl"));
-                    cmd.args(&args).args(slow.clone().unwrap_or_default());
-                    let shards = ds.join("shards");
-                    let t0 = std::time::Instant::now();
-                    kill_when(cmd, &|| {
-                        shards.read_dir().is_ok_and(|mut d| d.next().is_some())
-                            && t0.elapsed().as_millis() as u64 >= ms
-                    });
+                    cmd.args(&args);
+                    let target = kill_at_commit(cmd, n);
+                    assert!(
+                        target.starts_with(d),
+                        "{args:?} commits inside its output: {target}"
+                    );
                 }
             }
-            ok(&args);
+            let o = nrw(&args);
+            assert!(
+                o.status.success(),
+                "{args:?}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            if kill && args[0] == "style" {
+                // Killed during its third commit, two parts were in place: the rerun
+                // describes only the rest.
+                let (written, there) = style_parts(&String::from_utf8_lossy(&o.stderr));
+                assert!(there >= 2 && written + there == 4, "{written} {there}");
+            }
         }
     };
     let (clean, killed) = (tmp.path().join("clean"), tmp.path().join("killed"));
@@ -646,6 +730,16 @@ fn stages_killed_with_sigkill_then_rerun_write_the_same_bytes() {
         &strip(files(&killed)),
         "killed and rerun",
     );
+    // The export names its dataset's folder; otherwise the bytes are the same.
+    let mut clean_export = files(&tmp.path().join("clean-export"));
+    let mut killed_export = files(&tmp.path().join("killed-export"));
+    let record = Path::new(nrw_dataset::export::EXPORT_JSON);
+    let text = |b: Vec<u8>| String::from_utf8(b).unwrap();
+    assert_eq!(
+        text(clean_export.remove(record).expect("export.json")),
+        text(killed_export.remove(record).expect("export.json")).replace("killed", "clean"),
+    );
+    assert_same_files(&clean_export, &killed_export, "export killed and rerun");
     assert_eq!(verify_code(&killed), Some(0));
 }
 

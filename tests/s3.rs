@@ -299,9 +299,24 @@ fn bad_endpoints_buckets_and_credentials_name_the_url_and_keep_secrets() {
         err.contains("s3://nrw/ds") && err.contains("access denied"),
         "{err}"
     );
+    // A scene that fails once the dataset is open (a photo missing): the store was reached
+    // with working credentials, and still nothing may be written.
+    let photo = std::fs::read_dir(scene.join("images"))
+        .unwrap()
+        .flatten()
+        .next()
+        .unwrap()
+        .path();
+    std::fs::remove_file(photo).unwrap();
+    let err = assert_fails(&ingest(&m, "s3://nrw/ds", &[]));
+    assert!(err.contains("registered photos are missing"), "{err}");
     // Nothing was written by any of them: the bucket made first is empty, and the missing
     // bucket was not created (a second attempt finds it missing still).
-    assert!(m.files("s3://nrw").is_empty());
+    assert!(
+        m.files("s3://nrw").is_empty(),
+        "{:?}",
+        m.files("s3://nrw").keys()
+    );
     let err = assert_fails(&ingest(&m, "s3://no-such-bucket/ds", &[]));
     assert!(err.contains("the bucket does not exist"), "{err}");
 }

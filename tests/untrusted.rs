@@ -158,6 +158,7 @@ fn a_subfolder_name_works_end_to_end_in_every_export_layout() {
     assert!(names.iter().any(|n| n == "cam0/sub/0000.jpg"), "{names:?}");
     for (layout, want) in [
         ("official", "0000_reference.png"),
+        ("tfrecord", ".tfrecord"),
         ("files", "cam0/sub/0000/photo.png"),
         ("nerfw", "dense/images/cam0/sub/0000.png"),
         ("nerfstudio", "images/cam0/sub/0000.png"),
@@ -172,7 +173,7 @@ fn a_subfolder_name_works_end_to_end_in_every_export_layout() {
             exp.to_str().unwrap(),
             "--quiet",
         ];
-        if layout == "official" {
+        if layout == "official" || layout == "tfrecord" {
             a.extend(["--crop", "none", "--no-semantics"]);
         }
         ok(&a);
@@ -206,4 +207,209 @@ fn the_one_join_refuses_every_hostile_name_a_writer_could_be_given() {
         nrw_dataset::export::join_under(root, "train/cam0/0001.png").unwrap(),
         root.join("train/cam0/0001.png")
     );
+}
+
+/// Rename views of the dataset at `ds` in its shards (and manifest), as a dataset made
+/// elsewhere could name them: a dataset's names are data too, not only a model's.
+fn rename_views(ds: &Path, rename: &dyn Fn(&str) -> Option<String>) {
+    let store = nrw_dataset::Store::local(ds);
+    let mut manifest = nrw_dataset::Manifest::read(&store).unwrap();
+    for t in manifest.tables.clone() {
+        if !nrw_dataset::views::is_shard(&t.path) {
+            continue;
+        }
+        let path = ds.join(&t.path);
+        let file = std::fs::File::open(&path).unwrap();
+        let mut rows = nrw_dataset::reader::views_in(file, &path).unwrap();
+        for r in &mut rows {
+            if let Some(n) = rename(&r.name) {
+                r.name = n;
+            }
+        }
+        manifest.replace_table(nrw_dataset::write_shard(&store, &t.path, &rows).unwrap());
+    }
+    manifest.write(&store).unwrap();
+}
+
+/// A split, undistorted dataset of the small scene at `dir/ds` (every layout takes it), and
+/// the names of its train views (one folder in every layout).
+fn exportable_dataset(dir: &Path) -> (PathBuf, Vec<String>) {
+    let scene = scene_with(dir, |_, _| {});
+    let ds = dir.join("ds");
+    assert_eq!(ingest(&scene, &ds, &["--undistort"]), None);
+    ok(&["split", ds.to_str().unwrap(), "--val", "1"]);
+    let d = nrw_dataset::reader::Dataset::open(&ds).unwrap();
+    let names: Vec<String> = d
+        .ids("train")
+        .unwrap()
+        .iter()
+        .map(|&i| d.get(i).unwrap().name)
+        .collect();
+    assert!(names.len() >= 2, "{names:?}");
+    (ds, names)
+}
+
+/// `export --layout LAYOUT` of `ds` into `out`: its stderr when it fails, else None.
+fn export(ds: &Path, layout: &str, out: &Path) -> Option<String> {
+    let mut a = vec![
+        "export",
+        ds.to_str().unwrap(),
+        "--layout",
+        layout,
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ];
+    if layout == "official" || layout == "tfrecord" {
+        a.extend(["--crop", "none", "--no-semantics"]);
+    }
+    let o = super::nrw(&a);
+    (!o.status.success()).then(|| String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
+const LAYOUTS: [&str; 5] = ["official", "tfrecord", "files", "nerfw", "nerfstudio"];
+/// The layouts whose file names come from the photos' names.
+const NAMED_LAYOUTS: [&str; 3] = ["files", "nerfw", "nerfstudio"];
+
+#[test]
+fn hostile_names_in_a_dataset_reach_no_path_outside_any_export() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (ds, names) = exportable_dataset(tmp.path());
+    let absolute = tmp.path().join("abs/pwn.jpg").display().to_string();
+    for hostile in [
+        "../../pwn/0000.jpg",
+        absolute.as_str(),
+        "a\\..\\..\\pwn.jpg",
+        "a\0b.jpg",
+        "x/../../../pwn.jpg",
+    ] {
+        // Every view but the first keeps its name; the first is hostile.
+        let first = names[0].clone();
+        let to = hostile.to_string();
+        rename_views(&ds, &|n| (n == first).then(|| to.clone()));
+        let before = files(tmp.path());
+        for layout in LAYOUTS {
+            let out = tmp.path().join("exports").join(layout);
+            match export(&ds, layout, &out) {
+                Some(e) => {
+                    assert!(NAMED_LAYOUTS.contains(&layout), "{layout} {hostile:?}: {e}");
+                    assert!(
+                        e.contains("field `name`") && e.contains(out.to_str().unwrap()),
+                        "{layout} {hostile:?}: {e}"
+                    );
+                    assert!(
+                        ["climbs out", "empty component", "backslash", "U+0000"]
+                            .iter()
+                            .any(|why| e.contains(why)),
+                        "{layout} {hostile:?}: {e}"
+                    );
+                    assert_eq!(files(tmp.path()), before, "{layout} {hostile:?}");
+                }
+                None => {
+                    // Layouts of index names write the hostile name only as data, inside.
+                    assert!(!NAMED_LAYOUTS.contains(&layout), "{layout} {hostile:?}");
+                    let now: Vec<String> = files(tmp.path())
+                        .into_iter()
+                        .filter(|f| !f.starts_with(&format!("exports/{layout}/")))
+                        .collect();
+                    assert_eq!(now, before, "{layout} {hostile:?}");
+                    std::fs::remove_dir_all(&out).unwrap();
+                }
+            }
+        }
+        let back = first.clone();
+        rename_views(&ds, &|n| (n == hostile).then(|| back.clone()));
+    }
+}
+
+#[test]
+fn names_one_file_apart_only_by_case_or_normalisation_are_refused_naming_both() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (ds, names) = exportable_dataset(tmp.path());
+    let (a, b) = (names[0].clone(), names[1].clone());
+    for (x, y) in [
+        ("Photo.jpg", "photo.JPG"),
+        ("caf\u{e9}/0.jpg", "cafe\u{301}/0.jpg"),
+        ("same.jpg", "same.png"),
+    ] {
+        rename_views(&ds, &|n| {
+            (n == a)
+                .then(|| x.to_string())
+                .or_else(|| (n == b).then(|| y.to_string()))
+        });
+        for layout in LAYOUTS {
+            let out = tmp.path().join("exports").join(layout);
+            let before = files(tmp.path());
+            match export(&ds, layout, &out) {
+                Some(e) => {
+                    assert!(NAMED_LAYOUTS.contains(&layout), "{layout}: {e}");
+                    // Named as Rust quotes them (a combining accent is escaped).
+                    let stem = |n: &str| {
+                        let s = n.split('.').next().unwrap();
+                        format!("{s:?}").trim_matches('"').to_string()
+                    };
+                    assert!(
+                        e.contains(&stem(x)) && e.contains(&stem(y)),
+                        "{layout} {x:?} {y:?}: {e}"
+                    );
+                    assert!(
+                        e.contains("letter case or Unicode normalisation")
+                            || e.contains("two views would write the same file")
+                            || e.contains("would both be written as"),
+                        "{layout}: {e}"
+                    );
+                    assert_eq!(files(tmp.path()), before, "{layout}: nothing written");
+                }
+                None => {
+                    assert!(!NAMED_LAYOUTS.contains(&layout), "{layout} {x:?} {y:?}");
+                    std::fs::remove_dir_all(&out).unwrap();
+                }
+            }
+        }
+        rename_views(&ds, &|n| {
+            (n == x)
+                .then(|| a.clone())
+                .or_else(|| (n == y).then(|| b.clone()))
+        });
+    }
+}
+
+#[test]
+fn a_model_naming_a_million_photos_is_read_whole_and_refused_in_a_bounded_message() {
+    const N: u32 = 1_000_000;
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene_with(tmp.path(), |rec, _| {
+        let model = rec.images.values().next().unwrap().clone();
+        let first = *rec.images.keys().max().unwrap() + 1;
+        for id in first..first + N - rec.images.len() as u32 {
+            let mut img = model.clone();
+            img.id = id;
+            img.name = format!("extra/{id:07}.jpg");
+            img.points2d.clear();
+            rec.images.insert(id, img);
+        }
+    });
+    // Binary, as such a model would come.
+    let model = scene.join("sparse/0");
+    let rec = nrw_colmap::read_scene(&scene).unwrap();
+    assert_eq!(rec.images.len(), N as usize);
+    for f in std::fs::read_dir(&model).unwrap().flatten() {
+        std::fs::remove_file(f.path()).unwrap();
+    }
+    nrw_colmap::write_model(&rec, &model, nrw_colmap::Format::Binary).unwrap();
+    drop(rec);
+    let summary: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", scene.to_str().unwrap(), "--json"])).unwrap();
+    assert_eq!(summary["images"].as_u64(), Some(N as u64), "{summary}");
+    let out = tmp.path().join("out");
+    let e = ingest(&scene, &out, &[]).expect("refused");
+    assert!(
+        e.contains(&format!("{} of {N} registered photos are missing", N - 4))
+            && e.contains("extra/")
+            && e.len() < 2_000,
+        "{} bytes: {}",
+        e.len(),
+        &e[..e.len().min(2_000)]
+    );
+    assert!(!out.join("manifest.json").exists());
 }

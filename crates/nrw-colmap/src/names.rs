@@ -61,6 +61,19 @@ pub fn check_name(name: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// The form under which two names are one file on a file system that ignores letter case
+/// and Unicode normalisation (macOS's APFS, Windows' NTFS): NFC, lower case, NFC again.
+/// (Lower-casing stands in for each system's own case folding; it joins every pair they join
+/// among real photo names.) Writers refuse a second file of an equal key in one export.
+pub fn fold_key(name: &str) -> String {
+    use unicode_normalization::UnicodeNormalization;
+    name.nfc()
+        .collect::<String>()
+        .to_lowercase()
+        .nfc()
+        .collect()
+}
+
 /// A model reader's check of one image's name (see [`check_name`]); the error names the
 /// file, the image and `field`. (Two images of one name are refused where the model is
 /// assembled.)
@@ -112,6 +125,58 @@ pub fn photo_path(dir: &Path, name: &str, follow_outside_links: bool) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fuzz target's property (fuzz/fuzz_targets/names.rs), checked exhaustively over
+    /// every name of up to five symbols from an alphabet of the characters that matter.
+    #[test]
+    fn every_short_name_that_passes_stays_inside_as_normal_components() {
+        use std::path::Component;
+        let alphabet = ['a', '.', '/', '\\', '\0', ':', 'C', '\u{301}'];
+        let root = Path::new("/scene/images");
+        let mut names = vec![String::new()];
+        let (mut passed, mut refused) = (0, 0);
+        for _ in 0..5 {
+            names = names
+                .iter()
+                .flat_map(|n| alphabet.iter().map(move |c| format!("{n}{c}")))
+                .collect();
+            for name in &names {
+                let _ = fold_key(name);
+                let Ok(path) = join_checked(root, name) else {
+                    refused += 1;
+                    continue;
+                };
+                passed += 1;
+                let rel = path.strip_prefix(root).unwrap();
+                assert!(
+                    rel.components().all(|c| matches!(c, Component::Normal(_))),
+                    "{name:?}"
+                );
+                assert_eq!(
+                    rel.components().count(),
+                    name.split('/').count(),
+                    "{name:?}"
+                );
+            }
+        }
+        // Both sides are exercised: ".." and "a/.." refused, "a..", "C:" prefixes refused,
+        // "a/a" and "..a" kept.
+        assert!(passed > 1_000 && refused > 10_000, "{passed} {refused}");
+    }
+
+    #[test]
+    fn names_equal_but_for_case_or_normalisation_fold_to_one_key() {
+        let nfc = "caf\u{e9}/IMG_1.JPG";
+        let nfd = "cafe\u{301}/img_1.jpg";
+        assert_ne!(nfc, nfd);
+        assert_eq!(fold_key(nfc), fold_key(nfd));
+        assert_eq!(
+            fold_key("\u{C5}ngstr\u{F6}m.jpg"),
+            fold_key("A\u{30A}ngstro\u{308}m.JPG")
+        );
+        assert_ne!(fold_key("cafe/img_1.jpg"), fold_key(nfd));
+        assert_ne!(fold_key("a.jpg"), fold_key("a.png"));
+    }
 
     #[test]
     fn only_relative_names_of_normal_components_pass() {

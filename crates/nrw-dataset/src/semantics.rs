@@ -53,9 +53,18 @@ pub fn classes() -> &'static [ClassInfo] {
     })
 }
 
-/// Where a photo's label map lives in a label folder: its name with `.png` (subfolders kept).
-pub fn label_path(dir: &Path, photo: &str) -> std::path::PathBuf {
-    dir.join(Path::new(photo).with_extension("png"))
+/// Where a photo's label map lives in a label folder: its name with `.png` (subfolders
+/// kept), joined through the one name check so no photo name reaches outside the folder.
+pub fn label_path(dir: &Path, photo: &str) -> Result<std::path::PathBuf> {
+    let rel = Path::new(photo).with_extension("png");
+    nrw_colmap::names::join_checked(dir, &rel.to_string_lossy()).map_err(|problem| {
+        DatasetError::Value {
+            path: dir.to_path_buf(),
+            record: format!("label map of photo {photo:?}"),
+            field: "name".into(),
+            problem,
+        }
+    })
 }
 
 /// Read a label map (8-bit class ids, 0 = unlabelled) and check its size against the photo's.
@@ -129,6 +138,28 @@ pub fn colorize(labels: &GrayImage) -> (Vec<u8>, Vec<u8>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn label_paths_keep_subfolders_and_refuse_names_that_leave_the_folder() {
+        let d = Path::new("/labels");
+        assert_eq!(
+            label_path(d, "cam0/0001.jpg").unwrap(),
+            d.join("cam0/0001.png")
+        );
+        for bad in [
+            "../x.jpg",
+            "/etc/x.jpg",
+            "a\\..\\x.jpg",
+            "a/../../x.jpg",
+            "a\0.jpg",
+        ] {
+            let e = label_path(d, bad).unwrap_err().to_string();
+            assert!(
+                e.contains("/labels") && e.contains("field `name`") && e.contains("label map"),
+                "{bad:?}: {e}"
+            );
+        }
+    }
 
     #[test]
     fn table_has_the_classes_the_synthetic_scenes_use() {

@@ -266,6 +266,28 @@ impl Store {
         }
     }
 
+    /// `rel` after the one name check ([`nrw_colmap::names::check_name`]): every file the
+    /// store reads, writes or deletes, locally or as an object key, stays inside the dataset,
+    /// whatever a table or a caller names. `""` (the dataset itself) passes where a folder is
+    /// meant.
+    fn checked<'a>(&self, rel: &'a str, folder: bool) -> Result<&'a str> {
+        let rel = if folder {
+            rel.trim_end_matches('/')
+        } else {
+            rel
+        };
+        if folder && rel.is_empty() {
+            return Ok(rel);
+        }
+        nrw_colmap::names::check_name(rel).map_err(|problem| DatasetError::Value {
+            path: self.root(),
+            record: "file".into(),
+            field: "name".into(),
+            problem: format!("{rel:?} {problem}"),
+        })?;
+        Ok(rel)
+    }
+
     fn key(r: &Remote, rel: &str) -> object_store::path::Path {
         let mut k = r.prefix.clone();
         for part in rel.split('/').filter(|p| !p.is_empty()) {
@@ -276,6 +298,7 @@ impl Store {
 
     /// A file's bytes.
     pub fn read(&self, rel: &str) -> Result<Bytes> {
+        let rel = self.checked(rel, false)?;
         match &*self.inner {
             Inner::Local(d) => {
                 let p = d.join(rel);
@@ -307,6 +330,7 @@ impl Store {
     /// Write a file whole and atomically (a temporary name and a rename locally, one PUT
     /// on object storage).
     pub fn write(&self, rel: &str, bytes: Vec<u8>) -> Result<()> {
+        let rel = self.checked(rel, false)?;
         match &*self.inner {
             Inner::Local(d) => crate::atomic::write_bytes_atomic(&d.join(rel), &bytes),
             Inner::Remote(r) => {
@@ -320,6 +344,7 @@ impl Store {
 
     /// Whether a file exists.
     pub fn exists(&self, rel: &str) -> Result<bool> {
+        let rel = self.checked(rel, false)?;
         match &*self.inner {
             Inner::Local(d) => Ok(d.join(rel).is_file()),
             Inner::Remote(r) => {
@@ -336,6 +361,7 @@ impl Store {
     /// Files under a folder of the dataset (recursively), as dataset-relative paths, sorted;
     /// empty when the folder does not exist.
     pub fn list(&self, dir_rel: &str) -> Result<Vec<String>> {
+        let dir_rel = self.checked(dir_rel, true)?;
         let mut out = match &*self.inner {
             Inner::Local(d) => {
                 let mut out = Vec::new();
@@ -381,6 +407,7 @@ impl Store {
 
     /// Remove a file (a missing one is not an error).
     pub fn delete(&self, rel: &str) -> Result<()> {
+        let rel = self.checked(rel, false)?;
         match &*self.inner {
             Inner::Local(d) => match std::fs::remove_file(d.join(rel)) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
@@ -400,6 +427,7 @@ impl Store {
 
     /// Remove every file under a folder of the dataset (and, locally, the folder).
     pub fn delete_dir(&self, dir_rel: &str) -> Result<()> {
+        let dir_rel = self.checked(dir_rel, true)?;
         if let Inner::Local(d) = &*self.inner {
             let p = d.join(dir_rel);
             return match std::fs::remove_dir_all(&p) {
@@ -421,6 +449,7 @@ impl Store {
 
     /// [`Store::chunks`] of a file whose size is known (from the manifest): no HEAD request.
     pub fn chunks_sized(&self, rel: &str, size: Option<u64>) -> Result<Chunks> {
+        let rel = self.checked(rel, false)?;
         match &*self.inner {
             Inner::Local(d) => {
                 let p = d.join(rel);
@@ -576,6 +605,45 @@ mod tests {
         assert!(!is_url("relative/dir"));
         let s = Store::open("file:///tmp/x").unwrap();
         assert_eq!(s.local_dir(), Some(Path::new("/tmp/x")));
+    }
+
+    #[test]
+    fn no_name_leaves_the_dataset_locally_or_as_an_object_key() {
+        let d = tempfile::tempdir().unwrap();
+        let inner = d.path().join("ds");
+        let remote = Store::open("s3://bucket/ds").unwrap();
+        for s in [Store::local(&inner), remote] {
+            for bad in [
+                "../x.json",
+                "/etc/passwd",
+                "a/../../x",
+                "a\\..\\x",
+                "a\0b",
+                "",
+            ] {
+                let named = |e: DatasetError| {
+                    let m = e.to_string();
+                    assert!(
+                        m.contains("field `name`") && m.contains("ds"),
+                        "{bad:?}: {m}"
+                    );
+                };
+                named(s.write(bad, b"x".to_vec()).unwrap_err());
+                named(s.read(bad).unwrap_err());
+                named(s.exists(bad).unwrap_err());
+                named(s.delete(bad).unwrap_err());
+                named(s.chunks(bad).err().unwrap());
+                if !bad.is_empty() {
+                    named(s.list(bad).unwrap_err());
+                    named(s.delete_dir(bad).unwrap_err());
+                }
+            }
+        }
+        assert_eq!(
+            std::fs::read_dir(d.path()).unwrap().count(),
+            0,
+            "nothing written"
+        );
     }
 
     #[test]

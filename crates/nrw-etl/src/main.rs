@@ -23,6 +23,10 @@ On your own data, start with `nrw-etl inspect SCENE` to check a model, then `nrw
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Wait this long before each commit (rename) of an output, saying so on stderr: lets the
+    /// kill tests interrupt any stage at a known point
+    #[arg(long, global = true, hide = true, value_name = "MS")]
+    pause_before_commit_ms: Option<u64>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -61,6 +65,9 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    if let Some(ms) = cli.pause_before_commit_ms {
+        nrw_dataset::atomic::set_commit_pause(ms);
+    }
     let threads = match &cli.command {
         Command::Ingest(a) => a.threads,
         Command::Segment(a) => a.threads,

@@ -672,7 +672,7 @@ fn label_pngs(
         let what = p.photos_dir.join(photo_name).display().to_string();
         nrw_segment::segment(model, photo, *mode, &what, nrw_segment::Parallelism::None)?
     } else if let Some(dir) = &cfg.semantics {
-        let path = nrw_dataset::semantics::label_path(dir, photo_name);
+        let path = nrw_dataset::semantics::label_path(dir, photo_name)?;
         nrw_dataset::semantics::load_labels(&path, photo.width(), photo.height())?
     } else {
         return Ok((None, None, None));

@@ -116,9 +116,15 @@ pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSu
         .filter(|(p, _)| cfg.unit.owns(*p))
         .map(|(_, n)| n.as_str())
         .collect();
-    let (done, todo): (Vec<&str>, Vec<&str>) = names
-        .iter()
-        .partition(|n| nrw_dataset::semantics::label_path(&cfg.out, n).is_file());
+    let mut done = Vec::new();
+    let mut todo = Vec::new();
+    for &n in &names {
+        if nrw_dataset::semantics::label_path(&cfg.out, n)?.is_file() {
+            done.push(n);
+        } else {
+            todo.push(n);
+        }
+    }
     progress.start("segmenting photos", todo.len() as u64, "photos");
     let results: Vec<Result<Option<String>>> = todo
         .par_iter()
@@ -243,7 +249,7 @@ fn segment_one(
         &path.display().to_string(),
         Parallelism::None,
     )?;
-    let out = nrw_dataset::semantics::label_path(&cfg.out, name);
+    let out = nrw_dataset::semantics::label_path(&cfg.out, name)?;
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir).map_err(|e| PipelineError::input(dir, e.to_string()))?;
     }

@@ -211,7 +211,11 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
             _ => format!("{}", r.verdict_value),
         };
         let caption = format!("{} — {} ({measured})", r.name, r.verdict);
-        let img = images_dir.and_then(|d| image::open(d.join(&r.name)).ok());
+        // The name is data from the dataset: joined through the one check, and a photo
+        // linking out of the images folder is not opened (the caption stays).
+        let img = images_dir
+            .and_then(|d| nrw_colmap::names::photo_path(d, &r.name, false).ok())
+            .and_then(|p| image::open(p).ok());
         match img {
             Some(img) => {
                 let t = thumbs::thumb(&img.to_rgb8(), THUMB);

@@ -168,8 +168,63 @@ fn refuse(path: &Path, problem: impl Into<String>) -> DatasetError {
     }
 }
 
+/// The hidden folder an export is built in, and every file claimed in it so far: no two
+/// files of one export may have names equal, or equal but for letter case or Unicode
+/// normalisation ([`nrw_colmap::names::fold_key`]), since on macOS and Windows the second
+/// would overwrite the first. Every file an export writes is claimed here.
+pub(crate) struct Staged {
+    dir: PathBuf,
+    /// The export's destination, named in messages (the hidden folder means nothing to a user).
+    out: PathBuf,
+    claimed: std::sync::Mutex<std::collections::HashMap<String, String>>,
+}
+
+impl Staged {
+    /// The hidden folder itself (for files of fixed names written by other code, such as a
+    /// COLMAP model).
+    pub(crate) fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// `dir/rel` through the checked join ([`join_under`]), claimed for one file.
+    pub(crate) fn claim(&self, rel: &str) -> Result<PathBuf> {
+        let path = nrw_colmap::names::join_checked(&self.dir, rel)
+            .map_err(|problem| name_error(&self.out, problem))?;
+        let key = nrw_colmap::names::fold_key(rel);
+        let mut claimed = self.claimed.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(first) = claimed.get(&key) {
+            let how = if first == rel {
+                "two views would write the same file"
+            } else {
+                "the names differ only in letter case or Unicode normalisation, so on macOS and Windows they are one file"
+            };
+            return Err(name_error(
+                &self.out,
+                format!("{rel:?} and {first:?}: {how}; rename one photo in the model (or leave one out) and export again"),
+            ));
+        }
+        claimed.insert(key, rel.to_string());
+        Ok(path)
+    }
+
+    /// Write `bytes` to a claimed `rel`, creating its folders.
+    pub(crate) fn write(&self, rel: &str, bytes: &[u8]) -> Result<()> {
+        write_file(&self.claim(rel)?, bytes)
+    }
+}
+
+/// An output file name refused, naming the export folder.
+fn name_error(out: &Path, problem: String) -> DatasetError {
+    DatasetError::Value {
+        path: out.into(),
+        record: "output file".into(),
+        field: "name".into(),
+        problem,
+    }
+}
+
 /// Check the destination and make the hidden folder the export is built in.
-fn stage(out: &Path) -> Result<PathBuf> {
+fn stage(out: &Path) -> Result<Staged> {
     if out.is_file() {
         return Err(refuse(out, "is a file; give a folder to export into"));
     }
@@ -202,11 +257,16 @@ fn stage(out: &Path) -> Result<PathBuf> {
     }
     let staged = parent.join(format!(".{base}.export-new-{}", std::process::id()));
     std::fs::create_dir_all(&staged).map_err(|e| DatasetError::io(&staged, e))?;
-    Ok(staged)
+    Ok(Staged {
+        dir: staged,
+        out: out.into(),
+        claimed: Default::default(),
+    })
 }
 
 /// Move the finished export into place, replacing an earlier one whole.
-fn commit(staged: &Path, out: &Path) -> Result<()> {
+fn commit(staged: &Staged, out: &Path) -> Result<()> {
+    let staged = staged.dir();
     let old = staged.with_file_name(
         staged
             .file_name()
@@ -214,6 +274,7 @@ fn commit(staged: &Path, out: &Path) -> Result<()> {
             .to_string_lossy()
             .replace(".export-new-", ".export-old-"),
     );
+    crate::atomic::commit_pause(out);
     if out.exists() {
         std::fs::rename(out, &old).map_err(|e| DatasetError::io(out, e))?;
     }
@@ -225,20 +286,11 @@ fn commit(staged: &Path, out: &Path) -> Result<()> {
 }
 
 /// `root/rel`, refusing a `rel` that is not a relative path of normal components
-/// ([`nrw_colmap::names::check_name`]): every file an export writes is joined here, so no
-/// name from a dataset (or an export's `--name`) can put a file outside the export folder.
+/// ([`nrw_colmap::names::check_name`]): every file an export writes is joined this way (by
+/// [`Staged::claim`]), so no name from a dataset (or an export's `--name`) can put a file
+/// outside the export folder.
 pub fn join_under(root: &Path, rel: &str) -> Result<std::path::PathBuf> {
-    nrw_colmap::names::join_checked(root, rel).map_err(|problem| DatasetError::Value {
-        path: root.into(),
-        record: "output file".into(),
-        field: "name".into(),
-        problem,
-    })
-}
-
-/// Write `bytes` to `root/rel` (through [`join_under`]), creating its folders.
-fn write_under(root: &Path, rel: &str, bytes: &[u8]) -> Result<()> {
-    write_file(&join_under(root, rel)?, bytes)
+    nrw_colmap::names::join_checked(root, rel).map_err(|problem| name_error(root, problem))
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -468,7 +520,7 @@ pub fn export(
             Ok(summary)
         }
         Err(e) => {
-            let _ = std::fs::remove_dir_all(&staged);
+            let _ = std::fs::remove_dir_all(staged.dir());
             Err(e)
         }
     }
@@ -527,8 +579,7 @@ pub fn export_with_points(
             skipped: Vec::new(),
             dist_pickle: None,
         };
-        write_under(
-            &staged,
+        staged.write(
             EXPORT_JSON,
             &serde_json::to_vec_pretty(&summary).expect("json"),
         )?;
@@ -540,7 +591,7 @@ pub fn export_with_points(
             Ok(summary)
         }
         Err(e) => {
-            let _ = std::fs::remove_dir_all(&staged);
+            let _ = std::fs::remove_dir_all(staged.dir());
             Err(e)
         }
     }
@@ -551,7 +602,7 @@ fn write_all(
     cfg: &ExportConfig,
     scale: Option<&DepthScale>,
     splits: &[(String, usize)],
-    staged: &Path,
+    staged: &Staged,
     dist: DistMatrix,
     tick: &(dyn Fn() + Sync),
 ) -> Result<ExportSummary> {
@@ -623,12 +674,11 @@ fn write_all(
         if let Some(m) = dist(&train.image_ids)? {
             let n = train.image_ids.len();
             let file = format!("dist_{}.pckl", cfg.name);
-            write_under(staged, &file, &pickle::matrix_dict("dist_matrix", n, &m))?;
+            staged.write(&file, &pickle::matrix_dict("dist_matrix", n, &m))?;
             summary.dist_pickle = Some(file);
         }
     }
-    write_under(
-        staged,
+    staged.write(
         EXPORT_JSON,
         &serde_json::to_vec_pretty(&summary).expect("json"),
     )?;
@@ -637,7 +687,7 @@ fn write_all(
 
 /// Where one split's encoded views go: files in the staging folder, or TFRecord shards.
 struct Sink<'a> {
-    staged: &'a Path,
+    staged: &'a Staged,
     records: Vec<(String, std::io::BufWriter<std::fs::File>)>,
     /// Views of the split in all (shard choice: position · shards / views).
     views: usize,
@@ -649,13 +699,13 @@ impl Sink<'_> {
         use std::io::Write;
         for (rel, bytes) in files {
             if self.records.is_empty() {
-                write_under(self.staged, &rel, &bytes)?;
+                self.staged.write(&rel, &bytes)?;
                 self.files.push(rel);
             } else {
                 let shard = pos * self.records.len() / self.views;
                 let (rel, w) = &mut self.records[shard];
                 w.write_all(&bytes)
-                    .map_err(|e| DatasetError::io(self.staged.join(&*rel), e))?;
+                    .map_err(|e| DatasetError::io(self.staged.dir().join(&*rel), e))?;
             }
         }
         Ok(())
@@ -665,7 +715,7 @@ impl Sink<'_> {
     fn finish(self) -> Result<Vec<String>> {
         let mut files = self.files;
         for (rel, w) in self.records {
-            let path = self.staged.join(&rel);
+            let path = self.staged.dir().join(&rel);
             let f = w
                 .into_inner()
                 .map_err(|e| DatasetError::io(&path, e.into_error()))?;
@@ -686,7 +736,7 @@ fn write_split(
     scale: Option<&DepthScale>,
     split: &str,
     n: usize,
-    staged: &Path,
+    staged: &Staged,
     skipped: &mut Vec<Skipped>,
     tick: &(dyn Fn() + Sync),
 ) -> Result<SplitExport> {
@@ -706,7 +756,7 @@ fn write_split(
     if cfg.layout == Layout::Tfrecord {
         for i in 0..cfg.shards {
             let rel = tfrecord_name(&cfg.name, split, i, cfg.shards);
-            let p = join_under(staged, &rel)?;
+            let p = staged.claim(&rel)?;
             let f = std::fs::File::create(&p).map_err(|e| DatasetError::io(&p, e))?;
             sink.records
                 .push((rel, std::io::BufWriter::with_capacity(1 << 20, f)));

@@ -24,7 +24,7 @@ use nrw_colmap::{CameraModel, PointCloud, Rigid3};
 use serde_json::{json, Map, Value};
 
 use super::nerfw::ScenePoint;
-use super::{join_under, refuse, write_under, ExportConfig, SplitExport};
+use super::{refuse, ExportConfig, SplitExport};
 use crate::error::{DatasetError, Result};
 use crate::reader::{Dataset, View};
 
@@ -151,14 +151,14 @@ fn npy_f32(h: u32, w: u32, data: &[f32]) -> Vec<u8> {
 }
 
 /// One view's files and frame.
-fn frame(v: &View, staged: &Path) -> Result<(String, Value)> {
+fn frame(v: &View, staged: &super::Staged) -> Result<(String, Value)> {
     let s = stem(&v.name);
     let image = format!("images/{s}.png");
-    write_under(staged, &image, &v.photo_png)?;
+    staged.write(&image, &v.photo_png)?;
     let depth = v.depth()?;
     let scaled: Vec<f32> = depth.data.iter().map(|z| z * DEPTH_SCALE).collect();
     let depth_file = format!("depth/{s}.npy");
-    write_under(staged, &depth_file, &npy_f32(v.height, v.width, &scaled))?;
+    staged.write(&depth_file, &npy_f32(v.height, v.width, &scaled))?;
     let pose = transform_matrix(v.qvec, v.tvec).ok_or_else(|| DatasetError::Value {
         path: v.name.clone().into(),
         record: format!("image {}", v.image_id),
@@ -174,7 +174,7 @@ fn frame(v: &View, staged: &Path) -> Result<(String, Value)> {
         let mask: Vec<u8> = t.as_raw().iter().map(|m| 255 - m).collect();
         let mask_file = format!("masks/{s}.png");
         let png = crate::codec::encode_gray(&v.name, v.width, v.height, &mask)?;
-        write_under(staged, &mask_file, &png)?;
+        staged.write(&mask_file, &png)?;
         f.insert("mask_path".into(), mask_file.into());
     }
     Ok((image, Value::Object(f)))
@@ -186,7 +186,7 @@ pub(super) fn write(
     cfg: &ExportConfig,
     points: &[ScenePoint],
     splits: &[(String, usize)],
-    staged: &Path,
+    staged: &super::Staged,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<SplitExport>> {
     let mut frames = Vec::new();
@@ -240,14 +240,13 @@ pub(super) fn write(
         .clone();
     lists.insert("test_filenames".into(), val);
     let ply = "sparse_pc.ply";
-    write_points(points, &join_under(staged, ply)?)?;
+    write_points(points, &staged.claim(ply)?)?;
     let mut top = Map::new();
     top.insert("frames".into(), Value::Array(frames));
     top.insert("applied_transform".into(), json!(APPLIED_TRANSFORM));
     top.insert("ply_file_path".into(), ply.into());
     top.extend(lists);
-    write_under(
-        staged,
+    staged.write(
         "transforms.json",
         &serde_json::to_vec_pretty(&Value::Object(top)).expect("json"),
     )?;

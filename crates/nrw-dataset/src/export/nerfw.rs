@@ -22,7 +22,7 @@ use std::path::Path;
 
 use nrw_colmap::{Camera, CameraModel, Format, Image, Point3D, Reconstruction, Rigid3};
 
-use super::{refuse, write_under, ExportConfig, SplitExport};
+use super::{refuse, ExportConfig, SplitExport};
 use crate::error::{DatasetError, Result};
 use crate::reader::{Dataset, View};
 
@@ -104,7 +104,7 @@ pub(super) fn write(
     cfg: &ExportConfig,
     points: &[ScenePoint],
     splits: &[(String, usize)],
-    staged: &Path,
+    staged: &super::Staged,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<SplitExport>> {
     let mut rec = Reconstruction::default();
@@ -133,7 +133,7 @@ pub(super) fn write(
             rec.cameras.insert(id, pinhole(&v)?);
             rec.images.insert(id, model_image(&v, &file)?);
             let rel = format!("dense/images/{file}");
-            write_under(staged, &rel, &v.photo_png)?;
+            staged.write(&rel, &v.photo_png)?;
             rows.push(format!("{file}\t{id}\t{}\t{}", tsv_split(split), cfg.name));
             s.image_ids.push(id);
             s.names.push(v.name.clone());
@@ -154,10 +154,10 @@ pub(super) fn write(
             },
         );
     }
-    let sparse = staged.join("dense/sparse");
+    let sparse = staged.dir().join("dense/sparse");
     nrw_colmap::write_model(&rec, &sparse, Format::Binary)
         .map_err(|e| DatasetError::io(&sparse, e))?;
     let tsv = format!("filename\tid\tsplit\tdataset\n{}\n", rows.join("\n"));
-    write_under(staged, &format!("{}.tsv", cfg.name), tsv.as_bytes())?;
+    staged.write(&format!("{}.tsv", cfg.name), tsv.as_bytes())?;
     Ok(out)
 }

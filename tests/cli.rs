@@ -4,6 +4,8 @@
 mod bad_inputs;
 #[path = "clean.rs"]
 mod clean;
+#[path = "golden.rs"]
+mod golden;
 #[path = "jpeg.rs"]
 mod jpeg;
 #[path = "nerfstudio.rs"]

@@ -2393,6 +2393,26 @@ fn trainer_lowers_the_loss_beats_chance_on_held_out_triplets_and_resumes_exactly
             b.1
         );
     }
+    // A setting out of range is named as its config field (nrw-train maps it to --pos-k).
+    for (pos_k, neg_k, setting) in [(0, 1, "pos_k"), (1, 1_000, "neg_k")] {
+        let e = train(
+            &ds,
+            "train",
+            &TrainConfig {
+                pos_k,
+                neg_k,
+                ..cfg.clone()
+            },
+            &tmp.path().join("bad-k"),
+            &mut |_, _| {},
+        )
+        .unwrap_err();
+        assert!(
+            matches!(&e, nrw_trainer::TrainError::Setting { setting: s, .. } if *s == setting),
+            "{e}"
+        );
+        assert!(e.to_string().contains("per anchor"), "{e}");
+    }
     // Other settings in the same folder are refused, not mixed.
     let err = train(
         &ds,

@@ -52,13 +52,24 @@ fn the_demo_dataset_and_every_export_layout_keep_their_bytes() {
     // NeRF-W takes pinhole cameras only: the demo scene undistorted.
     let pinhole = s(&root.join("undistorted"));
     let scene = s(&demo.join("scene"));
-    ok(&["ingest", &scene, "--out", &pinhole, "--undistort", "--quiet"]);
+    ok(&[
+        "ingest",
+        &scene,
+        "--out",
+        &pinhole,
+        "--undistort",
+        "--quiet",
+    ]);
     ok(&["split", &pinhole, "--val", "3"]);
     let out = s(&root.join("export-nerfw"));
-    ok(&["export", &pinhole, "--layout", "nerfw", "--out", &out, "--quiet"]);
+    ok(&[
+        "export", &pinhole, "--layout", "nerfw", "--out", &out, "--quiet",
+    ]);
 
     let found = hashes(root);
-    let list = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(LIST);
+    let list = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(LIST);
     if std::env::var_os("NRW_RECORD_GOLDEN").is_some() {
         let text: String = found.iter().map(|(p, h)| format!("{h}  {p}\n")).collect();
         std::fs::write(&list, text).unwrap();

@@ -35,7 +35,7 @@ impl FileEntry {
         FileEntry {
             path: rel.to_string(),
             bytes: data.len() as u64,
-            sha256: hex(&Sha256::digest(data)),
+            sha256: sha256_hex(data),
             rows: None,
         }
     }
@@ -56,6 +56,12 @@ pub fn sha256_file(path: &Path) -> Result<(u64, String)> {
         h.update(&buf[..k]);
     }
     Ok((n, hex(&h.finalize())))
+}
+
+/// SHA-256 of bytes as lower-case hex: the form of every digest a manifest, a unit record or
+/// a fingerprint holds.
+pub fn sha256_hex(data: &[u8]) -> String {
+    hex(&Sha256::digest(data))
 }
 
 fn hex(bytes: &[u8]) -> String {

@@ -17,13 +17,52 @@ pub const CAMERAS_TABLE: &str = "scene/cameras.parquet";
 /// Table path of the images table inside a dataset.
 pub const IMAGES_TABLE: &str = "scene/images.parquet";
 
-/// The `verdict` of a view that entered the dataset (`scene/images.parquet`); every other
-/// verdict names why a photo was dropped. The renderer's `Verdict::Kept` writes this word.
-pub const VERDICT_KEPT: &str = "kept";
+/// An image's `verdict` in `scene/images.parquet`, typed: counts and branches name a variant,
+/// so none can misspell a verdict; the table holds [`VerdictKind::name`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum VerdictKind {
+    /// The view entered the dataset (the renderer's `Verdict::Kept`).
+    Kept,
+    /// The photo's shorter side is under the filter's minimum.
+    TooSmall,
+    /// The render is emptier than the filter allows.
+    TooSparse,
+    /// The photo or label map cannot be decoded whole (truncated, corrupt, not an image);
+    /// `verdict_detail` holds the decoder's message.
+    Unreadable,
+}
 
-/// The `verdict` of a view whose photo or label map cannot be decoded whole (truncated,
-/// corrupt, not an image); `verdict_detail` holds the decoder's message.
-pub const VERDICT_UNREADABLE: &str = "unreadable";
+impl VerdictKind {
+    /// Every verdict.
+    pub const ALL: [VerdictKind; 4] = [
+        VerdictKind::Kept,
+        VerdictKind::TooSmall,
+        VerdictKind::TooSparse,
+        VerdictKind::Unreadable,
+    ];
+
+    /// The word the images table holds.
+    pub const fn name(self) -> &'static str {
+        match self {
+            VerdictKind::Kept => "kept",
+            VerdictKind::TooSmall => "too_small",
+            VerdictKind::TooSparse => "too_sparse",
+            VerdictKind::Unreadable => "unreadable",
+        }
+    }
+
+    /// The verdict a table's word names, if any.
+    pub fn of(name: &str) -> Option<VerdictKind> {
+        VerdictKind::ALL.into_iter().find(|v| v.name() == name)
+    }
+}
+
+/// The `verdict` of a view that entered the dataset; every other verdict names why a photo
+/// was dropped.
+pub const VERDICT_KEPT: &str = VerdictKind::Kept.name();
+
+/// The `verdict` of a view whose photo or label map cannot be decoded whole.
+pub const VERDICT_UNREADABLE: &str = VerdictKind::Unreadable.name();
 
 fn list_of(item: DataType) -> DataType {
     DataType::List(Arc::new(Field::new("item", item, false)))

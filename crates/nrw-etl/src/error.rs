@@ -9,8 +9,9 @@ pub enum EtlError {
     Colmap(#[from] nrw_colmap::ColmapError),
     #[error(transparent)]
     Dataset(#[from] nrw_dataset::DatasetError),
-    #[error("{0}")]
-    Usage(String),
+    /// A flag's value the library refused, named by the flag.
+    #[error("{flag} {problem}")]
+    Flag { flag: &'static str, problem: String },
 }
 
 impl EtlError {

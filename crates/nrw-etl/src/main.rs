@@ -84,35 +84,34 @@ fn main() -> std::process::ExitCode {
             }
         }
     }
+    // Each command ends in success, an error, or one of its own documented exit codes.
+    let code = |fine: bool, other: u8| {
+        if fine {
+            std::process::ExitCode::SUCCESS
+        } else {
+            std::process::ExitCode::from(other)
+        }
+    };
+    let done = |r: error::Result<()>| r.map(|()| std::process::ExitCode::SUCCESS);
     let result = match &cli.command {
-        Command::Demo(a) => cmd::demo::run(a),
-        Command::Synth(a) => cmd::synth::run(a),
-        Command::Inspect(a) => cmd::inspect::run(a),
-        Command::Split(a) => cmd::split::run(a),
-        Command::Segment(a) => cmd::segment::run(a),
-        Command::Export(a) => cmd::export::run(a),
-        Command::Finalize(a) => cmd::finalize::run(a),
-        Command::Verify(a) => cmd::verify::run(a).map(|ok| {
-            if !ok {
-                std::process::exit(cmd::verify::EXIT_MISMATCH as i32);
-            }
-        }),
-        Command::Style(a) => cmd::style::run(a),
-        Command::Triplets(a) => cmd::triplets::run(a),
-        Command::Qa(a) => cmd::qa::run(a),
-        Command::Run(a) => cmd::run::run(a).map(|kept| {
-            if !kept {
-                std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);
-            }
-        }),
-        Command::Ingest(a) => cmd::ingest::run(a).map(|kept| {
-            if !kept {
-                std::process::exit(cmd::ingest::EXIT_NOTHING_KEPT as i32);
-            }
-        }),
+        Command::Demo(a) => done(cmd::demo::run(a)),
+        Command::Synth(a) => done(cmd::synth::run(a)),
+        Command::Inspect(a) => done(cmd::inspect::run(a)),
+        Command::Split(a) => done(cmd::split::run(a)),
+        Command::Segment(a) => done(cmd::segment::run(a)),
+        Command::Export(a) => done(cmd::export::run(a)),
+        Command::Finalize(a) => done(cmd::finalize::run(a)),
+        Command::Verify(a) => cmd::verify::run(a).map(|ok| code(ok, cmd::verify::EXIT_MISMATCH)),
+        Command::Style(a) => done(cmd::style::run(a)),
+        Command::Triplets(a) => done(cmd::triplets::run(a)),
+        Command::Qa(a) => done(cmd::qa::run(a)),
+        Command::Run(a) => cmd::run::run(a).map(|kept| code(kept, cmd::ingest::EXIT_NOTHING_KEPT)),
+        Command::Ingest(a) => {
+            cmd::ingest::run(a).map(|kept| code(kept, cmd::ingest::EXIT_NOTHING_KEPT))
+        }
     };
     match result {
-        Ok(()) => std::process::ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) if e.interrupted() => {
             eprintln!("{e}");
             std::process::ExitCode::from(130)

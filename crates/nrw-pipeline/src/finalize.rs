@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use nrw_dataset::scene::VerdictKind;
 use nrw_dataset::Store;
 
 use nrw_dataset::units::{self, GroupRecord, UnitRecord};
@@ -274,8 +275,8 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         units: unit.count,
         registered: outcomes.len(),
         kept: count(&outcomes, nrw_dataset::scene::VERDICT_KEPT),
-        too_small: count(&outcomes, "too_small"),
-        too_sparse: count(&outcomes, "too_sparse"),
+        too_small: count(&outcomes, VerdictKind::TooSmall.name()),
+        too_sparse: count(&outcomes, VerdictKind::TooSparse.name()),
         unreadable: count(&outcomes, VERDICT_UNREADABLE),
         shards: shards.len(),
         least_empty: outcomes
@@ -328,4 +329,30 @@ pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
         parts: unit.groups,
         tier: kind.tier,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_renderers_verdicts_are_words_of_the_images_table() {
+        use nrw_render::verdict::Verdict;
+        for (v, kind) in [
+            (Verdict::Kept { empty_ratio: 0.1 }, VerdictKind::Kept),
+            (
+                Verdict::TooSmall { shorter_side_px: 9 },
+                VerdictKind::TooSmall,
+            ),
+            (
+                Verdict::TooSparse { empty_ratio: 0.9 },
+                VerdictKind::TooSparse,
+            ),
+        ] {
+            assert_eq!(VerdictKind::of(v.name()), Some(kind));
+        }
+        for k in VerdictKind::ALL {
+            assert_eq!(VerdictKind::of(k.name()), Some(k));
+        }
+    }
 }

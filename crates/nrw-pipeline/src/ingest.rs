@@ -164,6 +164,12 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
             ),
         ));
     }
+    if cfg.estimate_normals.is_some_and(|k| k < 3) {
+        return Err(PipelineError::config(
+            "--estimate-normals",
+            "K needs K ≥ 3 neighbours (a plane needs three points)",
+        ));
+    }
     if let Some(d) = cfg.semantics.as_ref().filter(|d| !d.is_dir()) {
         return Err(PipelineError::input(d, "--semantics is not a folder"));
     }
@@ -905,6 +911,10 @@ pub struct IngestSummary {
     pub resumed_groups: usize,
     /// Empty ratio of the least empty render (what the filter would have to allow).
     pub least_empty: Option<f64>,
+    /// The filters the verdicts came from: renders emptier than this fraction are too sparse,
+    pub max_empty: f64,
+    /// and photos with a shorter side under this many pixels too small.
+    pub min_photo_side: u32,
     pub warnings: Vec<String>,
     pub seconds: f64,
 }
@@ -932,6 +942,8 @@ pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSumma
         points: u.points,
         resumed_groups: u.resumed_groups,
         least_empty: f.least_empty,
+        max_empty: cfg.filters.max_empty_ratio,
+        min_photo_side: cfg.filters.min_photo_side,
         warnings: f.warnings,
         seconds: t0.elapsed().as_secs_f64(),
     })

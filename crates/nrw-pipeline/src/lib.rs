@@ -11,6 +11,7 @@ pub mod error;
 pub mod export;
 pub mod finalize;
 pub mod ingest;
+pub mod inspect;
 pub mod progress;
 pub mod qa;
 pub mod runner;
@@ -26,11 +27,6 @@ pub use error::{PipelineError, Result};
 pub use progress::{Progress, Silent};
 pub use units::Unit;
 
-/// SHA-256 of bytes as lower-case hex (fingerprints of inputs and parameters).
-pub fn sha256_hex(data: &[u8]) -> String {
-    use sha2::Digest;
-    sha2::Sha256::digest(data)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
+/// SHA-256 of bytes as lower-case hex (fingerprints of inputs and parameters), as the
+/// dataset's manifest writes digests.
+pub use nrw_dataset::manifest::sha256_hex;

@@ -76,7 +76,8 @@ pub struct TripletsStage {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExportStage {
-    pub layout: String,
+    /// Any layout `export --layout` takes, by the same name.
+    pub layout: nrw_dataset::export::Layout,
     /// false: export without semantics (train with --use_semantic=False)
     #[serde(default = "yes")]
     pub semantics: bool,
@@ -146,7 +147,7 @@ impl Pipeline {
             }),
             triplets: Some(TripletsStage { k: 20 }),
             export: Some(ExportStage {
-                layout: "official".into(),
+                layout: nrw_dataset::export::Layout::Official,
                 semantics: true,
                 crop: None,
             }),
@@ -212,28 +213,9 @@ fn ingest_config(
     Ok(c)
 }
 
-fn export_config(
-    p: &Pipeline,
-    e: &ExportStage,
-    dataset: &Path,
-    out: &Path,
-    segmented: bool,
-) -> Result<ExportConfig> {
-    let layout = match e.layout.as_str() {
-        "official" => nrw_dataset::export::Layout::Official,
-        "tfrecord" => nrw_dataset::export::Layout::Tfrecord,
-        "files" => nrw_dataset::export::Layout::Files,
-        other => {
-            return Err(PipelineError::config(
-                "export.layout",
-                format!(
-                    "{other:?} of pipeline {} is not official, tfrecord or files",
-                    p.name
-                ),
-            ))
-        }
-    };
-    Ok(ExportConfig {
+fn export_config(e: &ExportStage, dataset: &Path, out: &Path, segmented: bool) -> ExportConfig {
+    let layout = e.layout;
+    ExportConfig {
         layout,
         // The files layout keeps views whole; the paper's layouts take the published crop.
         crop: match e.crop {
@@ -244,7 +226,7 @@ fn export_config(
         // A run that segments its photos exports their labels.
         semantics: e.semantics || segmented,
         ..crate::export::official(dataset, out)
-    })
+    }
 }
 
 fn style_config(s: &StyleStage, dataset: &Path, weights: Option<&Path>) -> Result<StyleConfig> {
@@ -285,8 +267,7 @@ pub fn run(
     let export = p
         .export
         .as_ref()
-        .map(|e| export_config(p, e, out, export_dir, segmented))
-        .transpose()?;
+        .map(|e| export_config(e, out, export_dir, segmented));
     let ingest = p
         .ingest
         .as_ref()
@@ -410,4 +391,25 @@ pub fn demo(
         ));
     }
     Ok((report, out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nrw_dataset::export::Layout;
+
+    #[test]
+    fn every_export_layout_parses_by_its_cli_name_and_others_are_refused() {
+        for l in Layout::ALL {
+            let p: Pipeline =
+                toml::from_str(&format!("name = \"x\"\n[export]\nlayout = \"{l}\"\n")).unwrap();
+            assert_eq!(p.export.unwrap().layout, l);
+            assert_eq!(l.name().parse::<Layout>(), Ok(l));
+        }
+        let e = toml::from_str::<Pipeline>("name = \"x\"\n[export]\nlayout = \"nerf\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("layout") && e.contains("nerfstudio"), "{e}");
+        assert!("nerf".parse::<Layout>().unwrap_err().contains("nerfstudio"));
+    }
 }

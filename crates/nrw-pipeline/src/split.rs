@@ -53,7 +53,6 @@ const MAX_TSV_BYTES: u64 = 1 << 30;
 
 /// Assign exactly the train/test sets of a published split file.
 fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> {
-    use sha2::{Digest, Sha256};
     let io = |e| PipelineError::from(nrw_dataset::DatasetError::io(tsv, e));
     let len = std::fs::metadata(tsv).map_err(io)?.len();
     if len > MAX_TSV_BYTES {
@@ -80,7 +79,7 @@ fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> 
         "split_from_tsv".into(),
         serde_json::json!({
             "file": tsv.file_name().map(|n| n.to_string_lossy().into_owned()),
-            "sha256": Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect::<String>(),
+            "sha256": crate::sha256_hex(&bytes),
         }),
     );
     manifest.parameters.remove("split_val");

@@ -107,18 +107,20 @@ fn convention_mismatch(tier: &Tier, want: Convention) -> String {
     }
 }
 
-/// The five Gram matrices of one image as given, as safetensors bytes (whichever VGG the
-/// weights are).
-pub fn image_grams(weights: Option<&Path>, image: &Path, pre: Preprocess) -> Result<Vec<u8>> {
+/// The five Gram matrices of one image as given, written atomically to `out` as safetensors
+/// (whichever VGG the weights are).
+pub fn image_grams(
+    weights: Option<&Path>,
+    image: &Path,
+    pre: Preprocess,
+    out: &Path,
+) -> Result<()> {
     let net = load_weights(weights, &Tier::reference())
         .or_else(|_| load_weights(weights, &Tier::parse("vgg19-512").expect("valid tier")))?
         .expect("VGG tier");
-    Ok(nrw_style::image_grams_safetensors(
-        &net,
-        image,
-        pre,
-        Parallelism::Rayon(0),
-    )?)
+    let bytes = nrw_style::image_grams_safetensors(&net, image, pre, Parallelism::Rayon(0))?;
+    nrw_dataset::atomic::write_bytes_atomic(out, &bytes)?;
+    Ok(())
 }
 
 fn kind(cfg: &StyleConfig, net: Option<&Vgg>) -> DescriptorKind {

@@ -7,6 +7,7 @@ use std::path::Path;
 
 use nrw_dataset::descriptors::DescriptorRow;
 use nrw_dataset::reader::Dataset;
+use nrw_dataset::scene::VerdictKind;
 
 use crate::error::Result;
 use crate::tables::{ImageRow, Triplets};
@@ -168,13 +169,17 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
         h.push_str("<p class=\"ok\">No photo was dropped.</p>");
         return Ok(());
     }
-    let reason = |r: &str| match r {
-        "too_small" => format!("photo shorter side under {:.0} px", inp.min_side),
-        "too_sparse" => format!("render more than {:.0}% empty", inp.max_empty * 100.0),
-        nrw_dataset::VERDICT_UNREADABLE => {
+    let reason = |r: &str| match VerdictKind::of(r) {
+        Some(VerdictKind::TooSmall) => {
+            format!("photo shorter side under {:.0} px", inp.min_side)
+        }
+        Some(VerdictKind::TooSparse) => {
+            format!("render more than {:.0}% empty", inp.max_empty * 100.0)
+        }
+        Some(VerdictKind::Unreadable) => {
             "photo or label map cannot be decoded whole: empty, truncated or corrupt".into()
         }
-        other => other.to_string(),
+        Some(VerdictKind::Kept) | None => r.to_string(),
     };
     h.push_str("<div class=\"charts\"><table><tr><th>reason</th><th>photos</th></tr>");
     for (r, n) in &f.drops {
@@ -204,11 +209,11 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
         .filter(|r| r.verdict != nrw_dataset::scene::VERDICT_KEPT)
         .take(6)
     {
-        let measured = match r.verdict.as_str() {
-            "too_sparse" => format!("{:.1}% empty", r.verdict_value * 100.0),
-            "too_small" => format!("{:.0} px shorter side", r.verdict_value),
-            nrw_dataset::VERDICT_UNREADABLE => r.verdict_detail.clone().unwrap_or_default(),
-            _ => format!("{}", r.verdict_value),
+        let measured = match VerdictKind::of(&r.verdict) {
+            Some(VerdictKind::TooSparse) => format!("{:.1}% empty", r.verdict_value * 100.0),
+            Some(VerdictKind::TooSmall) => format!("{:.0} px shorter side", r.verdict_value),
+            Some(VerdictKind::Unreadable) => r.verdict_detail.clone().unwrap_or_default(),
+            Some(VerdictKind::Kept) | None => format!("{}", r.verdict_value),
         };
         let caption = format!("{} — {} ({measured})", r.name, r.verdict);
         // The name is data from the dataset: joined through the one check, and a photo

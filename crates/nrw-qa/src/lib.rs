@@ -152,7 +152,10 @@ pub fn build(dir: &nrw_dataset::Store, out: &Path) -> Result<Written> {
     }
     let counts = Counts {
         registered: images.len(),
-        rendered: images.iter().filter(|r| r.verdict != "too_small").count(),
+        rendered: images
+            .iter()
+            .filter(|r| r.verdict != nrw_dataset::scene::VerdictKind::TooSmall.name())
+            .count(),
         kept: kept.len(),
         dropped: images.len() - kept.len(),
         shard_rows,

@@ -16,4 +16,4 @@ pub use error::{Result, SegmentError};
 pub use gemm::Parallelism;
 pub use model::{model_files, Segformer};
 pub use ops::Map;
-pub use segment::{segment, Mode};
+pub use segment::{segment, Mode, ModeKind};

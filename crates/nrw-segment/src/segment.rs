@@ -52,29 +52,52 @@ impl std::fmt::Display for Mode {
     }
 }
 
+/// The kinds of [`Mode`], without their size: what a caller chooses before the size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModeKind {
+    Resize,
+    Whole,
+    Slide,
+    Crop,
+}
+
 impl Mode {
-    /// From the CLI's words: `resize`, `slide` or `crop`, with the size in pixels.
-    pub fn parse(name: &str, size: u32) -> std::result::Result<Mode, String> {
+    /// A mode of `kind` at `size` pixels, refusing sizes the kind cannot take.
+    pub fn new(kind: ModeKind, size: u32) -> std::result::Result<Mode, String> {
         if size == 0 || size > MAX_SIZE {
             return Err(format!(
                 "the size must be 1..={MAX_SIZE} pixels, not {size}"
             ));
         }
-        match name {
-            "whole" => Ok(Mode::Whole { size }),
-            "resize" => Ok(Mode::Resize {
+        match kind {
+            ModeKind::Whole => Ok(Mode::Whole { size }),
+            ModeKind::Resize => Ok(Mode::Resize {
                 width: size,
                 height: size,
             }),
-            "slide" if !size.is_multiple_of(4) => Err(format!(
+            ModeKind::Slide if !size.is_multiple_of(4) => Err(format!(
                 "slide windows must be a multiple of 4 pixels (the logits' grid), not {size}"
             )),
-            "slide" => Ok(Mode::Slide { size }),
-            "crop" => Ok(Mode::CenterCrop { size }),
-            other => Err(format!(
-                "unknown mode `{other}`: resize, whole, slide or crop"
-            )),
+            ModeKind::Slide => Ok(Mode::Slide { size }),
+            ModeKind::Crop => Ok(Mode::CenterCrop { size }),
         }
+    }
+
+    /// From the words of pipeline files: `resize`, `whole`, `slide` or `crop`, with the size
+    /// in pixels.
+    pub fn parse(name: &str, size: u32) -> std::result::Result<Mode, String> {
+        let kind = match name {
+            "whole" => ModeKind::Whole,
+            "resize" => ModeKind::Resize,
+            "slide" => ModeKind::Slide,
+            "crop" => ModeKind::Crop,
+            other => {
+                return Err(format!(
+                    "unknown mode `{other}`: resize, whole, slide or crop"
+                ))
+            }
+        };
+        Mode::new(kind, size)
     }
 }
 

@@ -35,6 +35,17 @@ pub enum Tier {
     Official { crop: u32 },
 }
 
+impl std::str::FromStr for Tier {
+    type Err = String;
+
+    /// A tier by its name ([`Tier::parse`]); the error lists the forms.
+    fn from_str(s: &str) -> Result<Tier, String> {
+        Tier::parse(s).ok_or_else(|| {
+            format!("{s:?} is not a tier: vgg16-<128|256|512|full>[-l<layers 1-5>], the same with vgg19, official[-N], or color-stats")
+        })
+    }
+}
+
 impl Tier {
     /// The paper's reference: VGG16, 512 × 512 centre crop, all five layers.
     pub fn reference() -> Tier {

@@ -7,8 +7,25 @@ use std::path::PathBuf;
 pub enum TrainError {
     #[error(transparent)]
     Dataset(#[from] nrw_dataset::DatasetError),
-    #[error("{0}")]
-    Usage(String),
+    /// A split with no view to load.
+    #[error("{}: split {split:?} holds no views", dataset.display())]
+    EmptySplit { dataset: PathBuf, split: String },
+    /// A setting out of its range, named as the config field (`pos_k`); the binary names its
+    /// own flag for it.
+    #[error("{setting}: {problem}")]
+    Setting {
+        setting: &'static str,
+        problem: String,
+    },
+    /// The dataset has no triplet table yet.
+    #[error("{}: no triplets.parquet; run `nrw-etl style` and `nrw-etl triplets` first", dataset.display())]
+    NoTripletTable { dataset: PathBuf },
+    /// Holding photos out left no triplet to train on.
+    #[error("no training triplets: {anchors} anchors, {held_out} held out")]
+    NoTriplets { anchors: usize, held_out: usize },
+    /// The checkpoint folder holds a run of other settings.
+    #[error("{}: holds a checkpoint of other settings; use another checkpoint folder or the same settings", out.display())]
+    OtherSettings { out: PathBuf },
     #[error("tensor computation: {0}")]
     Tensor(#[from] candle_core::Error),
     #[error("{path}: {source}")]

@@ -99,13 +99,18 @@ impl<'a> Loader<'a> {
     pub fn new(ds: &'a Dataset, split: &str, cfg: LoaderConfig) -> Result<Loader<'a>> {
         let ids = ds.ids(split)?.to_vec();
         if ids.is_empty() {
-            return Err(TrainError::Usage(format!(
-                "{}: split {split:?} holds no views",
-                ds.dir.display()
-            )));
+            return Err(TrainError::EmptySplit {
+                dataset: ds.dir.clone(),
+                split: split.into(),
+            });
         }
-        if cfg.batch == 0 || cfg.crop == 0 {
-            return Err(TrainError::Usage("batch and crop must be positive".into()));
+        for (setting, value) in [("batch", cfg.batch), ("crop", cfg.crop as usize)] {
+            if value == 0 {
+                return Err(TrainError::Setting {
+                    setting,
+                    problem: "must be positive".into(),
+                });
+            }
         }
         let depth_scale = nrw_dataset::scene::read_depth_max(&ds.store)?
             .filter(|d| *d > 0.0)

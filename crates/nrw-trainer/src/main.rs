@@ -112,6 +112,11 @@ fn main() -> std::process::ExitCode {
             );
             std::process::ExitCode::SUCCESS
         }
+        Err(nrw_trainer::TrainError::Setting { setting, problem }) => {
+            // The library names its config field; the user typed a flag.
+            eprintln!("error: --{}: {problem}", setting.replace('_', "-"));
+            std::process::ExitCode::FAILURE
+        }
         Err(e) => {
             eprintln!("error: {e}");
             std::process::ExitCode::FAILURE

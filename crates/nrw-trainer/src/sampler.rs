@@ -38,10 +38,18 @@ impl TripletSampler {
     ) -> Result<TripletSampler> {
         let k_near = rows.iter().map(|r| r.nearest_ids.len()).min().unwrap_or(0);
         let k_far = rows.iter().map(|r| r.furthest_ids.len()).min().unwrap_or(0);
-        if pos_k == 0 || neg_k == 0 || pos_k > k_near || neg_k > k_far {
-            return Err(TrainError::Usage(format!(
-                "--pos-k {pos_k} / --neg-k {neg_k}: the triplet table holds {k_near} nearest and {k_far} furthest per anchor (both must be between 1 and those); rerun `nrw-etl triplets --k` with a larger k or lower them"
-            )));
+        for (setting, k, held, which) in [
+            ("pos_k", pos_k, k_near, "nearest"),
+            ("neg_k", neg_k, k_far, "furthest"),
+        ] {
+            if k == 0 || k > held {
+                return Err(TrainError::Setting {
+                    setting,
+                    problem: format!(
+                        "{k}: the triplet table holds {held} {which} per anchor, and it must be between 1 and that; rerun `nrw-etl triplets --k` with a larger k or lower it"
+                    ),
+                });
+            }
         }
         let held: HashSet<u32> = rows
             .iter()
@@ -66,11 +74,10 @@ impl TripletSampler {
             }
         }
         if train.is_empty() {
-            return Err(TrainError::Usage(format!(
-                "no training triplets: {} anchors, {} held out",
-                rows.len(),
-                held.len()
-            )));
+            return Err(TrainError::NoTriplets {
+                anchors: rows.len(),
+                held_out: held.len(),
+            });
         }
         Ok(TripletSampler {
             train,

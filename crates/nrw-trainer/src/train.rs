@@ -313,10 +313,9 @@ pub fn train(
     progress: &mut dyn FnMut(u64, f64),
 ) -> Result<Report> {
     let rows = nrw_dataset::triplets::read_triplets(&ds.store)?.ok_or_else(|| {
-        TrainError::Usage(format!(
-            "{}: no triplets.parquet; run `nrw-etl style` and `nrw-etl triplets` first",
-            ds.dir.display()
-        ))
+        TrainError::NoTripletTable {
+            dataset: ds.dir.clone(),
+        }
     })?;
     let mut sampler =
         TripletSampler::new(&rows, cfg.pos_k, cfg.neg_k, cfg.hold_out_every, cfg.seed)?;
@@ -365,12 +364,7 @@ pub fn train(
             config: cfg.clone(),
             ..s
         },
-        Some(_) => {
-            return Err(TrainError::Usage(format!(
-                "{}: holds a checkpoint of other settings; use another --out or the same settings",
-                out.display()
-            )))
-        }
+        Some(_) => return Err(TrainError::OtherSettings { out: out.into() }),
         None => {
             let (acc, class) = evaluate(&enc)?;
             State {

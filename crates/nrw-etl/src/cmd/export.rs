@@ -7,26 +7,21 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 use nrw_dataset::export::official::DepthMapping;
-use nrw_dataset::export::{ExportConfig, ExportSummary, Layout as DsLayout};
+use nrw_dataset::export::{ExportConfig, ExportSummary, Layout};
 
 use crate::error::Result;
 
 /// Fewest train views the published triplet sampler can index (`randint(1, 5 + 1)`).
 const PUBLISHED_MIN_TRAIN: usize = 6;
 
-/// `--layout` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Layout {
-    /// train/ and val/ with NNNN_reference.png, NNNN_color.png (RGBA), NNNN_depth.png (levels 0-255), NNNN_seg_rgb.png (the published colour coding), dist_NAME.pckl with official descriptors
-    Official,
-    /// NAME_train.tfrecord / NAME_val.tfrecord (or NAME-0000i-of-0000N_SPLIT.tfrecord with --shards N): the Examples the published data.py parses
-    Tfrecord,
-    /// SPLIT/NAME/{photo.png, color.png, depth.exr, normal.png, semantics.png, labels.png, transient.png, meta.json}
-    Files,
-    /// NeRF-W's Phototourism layout for nerf_pl / Ha-NeRF loaders: NAME.tsv (filename, id, split, dataset), dense/images/, dense/sparse/ (one PINHOLE camera per image, the scene's points); needs a dataset ingested with --undistort (or pinhole cameras)
-    Nerfw,
-    /// nerfstudio's transforms.json (each frame's exact camera model, OpenGL camera-to-world poses with nerfstudio's applied_transform, depth/*.npy, masks/*.png from the transient mask, train/val/test_filenames) with images/ and sparse_pc.ply; refuses camera models nerfstudio cannot represent exactly (FOV, FULL_OPENCV, thin-prism fisheyes)
-    Nerfstudio,
+/// `--layout` values: the dataset crate's layouts, each with its help line.
+fn layout_parser() -> impl clap::builder::TypedValueParser<Value = Layout> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(Layout::ALL.map(|l| PossibleValue::new(l.name()).help(l.summary())))
+        .map(|name| {
+            name.parse::<Layout>()
+                .expect("clap passes only the listed names")
+        })
 }
 
 /// `--depth` values.
@@ -73,7 +68,7 @@ pub struct ExportArgs {
     /// Dataset folder written by `ingest` (and `split`)
     pub dataset: PathBuf,
     /// Which layout to write
-    #[arg(long, value_enum, default_value = "official")]
+    #[arg(long, value_parser = layout_parser(), default_value = "official")]
     pub layout: Layout,
     /// Folder to write into (created; an earlier export there is replaced whole)
     #[arg(long)]
@@ -105,13 +100,7 @@ pub struct ExportArgs {
 
 /// Run `export`.
 pub fn run(args: &ExportArgs) -> Result<()> {
-    let layout = match args.layout {
-        Layout::Official => DsLayout::Official,
-        Layout::Tfrecord => DsLayout::Tfrecord,
-        Layout::Files => DsLayout::Files,
-        Layout::Nerfw => DsLayout::Nerfw,
-        Layout::Nerfstudio => DsLayout::Nerfstudio,
-    };
+    let layout = args.layout;
     let cfg = ExportConfig {
         layout,
         name: args
@@ -146,7 +135,7 @@ pub fn print_summary(dataset: &std::path::Path, out: &std::path::Path, s: &Expor
         .map(|p| format!("{} {}", p.split, p.image_ids.len()))
         .collect();
     println!(
-        "exported {} views ({}) of {} to {} ({:?} layout)",
+        "exported {} views ({}) of {} to {} ({} layout)",
         s.views(),
         per.join(", "),
         dataset.display(),
@@ -176,7 +165,7 @@ pub fn print_summary(dataset: &std::path::Path, out: &std::path::Path, s: &Expor
     }
     match &s.dist_pickle {
         Some(p) => println!("style distances: {} (pretrain_appearance loads it)", out.join(p).display()),
-        None if s.layout == DsLayout::Official => eprintln!(
+        None if s.layout == Layout::Official => eprintln!(
             "no dist_NAME.pckl: the dataset has no official style descriptors (`nrw-etl style DATASET --tier official --weights VGG16`)"
         ),
         None => {}

@@ -155,11 +155,6 @@ impl IngestArgs {
             max_image_size: self.undistort_max_size,
             ..Default::default()
         });
-        if self.estimate_normals.is_some_and(|k| k < 3) {
-            return Err(crate::error::EtlError::Usage(
-                "--estimate-normals K needs K ≥ 3 neighbours (a plane needs three points)".into(),
-            ));
-        }
         Ok(IngestConfig {
             segment,
             undistort,
@@ -208,7 +203,7 @@ pub fn run(args: &IngestArgs) -> Result<bool> {
         None => {
             let s = nrw_pipeline::ingest::ingest(&cfg, &bars)?;
             if !args.quiet {
-                print_summary(&s, &cfg);
+                print_summary(&s);
             }
             if args.json {
                 println!(
@@ -231,20 +226,20 @@ fn print_unit(s: &UnitSummary) {
     );
 }
 
-/// The summary lines of a whole ingest.
-pub fn print_summary(s: &IngestSummary, cfg: &IngestConfig) {
+/// The summary lines of a whole ingest (also what `run` and `demo` print for it).
+pub fn print_summary(s: &IngestSummary) {
     for w in &s.warnings {
         eprintln!("warning: {w}");
     }
     eprintln!(
-        "ingested {}: {} registered, {} kept, {} too sparse (>{:.0}% empty), {} too small (<{} px), {} unreadable; {} shards; {} points ({}) in {:.1} s",
+        "ingested {}: {} registered, {} kept, {} too sparse (>{}% empty), {} too small (<{} px), {} unreadable; {} shards; {} points ({}) in {:.1} s",
         s.dataset,
         s.registered,
         s.kept,
         s.too_sparse,
-        cfg.filters.max_empty_ratio * 100.0,
+        percent(s.max_empty),
         s.too_small,
-        cfg.filters.min_photo_side,
+        s.min_photo_side,
         s.unreadable,
         s.shards,
         s.points,
@@ -257,5 +252,23 @@ pub fn print_summary(s: &IngestSummary, cfg: &IngestConfig) {
             s.least_empty.map_or(String::new(), |m| format!(" (least empty render: {:.1}% empty)", m * 100.0)),
             s.dataset
         );
+    }
+}
+
+/// A fraction as a percentage with the digits it has (0.85 → 85, 0.995 → 99.5), never
+/// rounded across the threshold it describes.
+fn percent(fraction: f64) -> String {
+    let p = (fraction * 100.0 * 1e6).round() / 1e6;
+    format!("{p}")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn thresholds_print_with_their_own_digits() {
+        assert_eq!(super::percent(0.85), "85");
+        assert_eq!(super::percent(0.995), "99.5");
+        assert_eq!(super::percent(1.0), "100");
+        assert_eq!(super::percent(0.0), "0");
     }
 }

@@ -31,15 +31,7 @@ pub struct RunArgs {
 /// Print a finished stage's summary as its own command would.
 pub fn print_stage(dataset: &std::path::Path, done: StageDone) {
     match done {
-        StageDone::Ingest(s) => {
-            for w in &s.warnings {
-                eprintln!("warning: {w}");
-            }
-            eprintln!(
-                "ingested {}: {} registered, {} kept, {} too sparse, {} too small, {} unreadable; {} shards in {:.1} s",
-                s.dataset, s.registered, s.kept, s.too_sparse, s.too_small, s.unreadable, s.shards, s.seconds
-            );
-        }
+        StageDone::Ingest(s) => super::ingest::print_summary(s),
         StageDone::Split(s) => println!(
             "split {}: {} train, {} val",
             dataset.display(),

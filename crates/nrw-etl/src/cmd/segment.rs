@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 use nrw_pipeline::segment::{SegmentConfig, SegmentSummary};
-use nrw_segment::Mode;
+use nrw_segment::{Mode, ModeKind};
 
 use super::{Bars, Encoding, ShardArgs};
 use crate::error::{EtlError, Result};
@@ -25,13 +25,16 @@ pub enum ModeArg {
 
 /// The library's mode for `--mode`/`--size` (or ingest's `--segment-mode`/`--segment-size`).
 pub fn mode(arg: ModeArg, size: u32) -> Result<Mode> {
-    let name = match arg {
-        ModeArg::Resize => "resize",
-        ModeArg::Whole => "whole",
-        ModeArg::Slide => "slide",
-        ModeArg::Crop => "crop",
+    let kind = match arg {
+        ModeArg::Resize => ModeKind::Resize,
+        ModeArg::Whole => ModeKind::Whole,
+        ModeArg::Slide => ModeKind::Slide,
+        ModeArg::Crop => ModeKind::Crop,
     };
-    Mode::parse(name, size).map_err(|e| EtlError::Usage(format!("--size {size}: {e}")))
+    Mode::new(kind, size).map_err(|problem| EtlError::Flag {
+        flag: "--size",
+        problem: format!("{size}: {problem}"),
+    })
 }
 
 /// Arguments of `segment`.

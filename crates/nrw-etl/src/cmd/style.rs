@@ -8,7 +8,7 @@ use nrw_pipeline::style::StyleConfig;
 use nrw_style::{Preprocess, Tier};
 
 use super::{Bars, ShardArgs};
-use crate::error::{EtlError, Result};
+use crate::error::Result;
 
 /// `--preprocess` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -32,14 +32,15 @@ impl From<Pre> for Preprocess {
 #[derive(Debug, Args)]
 pub struct StyleArgs {
     /// Dataset folder: describe every kept photo into DATASET/descriptors/
+    #[arg(required_unless_present = "image")]
     pub dataset: Option<PathBuf>,
     /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>], the same with vgg19,
     /// official[-N] (the published code's distance: N×N centre crop, default 512, no resize,
     /// v·2/255 − 1 into tensorflow-vgg's Caffe VGG16, per-layer mean squared Gram difference;
     /// needs that vgg16.npy; for the official export's dist_<name>.pckl), or color-stats (no
     /// weights needed)
-    #[arg(long, default_value = "vgg16-512")]
-    pub tier: String,
+    #[arg(long, default_value = "vgg16-512", value_parser = |s: &str| s.parse::<Tier>())]
+    pub tier: Tier,
     /// Weights, never downloaded: VGG16 or VGG19 safetensors with torchvision names
     /// (features.N.weight / .bias) for the vgg tiers; the published code's vgg16.npy
     /// (tensorflow-vgg, the file its README links) for the official tiers
@@ -70,27 +71,21 @@ pub struct StyleArgs {
 /// Run `style`.
 pub fn run(args: &StyleArgs) -> Result<()> {
     if let Some(image) = &args.image {
-        let bytes = nrw_pipeline::style::image_grams(
+        let out = args.out.as_ref().expect("clap requires --out with --image");
+        nrw_pipeline::style::image_grams(
             args.weights.as_deref(),
             image,
             args.preprocess.into(),
+            out,
         )?;
-        let out = args.out.as_ref().expect("clap requires --out with --image");
-        nrw_dataset::atomic::write_bytes_atomic(out, &bytes)?;
         println!("{}", out.display());
         return Ok(());
     }
-    let Some(dir) = &args.dataset else {
-        return Err(EtlError::Usage(
-            "give a DATASET folder, or --image FILE --out FILE".into(),
-        ));
-    };
-    let tier = Tier::parse(&args.tier).ok_or_else(|| {
-        EtlError::Usage(format!(
-            "--tier {:?} is not a tier (vgg16-512, vgg16-256-l12, vgg16-full, official, color-stats, …)",
-            args.tier
-        ))
-    })?;
+    let dir = args
+        .dataset
+        .as_ref()
+        .expect("clap requires DATASET without --image");
+    let tier = args.tier.clone();
     let cfg = StyleConfig {
         tier,
         weights: args.weights.clone(),

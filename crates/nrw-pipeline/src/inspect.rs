@@ -1,0 +1,122 @@
+//! Inspect: what a location holds — a COLMAP model (counts, camera models, how well it agrees
+//! with itself) or a dataset (verdicts, views, splits) — as values any front end can print.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use nrw_colmap::Format;
+use serde::Serialize;
+
+use crate::error::Result;
+
+/// A COLMAP model's summary. Serialised, it is `inspect --json`'s object.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelSummary {
+    pub model_dir: String,
+    /// `bin` or `txt`.
+    pub encoding: &'static str,
+    /// `colmap3`, or `colmap4` (rigs and frames).
+    pub layout: &'static str,
+    pub cameras: usize,
+    pub images: usize,
+    pub points: usize,
+    pub observations: usize,
+    pub camera_models: Vec<&'static str>,
+    pub mean_reprojection_error_px: Option<f64>,
+    pub max_reprojection_error_px: Option<f64>,
+    /// Observations whose point projected into its image (the ones averaged).
+    #[serde(skip)]
+    pub observations_projected: usize,
+    pub not_visible_observations: usize,
+    pub rigs: usize,
+    pub frames: usize,
+    pub warnings: Vec<String>,
+}
+
+impl ModelSummary {
+    /// Observations per point (0 without points).
+    pub fn mean_track_length(&self) -> f64 {
+        if self.points == 0 {
+            0.0
+        } else {
+            self.observations as f64 / self.points as f64
+        }
+    }
+}
+
+/// A dataset's summary. Serialised, it is `inspect --json`'s object.
+#[derive(Debug, Clone, Serialize)]
+pub struct DatasetSummary {
+    pub dataset: String,
+    pub schema_version: u32,
+    /// Images the model registered (one verdict each).
+    pub registered: usize,
+    /// How many images got each verdict, by the verdict's name.
+    pub verdicts: BTreeMap<String, usize>,
+    pub views: usize,
+    #[serde(skip)]
+    pub shards: usize,
+    pub splits: BTreeMap<String, usize>,
+    pub parameters: serde_json::Map<String, serde_json::Value>,
+}
+
+/// What [`inspect`] found.
+#[derive(Debug, Clone)]
+pub enum Inspected {
+    Model(ModelSummary),
+    Dataset(DatasetSummary),
+}
+
+/// Summarise `location`: a dataset when it is a URL or holds a manifest, else the COLMAP
+/// model of a scene folder (or a model folder itself), read as `format` when given.
+pub fn inspect(location: &Path, format: Option<Format>) -> Result<Inspected> {
+    let is_dataset = nrw_dataset::store::is_url(&location.to_string_lossy())
+        || location.join(nrw_dataset::Manifest::FILE).is_file();
+    Ok(if is_dataset {
+        Inspected::Dataset(dataset_summary(location)?)
+    } else {
+        Inspected::Model(model_summary(location, format)?)
+    })
+}
+
+fn dataset_summary(location: &Path) -> Result<DatasetSummary> {
+    let ds = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open_path(location)?)?;
+    let verdicts = nrw_dataset::scene::read_verdicts(&ds.store)?;
+    let mut counts = BTreeMap::new();
+    for (_, _, v) in &verdicts {
+        *counts.entry(v.clone()).or_insert(0usize) += 1;
+    }
+    Ok(DatasetSummary {
+        dataset: location.display().to_string(),
+        schema_version: ds.manifest.schema_version,
+        registered: verdicts.len(),
+        verdicts: counts,
+        views: ds.len(),
+        shards: ds.shard_count(),
+        splits: ds.splits().into_iter().collect(),
+        parameters: ds.manifest.parameters.clone(),
+    })
+}
+
+fn model_summary(location: &Path, format: Option<Format>) -> Result<ModelSummary> {
+    let (dir, rec) = crate::ingest::load_model(location, format)?;
+    let stats = nrw_colmap::reprojection_stats(&rec);
+    let (encoding, layout) = crate::ingest::describe(&rec);
+    Ok(ModelSummary {
+        model_dir: dir.display().to_string(),
+        encoding,
+        layout,
+        cameras: rec.cameras.len(),
+        images: rec.images.len(),
+        points: rec.points.len(),
+        observations: rec.num_observations(),
+        camera_models: rec.camera_model_names(),
+        mean_reprojection_error_px: stats.mean_px,
+        max_reprojection_error_px: stats.max_px,
+        observations_projected: stats.observations,
+        not_visible_observations: stats.not_visible,
+        rigs: rec.rigs.len(),
+        frames: rec.frames.len(),
+        warnings: rec.warnings.iter().map(|w| w.to_string()).collect(),
+    })
+}

@@ -77,7 +77,7 @@ pub fn descriptor_crc32(values: &[f32]) -> u32 {
 pub fn check_part(
     path: &std::path::Path,
     data: bytes::Bytes,
-) -> Result<Vec<crate::views::PayloadMismatch>> {
+) -> Result<Vec<crate::payload::PayloadMismatch>> {
     let mut out = Vec::new();
     let mut row = 0;
     let cols = ["image_id", "descriptor", "descriptor_crc32"];
@@ -93,7 +93,7 @@ fn descriptor_mismatches(
     b: &RecordBatch,
     first_row: usize,
     path: &std::path::Path,
-) -> Result<Vec<crate::views::PayloadMismatch>> {
+) -> Result<Vec<crate::payload::PayloadMismatch>> {
     let ids = column::<UInt32Array>(b, "image_id", path)?;
     let desc = column::<ListArray>(b, "descriptor", path)?;
     let crcs = column::<UInt32Array>(b, "descriptor_crc32", path)?;
@@ -123,9 +123,9 @@ fn row_mismatch(
     stored: u32,
     values: &Float32Array,
     row: usize,
-) -> Option<crate::views::PayloadMismatch> {
+) -> Option<crate::payload::PayloadMismatch> {
     let computed = descriptor_crc32(values.values());
-    (computed != stored).then(|| crate::views::PayloadMismatch {
+    (computed != stored).then(|| crate::payload::PayloadMismatch {
         row,
         image_id,
         column: "descriptor".into(),

@@ -3,6 +3,7 @@
 //! they can never disagree about a byte.
 
 pub mod atomic;
+pub mod checks;
 pub mod codec;
 pub mod contain;
 pub mod depth;
@@ -13,6 +14,7 @@ pub mod footer;
 pub mod jpeg;
 pub mod manifest;
 pub mod parquet_io;
+pub mod payload;
 pub mod probe;
 pub mod reader;
 pub mod scene;

@@ -66,7 +66,7 @@ pub fn scene_points(
     store: &nrw_dataset::Store,
 ) -> Result<Vec<nrw_dataset::export::nerfw::ScenePoint>> {
     let m = nrw_dataset::Manifest::read(store)?;
-    let (rec, changed) = crate::ingest::reread_model(&m.scene, &m.inputs)?;
+    let (rec, changed) = crate::model::reread_model(&m.scene, &m.inputs)?;
     if let Some(f) = changed {
         return Err(crate::error::PipelineError::input(
             &f,

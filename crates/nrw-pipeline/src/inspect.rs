@@ -99,9 +99,9 @@ fn dataset_summary(location: &Path) -> Result<DatasetSummary> {
 }
 
 fn model_summary(location: &Path, format: Option<Format>) -> Result<ModelSummary> {
-    let (dir, rec) = crate::ingest::load_model(location, format)?;
+    let (dir, rec) = crate::model::load_model(location, format)?;
     let stats = nrw_colmap::reprojection_stats(&rec);
-    let (encoding, layout) = crate::ingest::describe(&rec);
+    let (encoding, layout) = crate::model::describe(&rec);
     Ok(ModelSummary {
         model_dir: dir.display().to_string(),
         encoding,

@@ -12,6 +12,7 @@ pub mod export;
 pub mod finalize;
 pub mod ingest;
 pub mod inspect;
+pub mod model;
 pub mod progress;
 pub mod qa;
 pub mod runner;

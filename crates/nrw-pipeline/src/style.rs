@@ -15,6 +15,7 @@ use nrw_style::{describe, Convention, Parallelism, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result};
+use crate::units::{check_units, close_stage, units_error};
 use crate::{Progress, Unit};
 
 /// Photos per descriptor part by default.
@@ -332,7 +333,7 @@ fn run_unit(
         stage: units::STYLE.into(),
         index: unit.index,
         count: unit.count,
-        fingerprint: crate::ingest::fingerprint(std::slice::from_ref(&ids_entry), &parameters),
+        fingerprint: crate::units::fingerprint(std::slice::from_ref(&ids_entry), &parameters),
         parameters,
         inputs: vec![ids_entry],
         scene: None,
@@ -363,6 +364,47 @@ pub fn style(cfg: &StyleConfig, progress: &dyn Progress) -> Result<StyleSummary>
     units::remove_unit_records(store, units::STYLE, None)?;
     let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
     let s = run_unit(cfg, Unit::WHOLE, net.as_ref(), progress)?;
-    crate::finalize::finalize_style(store)?;
+    finalize_style(store)?;
     Ok(s)
+}
+
+/// What finalize merged for style.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct StyleMerge {
+    pub units: usize,
+    pub parts: usize,
+    pub tier: String,
+}
+/// Merge style's units: every part present and of the units' kind, parts past the end
+/// (of an earlier, larger run) removed, all parts listed in the manifest.
+pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
+    let unit = check_units(dataset, units::STYLE)?;
+    let kind = crate::style::kind_of(&unit);
+    for k in 0..unit.groups {
+        let rel = nrw_dataset::descriptors::part_path(k);
+        // Only the kind columns: the descriptors themselves are megabytes per photo.
+        let ok = dataset.exists(&rel)?
+            && nrw_dataset::descriptors::read_kinds(dataset, &rel)?
+                .iter()
+                .all(|k| *k == kind);
+        if !ok {
+            return Err(units_error(
+                dataset,
+                format!(
+                    "{rel} (style unit {}/{}) is missing or of another kind: run that unit again",
+                    k % unit.count,
+                    unit.count
+                ),
+            ));
+        }
+    }
+    let mut manifest = Manifest::read(dataset)?;
+    crate::style::list_parts(dataset, &mut manifest, unit.groups)?;
+    manifest.write(dataset)?;
+    close_stage(dataset, units::STYLE)?;
+    Ok(StyleMerge {
+        units: unit.count,
+        parts: unit.groups,
+        tier: kind.tier,
+    })
 }

@@ -6,7 +6,11 @@
 //! writes, and `finalize` only has to list them. Every machine derives the same groups from
 //! the same model, so units agree without talking.
 
+use std::collections::BTreeMap;
 use std::fmt;
+
+use nrw_dataset::units::{self, UnitRecord};
+use nrw_dataset::Store;
 
 use crate::error::{PipelineError, Result};
 
@@ -107,6 +111,119 @@ impl Unit {
         }
         Ok(unit)
     }
+}
+
+/// SHA-256 (hex) of the inputs and parameters: what makes two runs' outputs interchangeable.
+pub fn fingerprint(
+    inputs: &[nrw_dataset::FileEntry],
+    parameters: &serde_json::Map<String, serde_json::Value>,
+) -> String {
+    let mut text = serde_json::to_string(inputs).expect("json");
+    text.push_str(&serde_json::to_string(parameters).expect("json"));
+    crate::sha256_hex(text.as_bytes())
+}
+
+pub(crate) fn units_error(dataset: &Store, problem: String) -> PipelineError {
+    PipelineError::Units {
+        dataset: dataset.root(),
+        problem,
+    }
+}
+
+pub(crate) fn names(units: &[&UnitRecord]) -> String {
+    let n: Vec<String> = units
+        .iter()
+        .map(|u| format!("{}/{}", u.index, u.count))
+        .collect();
+    format!(
+        "unit{} {}",
+        if n.len() > 1 { "s" } else { "" },
+        n.join(", ")
+    )
+}
+
+/// The first way `b` differs from `a`: a parameter (named with both values) or an input file.
+pub(crate) fn difference(a: &UnitRecord, b: &UnitRecord) -> String {
+    let keys: std::collections::BTreeSet<&String> =
+        a.parameters.keys().chain(b.parameters.keys()).collect();
+    for k in keys {
+        let (va, vb) = (a.parameters.get(k), b.parameters.get(k));
+        if va != vb {
+            let show =
+                |v: Option<&serde_json::Value>| v.map_or("(unset)".to_string(), |v| v.to_string());
+            return format!("{k} = {} vs {k} = {}", show(vb), show(va));
+        }
+    }
+    for ia in &a.inputs {
+        match b.inputs.iter().find(|ib| ib.path == ia.path) {
+            Some(ib) if ib.sha256 == ia.sha256 => {}
+            Some(_) => return format!("input {} had other contents", ia.path),
+            None => return format!("input {} was not read", ia.path),
+        }
+    }
+    "other inputs".into()
+}
+
+/// Check a stage's unit records agree and are complete; returns one of them.
+pub(crate) fn check_units(dataset: &Store, stage: &str) -> Result<UnitRecord> {
+    let records = units::unit_records(dataset, stage)?;
+    let first = records
+        .first()
+        .cloned()
+        .ok_or_else(|| units_error(dataset, format!("no {stage} unit has run here")))?;
+    let counts: std::collections::BTreeSet<usize> = records.iter().map(|r| r.count).collect();
+    if counts.len() > 1 {
+        let by = |n: usize| names(&records.iter().filter(|r| r.count == n).collect::<Vec<_>>());
+        let shown: Vec<String> = counts.iter().map(|n| by(*n)).collect();
+        return Err(units_error(dataset, format!(
+            "{stage} units were run with different unit counts ({}); run every unit with the same --shard I/N count",
+            shown.join("; ")
+        )));
+    }
+    // The largest group of agreeing units is taken as the intended run.
+    let mut by_fp: BTreeMap<&str, Vec<&UnitRecord>> = BTreeMap::new();
+    for r in &records {
+        by_fp.entry(r.fingerprint.as_str()).or_default().push(r);
+    }
+    if by_fp.len() > 1 {
+        let mut groups: Vec<Vec<&UnitRecord>> = by_fp.into_values().collect();
+        groups.sort_by_key(|g| std::cmp::Reverse(g.len()));
+        let (main, odd) = (&groups[0], &groups[1]);
+        return Err(units_error(
+            dataset,
+            format!(
+            "{stage} {} ran with other parameters than {}: {}; run {} again with the same settings",
+            names(odd),
+            names(main),
+            difference(main[0], odd[0]),
+            if odd.len() > 1 { "them" } else { "it" },
+        ),
+        ));
+    }
+    let missing: Vec<String> = (0..first.count)
+        .filter(|i| !records.iter().any(|r| r.index == *i))
+        .map(|i| format!("{i}/{}", first.count))
+        .collect();
+    if !missing.is_empty() {
+        return Err(units_error(dataset, format!(
+            "{stage} unit{} {} {} not run (or not finished): run {} with --shard, then finalize again",
+            if missing.len() > 1 { "s" } else { "" },
+            missing.join(", "),
+            if missing.len() > 1 { "have" } else { "has" },
+            if missing.len() > 1 { "them" } else { "it" },
+        )));
+    }
+    Ok(first)
+}
+
+/// Record the units' summed time as the stage's, and remove their records (merged).
+pub(crate) fn close_stage(dataset: &Store, stage: &str) -> Result<()> {
+    let seconds: f64 = units::unit_records(dataset, stage)?
+        .iter()
+        .map(|r| r.seconds)
+        .sum();
+    crate::qa::record_timing(dataset, stage, seconds);
+    Ok(units::clear_stage(dataset, stage)?)
 }
 
 #[cfg(test)]

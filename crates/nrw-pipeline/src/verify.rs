@@ -57,7 +57,7 @@ fn parquet_rows(store: &Store, rel: &str) -> Option<u64> {
 /// Every payload of a shard or descriptor part against its CRC-32 (other files have none).
 fn payload_check(rel: &str, name: &str, data: bytes::Bytes) -> Vec<Mismatch> {
     let hex = |c: Option<u32>| c.map_or("none".into(), |c| format!("crc32 {c:08x}"));
-    match nrw_dataset::views::check_payloads(rel, std::path::Path::new(name), data) {
+    match nrw_dataset::checks::check_payloads(rel, std::path::Path::new(name), data) {
         Ok(found) => found
             .into_iter()
             .map(|m| Mismatch {

@@ -3,20 +3,26 @@
 //! gives; the tool never downloads anything.
 
 pub mod backend;
+pub mod conv;
 pub mod descriptor;
 pub mod error;
+pub mod matmul;
 pub mod npy;
 mod pool;
 pub mod preprocess;
+pub mod tensor;
 pub mod vgg;
 pub mod winograd;
 
 pub use backend::Backend;
+pub use conv::ConvAlgo;
 pub use descriptor::{central_crop, describe, distance2, Tier};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
+pub use matmul::gram;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};
-pub use vgg::{gram, Activation, Arch, ConvAlgo, Convention, Vgg, STYLE_LAYERS};
+pub use tensor::Activation;
+pub use vgg::{Arch, Convention, Vgg, STYLE_LAYERS};
 
 /// The five Gram matrices (relu1_2 … relu5_2) of a preprocessed CHW input, f64, row-major.
 pub fn grams(

@@ -18,7 +18,8 @@
 use gemm::Parallelism;
 use rayon::prelude::*;
 
-use crate::vgg::{gemm_strided, Activation, GemmOperands};
+use crate::matmul::{gemm_strided, GemmOperands};
+use crate::tensor::Activation;
 
 /// The vector instructions the transforms are compiled for, chosen once at run time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -227,7 +228,7 @@ fn kernel_transform(g: &[f32], absolute: bool) -> [f64; P] {
 }
 
 /// 3 × 3 convolution (stride 1, padding 1) + bias + ReLU of a padded channels-last
-/// activation, by F(4×4, 3×3). Equal to [`crate::vgg::conv3x3_relu`] within the bound of
+/// activation, by F(4×4, 3×3). Equal to [`crate::conv::conv3x3_relu`] within the bound of
 /// [`error_bound`]; the output's zero border is kept. Bands of tiles are independent and
 /// their GEMMs never split the inner dimension, so the result is the same for any thread
 /// count.

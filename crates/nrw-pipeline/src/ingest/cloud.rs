@@ -1,0 +1,122 @@
+//! The cloud to render: the dense or sparse points, outliers removed and normals estimated
+//! when asked, re-centred on the scene origin.
+
+use super::*;
+
+/// A cloud as read, before clean-up: f64 positions, its channels, and per point where it
+/// is seen from (the mean centre of the cameras that observe a sparse point; the scene's
+/// mean camera centre for a dense cloud, which has no tracks).
+pub(super) struct RawCloud {
+    positions: Vec<glam::DVec3>,
+    colors: Option<Vec<[u8; 3]>>,
+    normals: Option<Vec<[f32; 3]>>,
+    seen_from: Vec<glam::DVec3>,
+}
+
+/// Which cloud to render, what it is called, and the file it came from (if any).
+pub(super) fn point_source(
+    cfg: &IngestConfig,
+    model_dir: &Path,
+    rec: &Reconstruction,
+) -> Result<(RawCloud, String, Option<PathBuf>)> {
+    let candidate = cfg.points.clone().or_else(|| {
+        std::iter::once(cfg.scene.join("dense/fused.ply"))
+            .chain(
+                model_dir
+                    .ancestors()
+                    .skip(1)
+                    .take(2)
+                    .map(|d| d.join("dense/fused.ply")),
+            )
+            .find(|p| p.is_file())
+    });
+    let centres: BTreeMap<u32, glam::DVec3> = rec
+        .images
+        .iter()
+        .map(|(id, i)| (*id, i.cam_from_world.centre()))
+        .collect();
+    let mean_centre = centres.values().copied().sum::<glam::DVec3>() / centres.len().max(1) as f64;
+    match candidate {
+        Some(p) => {
+            let cloud = read_ply(&p)?;
+            let raw = RawCloud {
+                seen_from: vec![mean_centre; cloud.positions.len()],
+                positions: cloud.positions,
+                colors: cloud.colors,
+                normals: cloud.normals,
+            };
+            Ok((raw, "ply".into(), Some(p)))
+        }
+        None if !rec.points.is_empty() => {
+            let raw = RawCloud {
+                positions: rec.points.values().map(|p| p.xyz).collect(),
+                colors: Some(rec.points.values().map(|p| p.rgb).collect()),
+                normals: None,
+                seen_from: rec
+                    .points
+                    .values()
+                    .map(|p| {
+                        let n = p.track.len().max(1) as f64;
+                        let sum: glam::DVec3 =
+                            p.track.iter().filter_map(|t| centres.get(&t.image_id)).sum();
+                        if p.track.is_empty() { mean_centre } else { sum / n }
+                    })
+                    .collect(),
+            };
+            Ok((raw, "sparse".into(), None))
+        }
+        None => Err(PipelineError::input(
+            model_dir,
+            "nothing to render: no dense/fused.ply, no --points FILE, and the model has no 3D points",
+        )),
+    }
+}
+
+/// Keep the elements whose flag is set (flags and elements in the same order).
+pub(super) fn keep_where<T>(v: &mut Vec<T>, keep: &[bool]) {
+    let mut flags = keep.iter();
+    v.retain(|_| *flags.next().expect("one flag per element"));
+}
+
+/// The cloud to render: outliers removed (`--denoise`), normals estimated where it has none
+/// (`--estimate-normals`), re-centred on `origin`. Returns what clean-up did, for the
+/// manifest (absent keys: not asked for).
+pub(super) fn render_cloud(
+    cfg: &IngestConfig,
+    raw: RawCloud,
+    origin: glam::DVec3,
+    warnings: &mut Vec<String>,
+) -> (RenderCloud, serde_json::Map<String, serde_json::Value>) {
+    let mut report = serde_json::Map::new();
+    let RawCloud {
+        mut positions,
+        mut colors,
+        mut normals,
+        mut seen_from,
+    } = raw;
+    if let Some((k, sigma)) = cfg.denoise {
+        let (keep, r) = nrw_render::clean::statistical_outliers(&positions, origin, k, sigma);
+        keep_where(&mut positions, &keep);
+        keep_where(&mut seen_from, &keep);
+        if let Some(c) = colors.as_mut() {
+            keep_where(c, &keep);
+        }
+        if let Some(n) = normals.as_mut() {
+            keep_where(n, &keep);
+        }
+        report.insert("denoise".into(), serde_json::to_value(&r).expect("json"));
+    }
+    if let Some(k) = cfg.estimate_normals {
+        if normals.is_some() {
+            warnings.push(format!(
+                "--estimate-normals {k}: the cloud has normals of its own; they are used"
+            ));
+        } else {
+            let n = nrw_render::clean::estimate_normals(&positions, origin, k, &|i| seen_from[i]);
+            normals = Some(n);
+            report.insert("estimated_normals_k".into(), k.into());
+        }
+    }
+    let cloud = RenderCloud::new(origin, &positions, colors.as_deref(), normals.as_deref());
+    (cloud, report)
+}

@@ -1,0 +1,172 @@
+//! Ingest's merge: the units' group records into the scene tables and the manifest (what
+//! `finalize` runs for ingest, and a whole ingest runs at its end).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use nrw_dataset::scene::VerdictKind;
+use nrw_dataset::units::{self, GroupRecord};
+use nrw_dataset::{
+    FileEntry, ImageOutcome, Manifest, Store, Tool, SCHEMA_VERSION, VERDICT_UNREADABLE,
+};
+
+use crate::error::Result;
+use crate::units::{check_units, close_stage, units_error};
+
+/// What finalize merged for ingest.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct IngestMerge {
+    pub units: usize,
+    pub registered: usize,
+    pub kept: usize,
+    pub too_small: usize,
+    pub too_sparse: usize,
+    /// Photos (or label maps) that could not be decoded whole: each is named in `warnings`.
+    pub unreadable: usize,
+    pub shards: usize,
+    /// Empty ratio of the least empty render (what the filter would have to allow).
+    pub least_empty: Option<f64>,
+    pub warnings: Vec<String>,
+}
+
+fn count(outcomes: &BTreeMap<u32, ImageOutcome>, verdict: &str) -> usize {
+    outcomes.values().filter(|o| o.verdict == verdict).count()
+}
+
+/// Merge ingest's units: scene tables and manifest from the group records, stale shards
+/// (of runs with other parameters) removed.
+pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
+    let unit = check_units(dataset, units::INGEST)?;
+    let mut outcomes = BTreeMap::new();
+    let mut photos = BTreeMap::new();
+    let mut shards: Vec<FileEntry> = Vec::new();
+    for g in 0..unit.groups {
+        let rel = units::group_record_path(units::INGEST, g);
+        let r: Option<GroupRecord> = units::read_record(dataset, &rel)?;
+        let r = r
+            .filter(|r| r.fingerprint == unit.fingerprint)
+            .ok_or_else(|| {
+                units_error(
+                    dataset,
+                    format!(
+                "ingest group {g} (unit {}/{}) has no record of this run: run that unit again",
+                g % unit.count,
+                unit.count
+            ),
+                )
+            })?;
+        shards.extend(r.shard);
+        for i in r.images {
+            photos.insert(i.image_id, i.photo_size);
+            outcomes.insert(i.image_id, i.outcome);
+        }
+    }
+    let scene = unit
+        .scene
+        .clone()
+        .ok_or_else(|| units_error(dataset, "ingest unit record names no scene".into()))?;
+    let (mut rec, changed) = crate::model::reread_model(&scene, &unit.inputs)?;
+    if let Some(f) = changed {
+        return Err(units_error(
+            dataset,
+            format!(
+                "{} changed since the ingest units read it: run the units again",
+                f.display()
+            ),
+        ));
+    }
+    // `ingest --undistort` stored the undistorted PINHOLE cameras: the scene tables list those.
+    if let Some(v) = unit.parameters.get("undistort") {
+        let options = crate::model::undistort_from_parameters(v).ok_or_else(|| {
+            units_error(
+                dataset,
+                format!("ingest unit record: unreadable `undistort` parameters {v}"),
+            )
+        })?;
+        crate::model::undistort_model(&mut rec, &options, Path::new(&scene.model_dir))?;
+    }
+    // Shards of an earlier run with other parameters must not linger next to these.
+    for stale in nrw_dataset::views::stale_shards(dataset, &shards)? {
+        dataset.delete(&stale)?;
+    }
+    let mut tables = nrw_dataset::write_scene_tables(dataset, &rec, &photos, &outcomes)?;
+    tables.extend(shards.iter().cloned());
+    // A split from an earlier run stays (split assigns only new photos when run again).
+    if dataset.exists(nrw_dataset::split::SPLITS_TABLE)? {
+        tables.push(FileEntry::of(dataset, nrw_dataset::split::SPLITS_TABLE)?);
+    }
+    let mut warnings = unit.warnings.clone();
+    for (id, o) in outcomes
+        .iter()
+        .filter(|(_, o)| o.verdict == VERDICT_UNREADABLE)
+    {
+        warnings.push(format!(
+            "{}: unreadable, left out: {}",
+            rec.images.get(id).map_or("?", |i| i.name.as_str()),
+            o.detail.as_deref().unwrap_or("")
+        ));
+    }
+    // Triplets depend on which views survive: a new ingest makes them stale.
+    let stale = nrw_dataset::triplets::TRIPLETS_TABLE;
+    if dataset.exists(stale)? {
+        dataset.delete(stale)?;
+        warnings.push(format!(
+            "{}: removed (stale after a new ingest); run `nrw-etl triplets` again",
+            dataset.name(stale).display()
+        ));
+    }
+    let manifest = Manifest {
+        schema_version: SCHEMA_VERSION,
+        tool: Tool {
+            name: "nrw-etl".into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+        },
+        scene,
+        inputs: unit.inputs.clone(),
+        parameters: unit.parameters.clone(),
+        tables,
+        warnings: warnings.clone(),
+    };
+    manifest.write(dataset)?;
+    close_stage(dataset, units::INGEST)?;
+    Ok(IngestMerge {
+        units: unit.count,
+        registered: outcomes.len(),
+        kept: count(&outcomes, nrw_dataset::scene::VERDICT_KEPT),
+        too_small: count(&outcomes, VerdictKind::TooSmall.name()),
+        too_sparse: count(&outcomes, VerdictKind::TooSparse.name()),
+        unreadable: count(&outcomes, VERDICT_UNREADABLE),
+        shards: shards.len(),
+        least_empty: outcomes
+            .values()
+            .filter_map(|o| o.empty_ratio)
+            .reduce(f64::min),
+        warnings,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_renderers_verdicts_are_words_of_the_images_table() {
+        use nrw_render::verdict::Verdict;
+        for (v, kind) in [
+            (Verdict::Kept { empty_ratio: 0.1 }, VerdictKind::Kept),
+            (
+                Verdict::TooSmall { shorter_side_px: 9 },
+                VerdictKind::TooSmall,
+            ),
+            (
+                Verdict::TooSparse { empty_ratio: 0.9 },
+                VerdictKind::TooSparse,
+            ),
+        ] {
+            assert_eq!(VerdictKind::of(v.name()), Some(kind));
+        }
+        for k in VerdictKind::ALL {
+            assert_eq!(VerdictKind::of(k.name()), Some(k));
+        }
+    }
+}

@@ -1,0 +1,404 @@
+//! Ingest: read and validate a scene, render every registered photo's view of the cloud,
+//! apply the paper's filters, and write shards; [`merge`] then writes the scene tables and the
+//! manifest (at the end of a whole run, or by `finalize` once every unit has run).
+//!
+//! Modules: `photos` (paths and headers), `cloud` (the points to render), `view` (one view
+//! and one group of them), `merge` (the units into the dataset); the model itself is read by
+//! [`crate::model`].
+//!
+//! Work goes in groups of `rows_per_shard` images in id order; each group becomes one shard,
+//! written atomically, then recorded in `.units/ingest/group-NNNNN.json`. A rerun (or unit)
+//! skips groups whose record matches its inputs and parameters, so an interrupted run resumes,
+//! and the result is byte-identical on any thread count and any number of units.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use image::RgbImage;
+use nrw_colmap::{read_ply, Format, Reconstruction, UndistortOptions};
+use nrw_dataset::codec::{
+    encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
+};
+use nrw_dataset::units::{self, GroupImage, GroupRecord, UnitRecord};
+use nrw_dataset::{FileEntry, ImageOutcome, SceneSource, Store, ViewRow};
+use nrw_render::{render, render_size, Filters, RenderCloud, Verdict, View};
+use rayon::prelude::*;
+
+use crate::error::{PipelineError, Result};
+use crate::model::{describe, images_dir, load_model, undistort_model, undistort_parameters};
+use crate::units::fingerprint;
+use crate::{Progress, Unit};
+
+mod cloud;
+mod merge;
+mod photos;
+mod view;
+
+pub use merge::{finalize_ingest, IngestMerge};
+
+use cloud::*;
+use photos::*;
+use view::*;
+
+/// Largest splat radius accepted: wider splats smear a render into a few blobs, and each
+/// point would touch thousands of pixels.
+pub const MAX_RADIUS: f32 = 32.0;
+
+/// Ingest's settings; [`IngestConfig::new`] fills in the paper's.
+#[derive(Debug, Clone)]
+pub struct IngestConfig {
+    /// Scene folder (COLMAP layout) or a model folder itself.
+    pub scene: PathBuf,
+    /// Dataset folder to write.
+    pub out: PathBuf,
+    /// Photo folder [default: images/ next to the model].
+    pub images: Option<PathBuf>,
+    /// Model encoding to read [default: bin when present].
+    pub format: Option<Format>,
+    /// Point cloud [default: dense/fused.ply, else the sparse points].
+    pub points: Option<PathBuf>,
+    /// Folder of per-photo ADE20K label maps.
+    pub semantics: Option<PathBuf>,
+    /// Segment each kept photo with this model instead of reading label maps.
+    pub segment: Option<InlineSegment>,
+    /// Store every view as COLMAP's `image_undistorter` would: the PINHOLE camera it computes
+    /// and the photo resampled to it (`ingest --undistort`).
+    pub undistort: Option<UndistortOptions>,
+    /// Statistical outlier removal before rendering: (k neighbours, σ) (`ingest --denoise`).
+    pub denoise: Option<(usize, f64)>,
+    /// Normals by PCA of k neighbours for a cloud without them (`ingest --estimate-normals`).
+    pub estimate_normals: Option<usize>,
+    /// Shorter side of a render in pixels (the paper: 600).
+    pub min_dim: u32,
+    /// Splat radius in render pixels (the paper: 1).
+    pub radius: f32,
+    /// The paper's filters: 85% empty, 450 px.
+    pub filters: Filters,
+    /// Images per shard (the unit of resumption and of work units).
+    pub rows_per_shard: usize,
+    /// Make an unreadable photo or label map an error instead of an `unreadable` verdict.
+    pub strict: bool,
+    /// Read a photo that is a symbolic link out of the images folder (refused by default: a
+    /// model's names cannot make ingest read files the user did not put there).
+    pub follow_outside_links: bool,
+    /// Stop after this many groups, as an interruption would (resume tests).
+    pub stop_after_groups: Option<usize>,
+    /// Sleep this long after each group (so tests can kill a unit mid-way).
+    pub pause_after_group: Option<std::time::Duration>,
+}
+
+impl IngestConfig {
+    /// The paper's settings for a scene and a dataset folder.
+    pub fn new(scene: impl Into<PathBuf>, out: impl Into<PathBuf>) -> IngestConfig {
+        IngestConfig {
+            scene: scene.into(),
+            out: out.into(),
+            images: None,
+            format: None,
+            points: None,
+            semantics: None,
+            segment: None,
+            undistort: None,
+            denoise: None,
+            estimate_normals: None,
+            min_dim: 600,
+            radius: 1.0,
+            filters: Filters::default(),
+            rows_per_shard: 64,
+            strict: false,
+            follow_outside_links: false,
+            stop_after_groups: None,
+            pause_after_group: None,
+        }
+    }
+}
+
+/// `ingest --segment-weights`: the model and mode that label each kept photo.
+#[derive(Debug, Clone)]
+pub struct InlineSegment {
+    /// The SegFormer folder (config.json + model.safetensors).
+    pub weights: PathBuf,
+    pub mode: nrw_segment::Mode,
+}
+
+/// What a unit of ingest did.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct UnitSummary {
+    pub dataset: String,
+    pub unit: String,
+    /// Groups (shards) this unit owns, of all groups.
+    pub groups_owned: usize,
+    pub groups_total: usize,
+    /// Groups found done from an earlier (interrupted) run.
+    pub resumed_groups: usize,
+    pub views: usize,
+    pub point_source: String,
+    pub points: usize,
+    pub warnings: Vec<String>,
+    pub seconds: f64,
+}
+
+/// Everything a unit derives from the inputs before rendering (every unit derives the same).
+struct Prepared {
+    rec: Reconstruction,
+    photos_dir: PathBuf,
+    photos: BTreeMap<u32, (u32, u32)>,
+    /// Photos whose header cannot be read, with the reason (their views are `unreadable`).
+    unreadable: BTreeMap<u32, String>,
+    cloud: RenderCloud,
+    source: String,
+    record: UnitRecord,
+    /// The model of `--segment-weights`, loaded once, and its mode.
+    segmenter: Option<(nrw_segment::Segformer, nrw_segment::Mode)>,
+    /// With `--undistort`: the photos' own (distorted) cameras; `rec` then holds the
+    /// undistorted PINHOLE ones.
+    distorted: Option<BTreeMap<u32, nrw_colmap::Camera>>,
+}
+
+fn check_config(cfg: &IngestConfig) -> Result<()> {
+    if cfg.rows_per_shard == 0 {
+        return Err(PipelineError::config(
+            "--rows-per-shard",
+            "must be at least 1",
+        ));
+    }
+    if !(0.0..=MAX_RADIUS).contains(&cfg.radius) {
+        return Err(PipelineError::config(
+            "--radius",
+            format!(
+                "{} is outside 0..={MAX_RADIUS} render pixels (the paper uses 1)",
+                cfg.radius
+            ),
+        ));
+    }
+    if !(0.0..=1.0).contains(&cfg.filters.max_empty_ratio) {
+        return Err(PipelineError::config(
+            "--max-empty",
+            format!(
+                "{} is not a fraction in 0..=1 (the paper drops views above 0.85)",
+                cfg.filters.max_empty_ratio
+            ),
+        ));
+    }
+    if cfg.estimate_normals.is_some_and(|k| k < 3) {
+        return Err(PipelineError::config(
+            "--estimate-normals",
+            "K needs K ≥ 3 neighbours (a plane needs three points)",
+        ));
+    }
+    if let Some(d) = cfg.semantics.as_ref().filter(|d| !d.is_dir()) {
+        return Err(PipelineError::input(d, "--semantics is not a folder"));
+    }
+    if cfg.semantics.is_some() && cfg.undistort.is_some() {
+        return Err(PipelineError::config(
+            "--undistort",
+            "cannot be combined with --semantics yet (label maps of the distorted photos \
+             would need resampling too); segment the undistorted photos with \
+             --segment-weights instead",
+        ));
+    }
+    if cfg.semantics.is_some() && cfg.segment.is_some() {
+        return Err(PipelineError::config(
+            "--segment-weights",
+            "and --semantics both give label maps: use one",
+        ));
+    }
+    Ok(())
+}
+
+/// Inputs with their hashes, sorted by path.
+fn hashed_inputs(files: impl Iterator<Item = PathBuf>) -> Result<Vec<FileEntry>> {
+    let mut inputs = files
+        .map(|p| {
+            let (bytes, sha256) = nrw_dataset::manifest::sha256_file(&p)?;
+            Ok(FileEntry {
+                path: p.display().to_string(),
+                bytes,
+                sha256,
+                rows: None,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    inputs.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(inputs)
+}
+
+fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
+    check_config(cfg)?;
+    let (model_dir, mut rec) = load_model(&cfg.scene, cfg.format)?;
+    let photos_dir = images_dir(cfg.images.as_deref(), &cfg.scene, &model_dir)?;
+    let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
+    let photos = photo_sizes(&rec, &photos_dir, cfg, &mut warnings)?;
+    let distorted = match &cfg.undistort {
+        Some(o) => Some(undistort_model(&mut rec, o, &model_dir)?),
+        None => None,
+    };
+    let (raw, source, source_path) = point_source(cfg, &model_dir, &rec)?;
+    let (cloud, cleaned) = render_cloud(cfg, raw, rec.scene_origin(), &mut warnings);
+    let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
+    let (enc, layout) = describe(&rec);
+    let mut parameters = serde_json::Map::new();
+    parameters.insert("format".into(), enc.into());
+    parameters.insert("point_source".into(), source.clone().into());
+    parameters.insert("points".into(), cloud.len().into());
+    parameters.insert("min_dim".into(), cfg.min_dim.into());
+    parameters.insert("radius".into(), (cfg.radius as f64).into());
+    parameters.insert("max_empty".into(), cfg.filters.max_empty_ratio.into());
+    parameters.insert("min_photo_side".into(), cfg.filters.min_photo_side.into());
+    parameters.insert("rows_per_shard".into(), cfg.rows_per_shard.into());
+    if let Some(d) = &cfg.semantics {
+        parameters.insert("semantics".into(), d.display().to_string().into());
+    }
+    if let Some(o) = &cfg.undistort {
+        parameters.insert("undistort".into(), undistort_parameters(o));
+    }
+    parameters.extend(cleaned);
+    let segmenter = match &cfg.segment {
+        Some(s) => {
+            let model = crate::segment::load_model(&s.weights)?;
+            parameters.insert("segment_model_sha256".into(), model.sha256.clone().into());
+            parameters.insert("segment_mode".into(), s.mode.to_string().into());
+            Some((model, s.mode))
+        }
+        None => None,
+    };
+    let record = UnitRecord {
+        stage: units::INGEST.into(),
+        index: unit.index,
+        count: unit.count,
+        fingerprint: fingerprint(&inputs, &parameters),
+        parameters,
+        inputs,
+        scene: Some(SceneSource {
+            scene_dir: cfg.scene.display().to_string(),
+            model_dir: model_dir.display().to_string(),
+            images_dir: Some(photos_dir.display().to_string()),
+            encoding: enc.into(),
+            layout: layout.into(),
+        }),
+        warnings,
+        groups: rec.images.len().div_ceil(cfg.rows_per_shard),
+        seconds: 0.0,
+    };
+    Ok(Prepared {
+        rec,
+        photos_dir,
+        photos: photos.sizes,
+        unreadable: photos.unreadable,
+        cloud,
+        source,
+        record,
+        segmenter,
+        distorted,
+    })
+}
+
+/// Run one unit of ingest: render the groups `unit` owns (skipping those already done) and
+/// record the unit as done. Writes only this unit's shards and records; deletes nothing.
+pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> Result<UnitSummary> {
+    let t0 = Instant::now();
+    let mut p = prepare(cfg, unit)?;
+    let store = &Store::open_path(&cfg.out)?;
+    let ids: Vec<u32> = p.rec.images.keys().copied().collect();
+    let groups: Vec<(usize, &[u32])> = ids
+        .chunks(cfg.rows_per_shard)
+        .enumerate()
+        .filter(|(g, _)| unit.owns(*g))
+        .collect();
+    let todo: Vec<&(usize, &[u32])> = groups
+        .iter()
+        .filter(|(g, _)| done_group(store, *g, &p.record.fingerprint).is_none())
+        .collect();
+    let resumed = groups.len() - todo.len();
+    progress.start(
+        "rendering",
+        todo.iter().map(|(_, ids)| ids.len() as u64).sum(),
+        "views",
+    );
+    let mut views = 0;
+    for (written, (g, group)) in todo.iter().enumerate() {
+        views += run_group(cfg, store, &p, *g, group, progress)?;
+        if let Some(d) = cfg.pause_after_group {
+            std::thread::sleep(d);
+        }
+        if cfg.stop_after_groups.is_some_and(|n| written + 1 >= n) && written + 1 < todo.len() {
+            progress.finish();
+            return Err(PipelineError::Interrupted(format!(
+                "stopped after {} groups as asked; run the same command again to resume",
+                written + 1
+            )));
+        }
+    }
+    progress.finish();
+    p.record.seconds = t0.elapsed().as_secs_f64();
+    let rel = units::unit_record_path(units::INGEST, unit.index, unit.count);
+    units::write_record(store, &rel, &p.record)?;
+    Ok(UnitSummary {
+        dataset: store.root().display().to_string(),
+        unit: unit.to_string(),
+        groups_owned: groups.len(),
+        groups_total: p.record.groups,
+        resumed_groups: resumed,
+        views,
+        point_source: p.source,
+        points: p.cloud.len(),
+        warnings: p.record.warnings,
+        seconds: p.record.seconds,
+    })
+}
+
+/// What a whole ingest produced (printed with `--json`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct IngestSummary {
+    pub dataset: String,
+    pub registered: usize,
+    pub rendered: usize,
+    pub kept: usize,
+    pub too_small: usize,
+    pub too_sparse: usize,
+    /// Photos (or label maps) that could not be decoded whole, each named in `warnings`.
+    pub unreadable: usize,
+    pub shards: usize,
+    pub point_source: String,
+    pub points: usize,
+    pub resumed_groups: usize,
+    /// Empty ratio of the least empty render (what the filter would have to allow).
+    pub least_empty: Option<f64>,
+    /// The filters the verdicts came from: renders emptier than this fraction are too sparse,
+    pub max_empty: f64,
+    /// and photos with a shorter side under this many pixels too small.
+    pub min_photo_side: u32,
+    pub warnings: Vec<String>,
+    pub seconds: f64,
+}
+
+/// Ingest the whole scene in this process: one unit of one, then finalize. Unit records of
+/// earlier unfinished unit runs are cleared first (this run owns the dataset); their group
+/// records are reused when they match.
+pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSummary> {
+    let t0 = Instant::now();
+    check_config(cfg)?;
+    let store = &Store::open_path(&cfg.out)?;
+    units::remove_unit_records(store, units::INGEST, None)?;
+    let u = ingest_unit(cfg, Unit::WHOLE, progress)?;
+    let f = finalize_ingest(store)?;
+    Ok(IngestSummary {
+        dataset: u.dataset,
+        registered: f.registered,
+        rendered: f.kept + f.too_sparse,
+        kept: f.kept,
+        too_small: f.too_small,
+        too_sparse: f.too_sparse,
+        unreadable: f.unreadable,
+        shards: f.shards,
+        point_source: u.point_source,
+        points: u.points,
+        resumed_groups: u.resumed_groups,
+        least_empty: f.least_empty,
+        max_empty: cfg.filters.max_empty_ratio,
+        min_photo_side: cfg.filters.min_photo_side,
+        warnings: f.warnings,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}

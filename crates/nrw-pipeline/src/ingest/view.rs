@@ -1,0 +1,232 @@
+//! One view: its photo, render, depth, labels and verdict, encoded into a shard row; and
+//! one group of views, written as a shard and recorded.
+
+use super::*;
+
+/// A group's record if it is done with these inputs and parameters and its shard is intact.
+pub(super) fn done_group(out: &Store, g: usize, fingerprint: &str) -> Option<GroupRecord> {
+    let r: GroupRecord =
+        units::read_record(out, &units::group_record_path(units::INGEST, g)).ok()??;
+    let intact = r.fingerprint == fingerprint
+        && r.shard
+            .as_ref()
+            .is_none_or(|e| FileEntry::of(out, &e.path).is_ok_and(|f| f.sha256 == e.sha256));
+    intact.then_some(r)
+}
+
+pub(super) fn outcome(
+    verdict: &Verdict,
+    empty: Option<f64>,
+    size: Option<(u32, u32)>,
+) -> ImageOutcome {
+    ImageOutcome {
+        verdict: verdict.name().into(),
+        verdict_value: verdict.value(),
+        empty_ratio: empty,
+        render_size: size,
+        shard: None,
+        depth_range: None,
+        detail: None,
+    }
+}
+
+/// The outcome of a view whose photo or label map cannot be decoded: the verdict's value is
+/// the file's size in bytes (0 for an empty file), the detail the decoder's message.
+pub(super) fn unreadable(path: &Path, problem: String) -> ImageOutcome {
+    ImageOutcome {
+        verdict: nrw_dataset::VERDICT_UNREADABLE.into(),
+        verdict_value: std::fs::metadata(path).map_or(0.0, |m| m.len() as f64),
+        empty_ratio: None,
+        render_size: None,
+        shard: None,
+        depth_range: None,
+        detail: Some(problem),
+    }
+}
+
+/// Smallest and largest rendered depth (0 = empty).
+pub(super) fn depth_range(depth: &[f32]) -> Option<(f64, f64)> {
+    depth.iter().filter(|d| **d > 0.0).fold(None, |r, &d| {
+        let d = d as f64;
+        Some(r.map_or((d, d), |(lo, hi): (f64, f64)| (lo.min(d), hi.max(d))))
+    })
+}
+
+pub(super) type LabelPngs = (Option<Vec<u8>>, Option<Vec<u8>>, Option<Vec<u8>>);
+
+/// The view's label maps (colour-coded, transient mask, class ids), when ingest has them:
+/// read from the label folder, or made from the photo by the model (`--segment-weights`).
+pub(super) fn label_pngs(
+    cfg: &IngestConfig,
+    p: &Prepared,
+    name: &str,
+    photo_name: &str,
+    photo: &RgbImage,
+    w: u32,
+    h: u32,
+) -> Result<LabelPngs> {
+    let labels = if let Some((model, mode)) = &p.segmenter {
+        let what = p.photos_dir.join(photo_name).display().to_string();
+        nrw_segment::segment(model, photo, *mode, &what, nrw_segment::Parallelism::None)?
+    } else if let Some(dir) = &cfg.semantics {
+        let path = nrw_dataset::semantics::label_path(dir, photo_name)?;
+        nrw_dataset::semantics::load_labels(&path, photo.width(), photo.height())?
+    } else {
+        return Ok((None, None, None));
+    };
+    let ids = nrw_dataset::semantics::resize_labels(&labels, w, h);
+    let (rgb, mask) = nrw_dataset::semantics::colorize(&ids);
+    Ok((
+        Some(nrw_dataset::codec::encode_rgb_bytes(name, w, h, &rgb)?),
+        Some(nrw_dataset::codec::encode_gray(name, w, h, &mask)?),
+        Some(nrw_dataset::codec::encode_gray(name, w, h, ids.as_raw())?),
+    ))
+}
+
+/// The photo resampled from its own camera `from` to the undistorted PINHOLE camera `to`
+/// (a photo stored at another size than its camera's, same aspect ratio, is brought to the
+/// camera's size first).
+pub(super) fn undistorted_photo(
+    photo: &RgbImage,
+    from: &nrw_colmap::Camera,
+    to: &nrw_colmap::Camera,
+) -> RgbImage {
+    let photo = resize_photo(photo, from.width as u32, from.height as u32);
+    let src = nrw_render::Rgb8 {
+        width: photo.width(),
+        height: photo.height(),
+        data: photo.into_raw(),
+    };
+    let out = nrw_render::undistort_photo(&src, from, to);
+    RgbImage::from_raw(out.width, out.height, out.data).expect("width × height × 3 bytes")
+}
+
+/// Render one image and, if kept, encode its row.
+pub(super) fn process(
+    cfg: &IngestConfig,
+    p: &Prepared,
+    image_id: u32,
+) -> Result<(ImageOutcome, Option<ViewRow>)> {
+    let img = &p.rec.images[&image_id];
+    let cam = &p.rec.cameras[&img.camera_id];
+    // Every image's path was checked (name, links) when its size was read in `photo_sizes`.
+    let photo_path = p.photos_dir.join(&img.name);
+    if let Some(problem) = p.unreadable.get(&image_id) {
+        return Ok((unreadable(&photo_path, problem.clone()), None));
+    }
+    let size = p.photos[&image_id];
+    if let Some(v) = cfg.filters.check_size(size.0 as u64, size.1 as u64) {
+        return Ok((outcome(&v, None, None), None));
+    }
+    let (w, h) = render_size(cam.width, cam.height, cfg.min_dim);
+    let view = View::new(img, cam, p.cloud.origin, w, h, cfg.radius);
+    let buf = render(&view, &p.cloud);
+    let empty = buf.empty_ratio();
+    let verdict = cfg.filters.check_render(empty);
+    let o = outcome(&verdict, Some(empty), Some((w, h)));
+    if !matches!(verdict, Verdict::Kept { .. }) {
+        return Ok((o, None));
+    }
+    // Kept: record its depth range (export's depth scale and QA's depth plots read it).
+    let o = ImageOutcome {
+        depth_range: depth_range(&buf.depth),
+        ..o
+    };
+    let name = format!("image {}", img.id);
+    let decoded = load_photo(&photo_path)
+        .map_err(PipelineError::from)
+        .map(|photo| match &p.distorted {
+            Some(originals) => undistorted_photo(&photo, &originals[&img.camera_id], cam),
+            None => photo,
+        })
+        .and_then(|photo| {
+            let labels = label_pngs(cfg, p, &name, &img.name, &photo, w, h)?;
+            Ok((photo, labels))
+        });
+    let (photo, (semantics_png, transient_png, labels_png)) = match decoded {
+        Ok(d) => d,
+        Err(PipelineError::Dataset(nrw_dataset::DatasetError::Unreadable { path, problem }))
+            if !cfg.strict =>
+        {
+            return Ok((unreadable(&path, problem), None));
+        }
+        Err(e) => return Err(e),
+    };
+    let photo = resize_photo(&photo, w, h);
+    let row = ViewRow {
+        image_id: img.id,
+        name: img.name.clone(),
+        camera_id: cam.id,
+        model: cam.model.name().into(),
+        width: w,
+        height: h,
+        scale_x: view.scale.x,
+        scale_y: view.scale.y,
+        params: view.camera.params.clone(),
+        qvec: img.cam_from_world.qvec(),
+        tvec: img.cam_from_world.translation.to_array(),
+        empty_ratio: empty,
+        photo_png: encode_rgb(&name, &photo)?,
+        color_png: encode_color_render(&name, w, h, buf.color.as_deref(), &buf.depth)?,
+        depth_exr: nrw_dataset::depth::encode_exr(&nrw_dataset::depth::DepthMap {
+            width: w as usize,
+            height: h as usize,
+            data: buf.depth.clone(),
+        })?,
+        normal_png: match &buf.normal {
+            Some(n) => Some(encode_normals(&name, w, h, n, &buf.depth)?),
+            None => None,
+        },
+        semantics_png,
+        transient_png,
+        labels_png,
+    };
+    Ok((o, Some(row)))
+}
+
+/// Render one group, write its shard, then its record.
+pub(super) fn run_group(
+    cfg: &IngestConfig,
+    store: &Store,
+    p: &Prepared,
+    g: usize,
+    ids: &[u32],
+    progress: &dyn Progress,
+) -> Result<usize> {
+    let results: Vec<(ImageOutcome, Option<ViewRow>)> = ids
+        .par_iter()
+        .map(|id| {
+            let r = process(cfg, p, *id);
+            progress.inc(1);
+            r
+        })
+        .collect::<Result<_>>()?;
+    let rows: Vec<ViewRow> = results.iter().filter_map(|(_, r)| r.clone()).collect();
+    let rel = nrw_dataset::views::shard_path(g);
+    let shard = if rows.is_empty() {
+        None
+    } else {
+        Some(nrw_dataset::write_shard(store, &rel, &rows)?)
+    };
+    let images = ids
+        .iter()
+        .zip(results)
+        .map(|(id, (mut o, row))| {
+            if row.is_some() {
+                o.shard = Some(rel.clone());
+            }
+            GroupImage {
+                image_id: *id,
+                photo_size: p.photos.get(id).copied(),
+                outcome: o,
+            }
+        })
+        .collect();
+    let record = GroupRecord {
+        fingerprint: p.record.fingerprint.clone(),
+        shard,
+        images,
+    };
+    units::write_record(store, &units::group_record_path(units::INGEST, g), &record)?;
+    Ok(rows.len())
+}

@@ -1,0 +1,115 @@
+//! The scene's COLMAP model as stages read it: found and read, its photo folder, the
+//! undistorted model of `--undistort`, and the model re-read (and checked unchanged) from a
+//! dataset's manifest.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use nrw_colmap::{Format, Reconstruction, UndistortOptions};
+use nrw_dataset::{FileEntry, SceneSource};
+
+use crate::error::{PipelineError, Result};
+
+/// Find and read the model of a scene folder (or a model folder itself).
+pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(PathBuf, Reconstruction)> {
+    let dir = nrw_colmap::find_model_dir(scene)?;
+    let rec = nrw_colmap::read_model(&dir, format)?;
+    Ok((dir, rec))
+}
+
+/// The model with every camera replaced by the PINHOLE camera COLMAP's `image_undistorter`
+/// gives it, and the original cameras; ingest and finalize both derive it this way.
+pub fn undistort_model(
+    rec: &mut Reconstruction,
+    options: &UndistortOptions,
+    model_dir: &Path,
+) -> Result<BTreeMap<u32, nrw_colmap::Camera>> {
+    let distorted = rec.cameras.clone();
+    for cam in rec.cameras.values_mut() {
+        *cam = nrw_colmap::undistort_camera(cam, options)
+            .map_err(|e| PipelineError::input(model_dir, e.to_string()))?;
+    }
+    Ok(distorted)
+}
+
+/// The manifest's record of `--undistort` (absent without it).
+pub fn undistort_parameters(o: &UndistortOptions) -> serde_json::Value {
+    serde_json::json!({
+        "blank_pixels": o.blank_pixels,
+        "min_scale": o.min_scale,
+        "max_scale": o.max_scale,
+        "max_image_size": o.max_image_size,
+    })
+}
+
+/// The options recorded by [`undistort_parameters`], read back (finalize).
+pub fn undistort_from_parameters(v: &serde_json::Value) -> Option<UndistortOptions> {
+    Some(UndistortOptions {
+        blank_pixels: v.get("blank_pixels")?.as_f64()?,
+        min_scale: v.get("min_scale")?.as_f64()?,
+        max_scale: v.get("max_scale")?.as_f64()?,
+        max_image_size: v.get("max_image_size")?.as_u64(),
+    })
+}
+
+/// The model a dataset was ingested from (its manifest's or unit record's `scene`), read
+/// again in the encoding ingest read, with the first of its files whose SHA-256 is not
+/// among `inputs` (changed since ingest), if any.
+pub fn reread_model(
+    scene: &SceneSource,
+    inputs: &[FileEntry],
+) -> Result<(Reconstruction, Option<PathBuf>)> {
+    let format = match scene.encoding.as_str() {
+        "txt" => Some(Format::Text),
+        "bin" => Some(Format::Binary),
+        _ => None,
+    };
+    let rec = nrw_colmap::read_model(Path::new(&scene.model_dir), format)?;
+    for f in &rec.files {
+        let (_, sha) = nrw_dataset::manifest::sha256_file(f)?;
+        let path = f.display().to_string();
+        if !inputs.iter().any(|i| i.path == path && i.sha256 == sha) {
+            let changed = f.clone();
+            return Ok((rec, Some(changed)));
+        }
+    }
+    Ok((rec, None))
+}
+
+/// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
+pub fn describe(rec: &Reconstruction) -> (&'static str, &'static str) {
+    let enc = rec.format.map_or("?", |f| f.ext());
+    let layout = if rec.is_colmap4() {
+        "colmap4"
+    } else {
+        "colmap3"
+    };
+    (enc, layout)
+}
+
+/// The photo folder: given, or `images/` next to the model as COLMAP lays scenes out.
+pub fn images_dir(images: Option<&Path>, scene: &Path, model_dir: &Path) -> Result<PathBuf> {
+    if let Some(d) = images {
+        if !d.is_dir() {
+            return Err(PipelineError::input(d, "--images is not a folder"));
+        }
+        return Ok(d.to_path_buf());
+    }
+    let mut tried = vec![scene.join("images")];
+    for up in model_dir.ancestors().skip(1).take(2) {
+        tried.push(up.join("images"));
+    }
+    tried.iter().find(|d| d.is_dir()).cloned().ok_or_else(|| {
+        PipelineError::input(
+            scene,
+            format!(
+                "no photo folder found (tried {}); pass --images DIR",
+                tried
+                    .iter()
+                    .map(|d| d.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })
+}

@@ -401,3 +401,34 @@ fn a_model_naming_a_million_photos_is_read_whole_and_refused_in_a_bounded_messag
     );
     assert!(!out.join("manifest.json").exists());
 }
+
+#[test]
+fn a_name_that_is_not_utf8_is_refused_naming_the_file_and_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = scene_with(tmp.path(), |_, _| {});
+    let model = scene.join("sparse/0");
+    let rec = nrw_colmap::read_scene(&scene).unwrap();
+    let first = rec.images.values().next().unwrap().name.clone();
+    for f in std::fs::read_dir(&model).unwrap().flatten() {
+        std::fs::remove_file(f.path()).unwrap();
+    }
+    nrw_colmap::write_model(&rec, &model, nrw_colmap::Format::Binary).unwrap();
+    // One byte of the first name becomes 0xFF, which no UTF-8 text holds.
+    let path = model.join("images.bin");
+    let mut bytes = std::fs::read(&path).unwrap();
+    let at = bytes
+        .windows(first.len())
+        .position(|w| w == first.as_bytes())
+        .unwrap();
+    bytes[at] = 0xFF;
+    std::fs::write(&path, bytes).unwrap();
+    let before = files(tmp.path());
+    let e = fails(&["inspect", scene.to_str().unwrap()]);
+    assert!(
+        e.contains("images.bin") && e.contains("not UTF-8") && e.contains("name"),
+        "{e}"
+    );
+    let e = ingest(&scene, &tmp.path().join("out"), &[]).expect("refused");
+    assert!(e.contains("images.bin") && e.contains("not UTF-8"), "{e}");
+    assert_eq!(files(tmp.path()), before, "nothing written");
+}

@@ -101,25 +101,58 @@ pub fn join_checked(root: &Path, name: &str) -> Result<PathBuf, String> {
     Ok(root.join(name))
 }
 
-/// The photo `name` inside `dir`. A photo that is a symbolic link (or inside a linked folder)
-/// resolving outside `dir` is refused unless `follow_outside_links`: a model cannot make the
-/// tool read files the user did not put in the images folder.
+/// An images folder, resolved once: each photo's link check then costs one `canonicalize`
+/// of the photo, not of the folder too (a model names up to millions of photos).
+#[derive(Debug, Clone)]
+pub struct PhotoDir {
+    dir: PathBuf,
+    /// The folder's real path; `None` when links out are allowed (or the folder is missing).
+    root: Option<PathBuf>,
+}
+
+impl PhotoDir {
+    /// The folder `dir`; with `follow_outside_links`, photos linking out of it are allowed.
+    pub fn new(dir: &Path, follow_outside_links: bool) -> PhotoDir {
+        PhotoDir {
+            dir: dir.to_path_buf(),
+            root: if follow_outside_links {
+                None
+            } else {
+                dir.canonicalize().ok()
+            },
+        }
+    }
+
+    /// The folder as given.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The photo `name` inside the folder. A photo that is a symbolic link (or inside a
+    /// linked folder) resolving outside it is refused unless links out were allowed: a model
+    /// cannot make the tool read files the user did not put in the images folder.
+    pub fn photo(&self, name: &str) -> Result<PathBuf, String> {
+        let path = join_checked(&self.dir, name)?;
+        let Some(root) = &self.root else {
+            return Ok(path);
+        };
+        let Ok(real) = path.canonicalize() else {
+            return Ok(path); // missing: the caller reports it as missing
+        };
+        if !real.starts_with(root) {
+            return Err(format!(
+                "{name:?} resolves to {}, outside the images folder {}: a link out of the folder is refused (--follow-outside-links allows it)",
+                real.display(),
+                root.display()
+            ));
+        }
+        Ok(path)
+    }
+}
+
+/// The photo `name` inside `dir` ([`PhotoDir::photo`]), for a caller with one photo to find.
 pub fn photo_path(dir: &Path, name: &str, follow_outside_links: bool) -> Result<PathBuf, String> {
-    let path = join_checked(dir, name)?;
-    if follow_outside_links {
-        return Ok(path);
-    }
-    let (Ok(real), Ok(root)) = (path.canonicalize(), dir.canonicalize()) else {
-        return Ok(path); // missing: the caller reports it as missing
-    };
-    if !real.starts_with(&root) {
-        return Err(format!(
-            "{name:?} resolves to {}, outside the images folder {}: a link out of the folder is refused (--follow-outside-links allows it)",
-            real.display(),
-            root.display()
-        ));
-    }
-    Ok(path)
+    PhotoDir::new(dir, follow_outside_links).photo(name)
 }
 
 #[cfg(test)]

@@ -126,10 +126,11 @@ pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSu
         }
     }
     progress.start("segmenting photos", todo.len() as u64, "photos");
+    let photos = nrw_colmap::names::PhotoDir::new(&photos_dir, cfg.follow_outside_links);
     let results: Vec<Result<Option<String>>> = todo
         .par_iter()
         .map(|name| {
-            let r = segment_one(cfg, &model, &photos_dir, name);
+            let r = segment_one(cfg, &model, &photos, name);
             progress.inc(1);
             r
         })
@@ -230,11 +231,12 @@ fn claim_folder(out: &Path, record: &SegmentRecord) -> Result<()> {
 fn segment_one(
     cfg: &SegmentConfig,
     model: &Segformer,
-    photos: &Path,
+    photos: &nrw_colmap::names::PhotoDir,
     name: &str,
 ) -> Result<Option<String>> {
-    let path = nrw_colmap::names::photo_path(photos, name, cfg.follow_outside_links)
-        .map_err(|p| PipelineError::input(photos, p))?;
+    let path = photos
+        .photo(name)
+        .map_err(|p| PipelineError::input(photos.dir(), p))?;
     let photo = match nrw_dataset::codec::load_photo(&path) {
         Ok(p) => p,
         Err(nrw_dataset::DatasetError::Unreadable { path, problem }) if !cfg.strict => {

@@ -241,8 +241,11 @@ impl Staged {
 
     /// `dir/rel` through the checked join ([`join_under`]), claimed for one file.
     pub(crate) fn claim(&self, rel: &str) -> Result<PathBuf> {
-        let path = nrw_colmap::names::join_checked(&self.dir, rel)
-            .map_err(|problem| name_error(&self.out, problem))?;
+        // Named by the export folder: the hidden staging folder means nothing to a user.
+        let path = join_under(&self.dir, rel).map_err(|e| match e {
+            DatasetError::Value { problem, .. } => name_error(&self.out, problem),
+            e => e,
+        })?;
         let key = nrw_colmap::names::fold_key(rel);
         let mut claimed = self.claimed.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(first) = claimed.get(&key) {

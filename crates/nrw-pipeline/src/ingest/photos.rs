@@ -18,18 +18,6 @@ pub(super) fn header_size(path: &Path) -> std::result::Result<(u32, u32), String
         .map_err(|e| format!("cannot read the photo's size: {}", e.to_string().trim()))
 }
 
-/// The photo of `img` inside `dir`, or an error naming the image: the one place a model's
-/// image name becomes a path (names are checked when the model is read; links out of the
-/// folder are refused here unless `follow_outside_links`).
-pub(super) fn photo_path(
-    dir: &Path,
-    img: &nrw_colmap::Image,
-    follow_outside_links: bool,
-) -> Result<PathBuf> {
-    nrw_colmap::names::photo_path(dir, &img.name, follow_outside_links)
-        .map_err(|p| PipelineError::input(dir, format!("image {}: field `name`: {p}", img.id)))
-}
-
 /// Registered photos' sizes from their headers, and those whose header cannot be read.
 pub(super) struct PhotoSizes {
     pub(super) sizes: BTreeMap<u32, (u32, u32)>,
@@ -48,8 +36,13 @@ pub(super) fn photo_sizes(
     let mut photos = BTreeMap::new();
     let mut unreadable = BTreeMap::new();
     let mut missing = Vec::new();
+    let photos_dir = nrw_colmap::names::PhotoDir::new(dir, cfg.follow_outside_links);
     for img in rec.images.values() {
-        let path = photo_path(dir, img, cfg.follow_outside_links)?;
+        // The one place a model's image name becomes a path (checked when the model was read;
+        // links out of the folder refused unless --follow-outside-links).
+        let path = photos_dir.photo(&img.name).map_err(|p| {
+            PipelineError::input(dir, format!("image {}: field `name`: {p}", img.id))
+        })?;
         if !path.is_file() {
             missing.push(img.name.clone());
             continue;

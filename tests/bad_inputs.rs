@@ -733,7 +733,7 @@ fn stages_killed_with_sigkill_then_rerun_write_the_same_bytes() {
     // The export names its dataset's folder; otherwise the bytes are the same.
     let mut clean_export = files(&tmp.path().join("clean-export"));
     let mut killed_export = files(&tmp.path().join("killed-export"));
-    let record = Path::new(nrw_dataset::export::EXPORT_JSON);
+    let record = Path::new(nrw_export::EXPORT_JSON);
     let text = |b: Vec<u8>| String::from_utf8(b).unwrap();
     assert_eq!(
         text(clean_export.remove(record).expect("export.json")),

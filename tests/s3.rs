@@ -219,6 +219,60 @@ fn same_bytes_on_s3_as_on_disk(scene: &Path, ingest_extra: &[&str], what: &str) 
 }
 
 #[test]
+fn every_export_layout_on_s3_holds_the_bytes_of_the_local_export_and_replaces_an_earlier_one_whole()
+{
+    let Some(m) = moto(false) else {
+        return;
+    };
+    m.bucket("nrw");
+    let tmp = tempfile::tempdir().unwrap();
+    let (ds, _) = crate::untrusted::exportable_dataset(tmp.path());
+    let export = |layout: &str, out: &str| {
+        let a = crate::untrusted::export_args(&ds, layout, out);
+        m.nrw(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    for layout in crate::untrusted::LAYOUTS {
+        let local = tmp.path().join("local").join(layout);
+        let url = format!("s3://nrw/exports/{layout}");
+        assert_ok(&export(layout, local.to_str().unwrap()));
+        assert_ok(&export(layout, &url));
+        let (a, b) = (files(&local), m.files(&url));
+        assert!(a.len() >= 3, "{layout}: {:?}", a.keys());
+        assert_same_files(&a, &b, &format!("the {layout} export on disk and on S3"));
+    }
+    // A second export into the same prefix replaces the first whole: no file of it is left.
+    let official = "s3://nrw/exports/official";
+    assert_ok(&export("tfrecord", official));
+    assert_same_files(
+        &files(&tmp.path().join("local/tfrecord")),
+        &m.files(official),
+        "a tfrecord export over an official one on S3",
+    );
+    // A prefix that holds other files is not an export to replace.
+    let opts: Vec<(String, String)> = m
+        .env()
+        .into_iter()
+        .map(|(k, v)| (k.to_ascii_lowercase(), v))
+        .collect();
+    let other = nrw_dataset::Store::open_with("s3://nrw/papers", &opts).unwrap();
+    other.write("draft.tex", b"keep me".to_vec()).unwrap();
+    let e = assert_fails(&export("files", "s3://nrw/papers"));
+    assert!(
+        e.contains("s3://nrw/papers") && e.contains("not an nrw-etl export"),
+        "{e}"
+    );
+    assert_eq!(m.files("s3://nrw/papers").len(), 1, "nothing was written");
+    // QA of a local dataset into a URL writes its report there, through the store.
+    let r = assert_ok(&m.nrw(&["qa", ds.to_str().unwrap(), "--out", "s3://nrw/reports/ds"]));
+    let report = m.files("s3://nrw/reports/ds");
+    assert!(
+        report.contains_key(Path::new("report.html")) && report.contains_key(Path::new("qa.json")),
+        "{r}: {:?}",
+        report.keys()
+    );
+}
+
+#[test]
 fn every_stage_on_s3_gives_the_bytes_of_local_disk_on_the_demo_scene() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = tmp.path().join("scene");

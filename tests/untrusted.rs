@@ -183,16 +183,14 @@ fn the_one_join_refuses_every_hostile_name_a_writer_could_be_given() {
         "C:x",
         "a//b",
     ] {
-        let e = nrw_dataset::export::join_under(root, bad)
-            .unwrap_err()
-            .to_string();
+        let e = nrw_export::join_under(root, bad).unwrap_err().to_string();
         assert!(
             e.contains("/data/export") && e.contains("field `name`"),
             "{bad:?}: {e}"
         );
     }
     assert_eq!(
-        nrw_dataset::export::join_under(root, "train/cam0/0001.png").unwrap(),
+        nrw_export::join_under(root, "train/cam0/0001.png").unwrap(),
         root.join("train/cam0/0001.png")
     );
 }
@@ -221,7 +219,7 @@ fn rename_views(ds: &Path, rename: &dyn Fn(&str) -> Option<String>) {
 
 /// A split, undistorted dataset of the small scene at `dir/ds` (every layout takes it), and
 /// the names of its train views (one folder in every layout).
-fn exportable_dataset(dir: &Path) -> (PathBuf, Vec<String>) {
+pub(crate) fn exportable_dataset(dir: &Path) -> (PathBuf, Vec<String>) {
     let scene = scene_with(dir, |_, _| {});
     let ds = dir.join("ds");
     assert_eq!(ingest(&scene, &ds, &["--undistort"]), None);
@@ -237,25 +235,34 @@ fn exportable_dataset(dir: &Path) -> (PathBuf, Vec<String>) {
     (ds, names)
 }
 
-/// `export --layout LAYOUT` of `ds` into `out`: its stderr when it fails, else None.
-fn export(ds: &Path, layout: &str, out: &Path) -> Option<String> {
-    let mut a = vec![
+/// The arguments of `export --layout LAYOUT` of `ds` into `out` (a folder or a URL).
+pub(crate) fn export_args(ds: &Path, layout: &str, out: &str) -> Vec<String> {
+    let mut a: Vec<String> = [
         "export",
         ds.to_str().unwrap(),
         "--layout",
         layout,
         "--out",
-        out.to_str().unwrap(),
+        out,
         "--quiet",
-    ];
+    ]
+    .map(String::from)
+    .to_vec();
     if layout == "official" || layout == "tfrecord" {
-        a.extend(["--crop", "none", "--no-semantics"]);
+        a.extend(["--crop", "none", "--no-semantics"].map(String::from));
     }
+    a
+}
+
+/// `export --layout LAYOUT` of `ds` into `out`: its stderr when it fails, else None.
+fn export(ds: &Path, layout: &str, out: &Path) -> Option<String> {
+    let a = export_args(ds, layout, out.to_str().unwrap());
+    let a: Vec<&str> = a.iter().map(String::as_str).collect();
     let o = super::nrw(&a);
     (!o.status.success()).then(|| String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
-const LAYOUTS: [&str; 5] = ["official", "tfrecord", "files", "nerfw", "nerfstudio"];
+pub(crate) const LAYOUTS: [&str; 5] = ["official", "tfrecord", "files", "nerfw", "nerfstudio"];
 /// The layouts whose file names come from the photos' names.
 const NAMED_LAYOUTS: [&str; 3] = ["files", "nerfw", "nerfstudio"];
 

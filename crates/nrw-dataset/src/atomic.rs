@@ -128,6 +128,16 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
+/// Copy the file `from` to `path` atomically, streaming (any size, bounded memory).
+pub fn copy_atomic(from: &Path, path: &Path) -> Result<()> {
+    let mut src = std::fs::File::open(from).map_err(|e| DatasetError::io(from, e))?;
+    write_atomic(path, |f| {
+        std::io::copy(&mut src, f)
+            .map(|_| ())
+            .map_err(|e| DatasetError::io(from, e))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

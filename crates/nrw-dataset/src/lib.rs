@@ -9,7 +9,6 @@ pub mod contain;
 pub mod depth;
 pub mod descriptors;
 pub mod error;
-pub mod export;
 pub mod footer;
 pub mod jpeg;
 pub mod manifest;

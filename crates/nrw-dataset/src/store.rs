@@ -34,7 +34,23 @@ struct Remote {
     url: String,
     store: Arc<dyn ObjectStore>,
     prefix: object_store::path::Path,
-    rt: tokio::runtime::Runtime,
+    rt: &'static tokio::runtime::Runtime,
+}
+
+/// The one async runtime of the process, shared by every object-store location it opens
+/// (made on the first open; a process that stays local never starts it).
+fn runtime(url: &str) -> Result<&'static tokio::runtime::Runtime> {
+    static RT: std::sync::OnceLock<tokio::runtime::Runtime> = std::sync::OnceLock::new();
+    if let Some(rt) = RT.get() {
+        return Ok(rt);
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| DatasetError::io(url, e))?;
+    // Two threads racing here each build one; the loser's is dropped unused.
+    Ok(RT.get_or_init(|| rt))
 }
 
 impl std::fmt::Debug for Store {
@@ -153,6 +169,47 @@ fn build_remote(
     Ok((store, prefix))
 }
 
+/// Part size of a multipart upload: above it a file travels in parts of this size.
+pub const UPLOAD_PART: usize = 16 << 20;
+
+/// Why an upload stopped: reading the local file, or the object store.
+enum Upload {
+    Read(std::io::Error),
+    Store(object_store::Error),
+}
+
+/// `from` to `key` in parts of [`UPLOAD_PART`] bytes, at most two in flight; aborted (no
+/// object left) on any error.
+async fn upload_parts(
+    r: &Remote,
+    key: &object_store::path::Path,
+    from: &Path,
+) -> std::result::Result<(), Upload> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(from).map_err(Upload::Read)?;
+    let upload = r.store.put_multipart(key).await.map_err(Upload::Store)?;
+    let mut w = object_store::WriteMultipart::new_with_chunk_size(upload, UPLOAD_PART);
+    let mut buf = vec![0u8; UPLOAD_PART];
+    loop {
+        let n = match file.read(&mut buf) {
+            Ok(n) => n,
+            Err(e) => {
+                let _ = w.abort().await;
+                return Err(Upload::Read(e));
+            }
+        };
+        if n == 0 {
+            break;
+        }
+        if let Err(e) = w.wait_for_capacity(2).await {
+            let _ = w.abort().await;
+            return Err(Upload::Store(e));
+        }
+        w.write(&buf[..n]);
+    }
+    w.finish().await.map(|_| ()).map_err(Upload::Store)
+}
+
 /// An object-store error as a dataset error naming the object's URL (object_store's
 /// messages carry no credentials).
 fn remote_err(url: String, e: object_store::Error) -> DatasetError {
@@ -217,11 +274,7 @@ impl Store {
                 path: url.clone().into(),
                 problem: format!("cannot open this object-store location: {problem}"),
             })?;
-        let rt = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-            .map_err(|e| DatasetError::io(&url, e))?;
+        let rt = runtime(&url)?;
         Ok(Store {
             inner: Arc::new(Inner::Remote(Remote {
                 url,
@@ -229,6 +282,24 @@ impl Store {
                 prefix,
                 rt,
             })),
+        })
+    }
+
+    /// The folder `rel` of this store as a store of its own (same credentials, same
+    /// connection): where a report or an export goes beside a dataset.
+    pub fn sub(&self, rel: &str) -> Result<Store> {
+        let rel = self.checked(rel, true)?;
+        let inner = match &*self.inner {
+            Inner::Local(d) => Inner::Local(d.join(rel)),
+            Inner::Remote(r) => Inner::Remote(Remote {
+                url: format!("{}/{rel}", r.url),
+                store: r.store.clone(),
+                prefix: Store::key(r, rel),
+                rt: r.rt,
+            }),
+        };
+        Ok(Store {
+            inner: Arc::new(inner),
         })
     }
 
@@ -338,6 +409,32 @@ impl Store {
                 r.rt.block_on(r.store.put(&key, bytes.into()))
                     .map(|_| ())
                     .map_err(|e| remote_err(self.name(rel).display().to_string(), e))
+            }
+        }
+    }
+
+    /// Copy the local file `from` to `rel` whole: a rename-safe copy locally, one PUT on object
+    /// storage, or a multipart upload of parts of [`UPLOAD_PART`] bytes for a larger file (so a
+    /// file of any size travels in bounded memory).
+    pub fn upload(&self, rel: &str, from: &Path) -> Result<()> {
+        let rel = self.checked(rel, false)?;
+        let size = std::fs::metadata(from)
+            .map_err(|e| DatasetError::io(from, e))?
+            .len();
+        match &*self.inner {
+            Inner::Local(d) => crate::atomic::copy_atomic(from, &d.join(rel)),
+            Inner::Remote(_) if size <= UPLOAD_PART as u64 => {
+                let bytes = std::fs::read(from).map_err(|e| DatasetError::io(from, e))?;
+                self.write(rel, bytes)
+            }
+            Inner::Remote(r) => {
+                let key = Store::key(r, rel);
+                let name = self.name(rel).display().to_string();
+                r.rt.block_on(upload_parts(r, &key, from))
+                    .map_err(|e| match e {
+                        Upload::Read(e) => DatasetError::io(from, e),
+                        Upload::Store(e) => remote_err(name, e),
+                    })
             }
         }
     }

@@ -19,8 +19,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use nrw_dataset::export::official::{DepthMapping, DepthScale};
 use nrw_dataset::reader::Dataset;
+use nrw_export::official::{DepthMapping, DepthScale};
 
 fn run(args: &[&str], threads: Option<usize>) -> f64 {
     let mut c = Command::new(env!("CARGO_BIN_EXE_nrw-etl"));

@@ -10,6 +10,9 @@ pub enum PipelineError {
     Colmap(#[from] nrw_colmap::ColmapError),
     #[error(transparent)]
     Dataset(#[from] nrw_dataset::DatasetError),
+    /// An export that could not be written (the export crate names the file or folder).
+    #[error(transparent)]
+    Export(#[from] nrw_export::ExportError),
     #[error(transparent)]
     Synth(#[from] nrw_synth::SynthError),
     #[error(transparent)]
@@ -20,9 +23,9 @@ pub enum PipelineError {
     /// Weights or an image the style stage could not use.
     #[error(transparent)]
     StyleInput(#[from] nrw_style::StyleError),
-    /// A setting outside what the stage accepts (`setting` is the CLI flag or pipeline key).
-    #[error("{setting} {problem}")]
-    Config { setting: String, problem: String },
+    /// A setting outside what the stage accepts, named by its key (the binary shows its flag).
+    #[error("{} {problem}", setting.key())]
+    Config { setting: Setting, problem: String },
     /// An input file or folder that cannot serve (missing, inconsistent with the model, …).
     #[error("{}: {problem}", path.display())]
     Input { path: PathBuf, problem: String },
@@ -48,14 +51,58 @@ pub enum PipelineError {
     Interrupted(String),
 }
 
+/// A setting of a stage's configuration that an error can name. Errors name it by its key
+/// (the stage's config field, as pipeline files spell it); the CLI shows its flag instead.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Setting {
+    RowsPerShard,
+    Radius,
+    MaxEmpty,
+    EstimateNormals,
+    Undistort,
+    SegmentWeights,
+    SegmentMode,
+    PhotosPerPart,
+    Tier,
+    Weights,
+    K,
+    Unit,
+    /// The photos a segment run reads: a scene's model, or a folder of images.
+    Photos,
+    /// A pipeline file's `[split]` table.
+    Split,
+}
+
+impl Setting {
+    /// The setting's key: `stage.field` as a pipeline file or a library caller names it.
+    pub fn key(self) -> &'static str {
+        match self {
+            Setting::RowsPerShard => "ingest.rows_per_shard",
+            Setting::Radius => "ingest.radius",
+            Setting::MaxEmpty => "ingest.max_empty",
+            Setting::EstimateNormals => "ingest.estimate_normals",
+            Setting::Undistort => "ingest.undistort",
+            Setting::SegmentWeights => "ingest.segment_weights",
+            Setting::SegmentMode => "ingest.segment_mode",
+            Setting::PhotosPerPart => "style.photos_per_part",
+            Setting::Tier => "style.tier",
+            Setting::Weights => "style.weights",
+            Setting::K => "triplets.k",
+            Setting::Unit => "unit",
+            Setting::Photos => "segment.scene",
+            Setting::Split => "split",
+        }
+    }
+}
+
 /// Result alias for the stages.
 pub type Result<T, E = PipelineError> = std::result::Result<T, E>;
 
 impl PipelineError {
     /// A configuration value out of range.
-    pub fn config(setting: &str, problem: impl Into<String>) -> Self {
+    pub fn config(setting: Setting, problem: impl Into<String>) -> Self {
         PipelineError::Config {
-            setting: setting.into(),
+            setting,
             problem: problem.into(),
         }
     }

@@ -1,9 +1,10 @@
 //! Export: a dataset as files other tools read (the layouts and their bytes live in
-//! `nrw_dataset::export`); this supplies the style distance matrix and the default name.
+//! `nrw_export`); this supplies what the layouts need from other stages (the style distance
+//! matrix, the scene's points) and the default name.
 
 use std::path::Path;
 
-use nrw_dataset::export::{ExportConfig, ExportSummary};
+use nrw_export::{ExportConfig, ExportSummary};
 
 use crate::error::Result;
 use crate::Progress;
@@ -24,15 +25,7 @@ pub fn default_name(dataset: &Path) -> String {
 /// The official export of a dataset into `out` with the defaults (name, linear depth, one
 /// shard, semantics when present).
 pub fn official(dataset: &Path, out: &Path) -> ExportConfig {
-    ExportConfig {
-        layout: nrw_dataset::export::Layout::Official,
-        out: out.into(),
-        name: default_name(dataset),
-        crop: Some(nrw_dataset::export::official::PUBLISHED_CROP),
-        semantics: true,
-        depth: nrw_dataset::export::official::DepthMapping::Linear,
-        shards: 1,
-    }
+    ExportConfig::official(out.into(), default_name(dataset))
 }
 
 /// Export `dataset` as `cfg` says.
@@ -45,16 +38,18 @@ pub fn export(
     crate::qa::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-        let summary = if cfg.layout.needs_points() {
-            let points = scene_points(store)?;
-            progress.start("export", total as u64, "views");
-            nrw_dataset::export::export_with_points(&ds, cfg, &points, &|| progress.inc(1))?
+        let points = if cfg.layout.needs_points() {
+            Some(scene_points(store)?)
         } else {
-            progress.start("export", total as u64, "views");
-            let dist =
-                |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
-            nrw_dataset::export::export(&ds, cfg, &dist, &|| progress.inc(1))?
+            None
         };
+        let dist = |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
+        let inputs = nrw_export::Inputs {
+            dist: Some(&dist),
+            points: points.as_deref(),
+        };
+        progress.start("export", total as u64, "views");
+        let summary = nrw_export::export(&ds, cfg, &inputs, &|| progress.inc(1))?;
         progress.finish();
         Ok(summary)
     })
@@ -62,9 +57,7 @@ pub fn export(
 
 /// The 3D points of the model the dataset was ingested from (named in its manifest), after
 /// checking that the model files are the ones ingest read.
-pub fn scene_points(
-    store: &nrw_dataset::Store,
-) -> Result<Vec<nrw_dataset::export::nerfw::ScenePoint>> {
+pub fn scene_points(store: &nrw_dataset::Store) -> Result<Vec<nrw_export::ScenePoint>> {
     let m = nrw_dataset::Manifest::read(store)?;
     let (rec, changed) = crate::model::reread_model(&m.scene, &m.inputs)?;
     if let Some(f) = changed {
@@ -77,7 +70,7 @@ pub fn scene_points(
     Ok(rec
         .points
         .values()
-        .map(|p| nrw_dataset::export::nerfw::ScenePoint {
+        .map(|p| nrw_export::ScenePoint {
             id: p.id,
             xyz: p.xyz.to_array(),
             rgb: p.rgb,

@@ -15,6 +15,7 @@ pub mod inspect;
 pub mod model;
 pub mod progress;
 pub mod qa;
+pub mod report;
 pub mod runner;
 pub mod segment;
 pub mod split;
@@ -24,7 +25,7 @@ pub mod triplets;
 pub mod units;
 pub mod verify;
 
-pub use error::{PipelineError, Result};
+pub use error::{PipelineError, Result, Setting};
 pub use progress::{Progress, Silent};
 pub use units::Unit;
 

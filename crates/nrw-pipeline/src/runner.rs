@@ -3,10 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
-use nrw_dataset::export::{ExportConfig, ExportSummary};
+use nrw_export::{ExportConfig, ExportSummary};
 use serde::Deserialize;
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 use crate::ingest::{IngestConfig, IngestSummary};
 use crate::split::{SplitConfig, SplitSummary};
 use crate::style::{StyleConfig, StyleSummary};
@@ -77,7 +77,7 @@ pub struct TripletsStage {
 #[serde(deny_unknown_fields)]
 pub struct ExportStage {
     /// Any layout `export --layout` takes, by the same name.
-    pub layout: nrw_dataset::export::Layout,
+    pub layout: nrw_export::Layout,
     /// false: export without semantics (train with --use_semantic=False)
     #[serde(default = "yes")]
     pub semantics: bool,
@@ -147,7 +147,7 @@ impl Pipeline {
             }),
             triplets: Some(TripletsStage { k: 20 }),
             export: Some(ExportStage {
-                layout: nrw_dataset::export::Layout::Official,
+                layout: nrw_export::Layout::Official,
                 semantics: true,
                 crop: None,
             }),
@@ -204,7 +204,7 @@ fn ingest_config(
     if let Some(w) = models.segformer {
         let mode = i.segment_mode.as_deref().unwrap_or("resize");
         let mode = nrw_segment::Mode::parse(mode, i.segment_size.unwrap_or(512))
-            .map_err(|e| PipelineError::config("ingest.segment_mode", e))?;
+            .map_err(|e| PipelineError::config(Setting::SegmentMode, e))?;
         c.segment = Some(crate::ingest::InlineSegment {
             weights: w.into(),
             mode,
@@ -231,10 +231,10 @@ fn export_config(e: &ExportStage, dataset: &Path, out: &Path, segmented: bool) -
 
 fn style_config(s: &StyleStage, dataset: &Path, weights: Option<&Path>) -> Result<StyleConfig> {
     let tier = nrw_style::Tier::parse(&s.tier).ok_or_else(|| {
-        PipelineError::config("style.tier", format!("{:?} is not a tier", s.tier))
+        PipelineError::config(Setting::Tier, format!("{:?} is not a tier", s.tier))
     })?;
     if tier.needs_weights() && weights.is_none() {
-        return Err(PipelineError::config("--weights", format!(
+        return Err(PipelineError::config(Setting::Weights, format!(
             "FILE is required: the pipeline's style tier {} runs VGG (the tool never downloads weights)",
             s.tier
         )));
@@ -298,7 +298,7 @@ pub fn run(
             (None, Some(f)) if (0.0..1.0).contains(&f) => ((kept as f64 * f) as usize).max(1),
             _ => {
                 return Err(PipelineError::config(
-                    "split",
+                    Setting::Split,
                     format!(
                 "of pipeline {}: give exactly one of val (a count) and val_fraction (0 to 1)",
                 p.name
@@ -396,7 +396,7 @@ pub fn demo(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nrw_dataset::export::Layout;
+    use nrw_export::Layout;
 
     #[test]
     fn every_export_layout_parses_by_its_cli_name_and_others_are_refused() {

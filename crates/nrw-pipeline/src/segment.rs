@@ -13,7 +13,7 @@ use nrw_colmap::Format;
 use nrw_segment::{Mode, Parallelism, Segformer};
 use rayon::prelude::*;
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 use crate::progress::Progress;
 
 /// The label folder's record of what made its maps.
@@ -81,7 +81,7 @@ pub struct SegmentSummary {
     pub model_sha256: String,
     pub mode: String,
     /// The work unit, `I/N` (`0/1`: the whole stage).
-    pub unit: String,
+    pub unit: crate::Unit,
     /// Registered photos this unit owns.
     pub photos: usize,
     /// Label maps written by this run.
@@ -150,7 +150,7 @@ pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSu
         model: cfg.weights.display().to_string(),
         model_sha256: model.sha256.clone(),
         mode: record.mode,
-        unit: cfg.unit.to_string(),
+        unit: cfg.unit,
         photos: names.len(),
         segmented: todo.len() - unreadable.len(),
         resumed: done.len(),
@@ -169,7 +169,10 @@ fn photo_list(cfg: &SegmentConfig) -> Result<(PathBuf, Vec<String>)> {
         return Ok((dir, rec.images.values().map(|i| i.name.clone()).collect()));
     }
     let Some(dir) = &cfg.images else {
-        return Err(PipelineError::config("SCENE", "or --images DIR: give one"));
+        return Err(PipelineError::config(
+            Setting::Photos,
+            "or an images folder: give one",
+        ));
     };
     if !dir.is_dir() {
         return Err(PipelineError::input(dir, "--images is not a folder"));

@@ -14,7 +14,7 @@ use nrw_dataset::{Manifest, Store};
 use nrw_style::{describe, Convention, Parallelism, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 use crate::units::{check_units, close_stage, units_error};
 use crate::{Progress, Unit};
 
@@ -54,7 +54,8 @@ impl StyleConfig {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct StyleSummary {
     pub dataset: String,
-    pub unit: String,
+    /// The work unit, `I/N` (`0/1`: the whole stage).
+    pub unit: crate::Unit,
     pub tier: String,
     pub photos: usize,
     pub parts_written: usize,
@@ -66,7 +67,7 @@ pub struct StyleSummary {
 pub fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
     match (tier.needs_weights(), path) {
         (false, _) => Ok(None),
-        (true, None) => Err(PipelineError::config("--weights", format!(
+        (true, None) => Err(PipelineError::config(Setting::Weights, format!(
             "FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); --tier color-stats is the explicit non-neural fallback",
             tier.name()
         ))),
@@ -277,7 +278,7 @@ fn run_unit(
     let t0 = Instant::now();
     if cfg.photos_per_part == 0 {
         return Err(PipelineError::config(
-            "--photos-per-part",
+            Setting::PhotosPerPart,
             "must be at least 1",
         ));
     }
@@ -348,7 +349,7 @@ fn run_unit(
     )?;
     Ok(StyleSummary {
         dataset: store.root().display().to_string(),
-        unit: unit.to_string(),
+        unit: unit,
         tier: kind.tier,
         photos: groups.iter().map(|(_, g)| g.len()).sum(),
         parts_written: todo.len(),

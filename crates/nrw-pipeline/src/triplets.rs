@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use nrw_dataset::triplets::{write_triplets, TripletInfo, TripletRow};
 use nrw_dataset::{Manifest, Store};
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 
 /// Triplets' settings; `new` is the paper's (k = 20, exact, training split).
 #[derive(Debug, Clone)]
@@ -110,7 +110,7 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
         .filter(|r| allowed.as_ref().is_none_or(|a| a.contains(&r.image_id)))
         .collect();
     if cfg.k + 1 > rows.len() {
-        return Err(PipelineError::config("--k", format!(
+        return Err(PipelineError::config(Setting::K, format!(
             "{} needs at least {} photos in scope {scope}, found {}; use --k {} or fewer (dataset {})",
             cfg.k,
             cfg.k + 1,

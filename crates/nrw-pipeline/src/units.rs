@@ -12,7 +12,7 @@ use std::fmt;
 use nrw_dataset::units::{self, UnitRecord};
 use nrw_dataset::Store;
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 
 /// One unit of a stage's work, or the whole stage (`0/1`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -24,6 +24,13 @@ pub struct Unit {
 impl fmt::Display for Unit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+/// Written as `I/N` in summaries and JSON, as on the command line.
+impl serde::Serialize for Unit {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.collect_str(self)
     }
 }
 
@@ -52,7 +59,7 @@ impl Unit {
         count: Option<usize>,
         env: &dyn Fn(&str) -> Option<String>,
     ) -> Result<Unit> {
-        let bad = |problem: String| PipelineError::config("--shard", problem);
+        let bad = |problem: String| PipelineError::config(Setting::Unit, problem);
         let num = |name: &str, v: &str| {
             v.trim()
                 .parse::<usize>()
@@ -248,7 +255,7 @@ mod tests {
         );
         for bad in ["3/3", "0/0", "x/2", "2", "-1/2"] {
             let e = Unit::parse(bad, None, &env(&[])).unwrap_err().to_string();
-            assert!(e.starts_with("--shard "), "{bad}: {e}");
+            assert!(e.starts_with("unit "), "{bad}: {e}");
         }
     }
 

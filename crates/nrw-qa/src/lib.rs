@@ -9,7 +9,7 @@ pub mod tables;
 pub mod thumbs;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use serde::Serialize;
 
@@ -106,6 +106,11 @@ pub struct Written {
     pub figures: Figures,
 }
 
+/// The report's file name in its folder.
+pub const REPORT_FILE: &str = "report.html";
+/// The figures' file name in the report's folder.
+pub const QA_JSON: &str = "qa.json";
+
 /// Name of the per-stage timing log inside a dataset (owned by nrw-dataset).
 pub use nrw_dataset::timings::TIMINGS_FILE;
 
@@ -131,8 +136,9 @@ fn param_f64(
     })
 }
 
-/// Compute the figures and write `report.html` and `qa.json` into `out`.
-pub fn build(dir: &nrw_dataset::Store, out: &Path) -> Result<Written> {
+/// Compute the figures and write `report.html` and `qa.json` into `out` (a folder or an
+/// object-store prefix, through its `Store`).
+pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Written> {
     let manifest = nrw_dataset::Manifest::read(dir)?;
     let images = tables::images(dir)?;
     let triplets = tables::triplets(dir, 3)?;
@@ -226,19 +232,13 @@ pub fn build(dir: &nrw_dataset::Store, out: &Path) -> Result<Written> {
         max_empty,
         min_side: param_f64(dir, p, "min_photo_side")?,
     })?;
-    std::fs::create_dir_all(out).map_err(|source| QaError::Io {
-        path: out.to_path_buf(),
-        source,
-    })?;
-    let report = out.join("report.html");
-    let json = out.join("qa.json");
-    nrw_dataset::atomic::write_bytes_atomic(&report, page.as_bytes())?;
+    out.write(REPORT_FILE, page.into_bytes())?;
     let mut text = serde_json::to_string_pretty(&figures).expect("figures serialise");
     text.push('\n');
-    nrw_dataset::atomic::write_bytes_atomic(&json, text.as_bytes())?;
+    out.write(QA_JSON, text.into_bytes())?;
     Ok(Written {
-        report,
-        json,
+        report: out.name(REPORT_FILE),
+        json: out.name(QA_JSON),
         figures,
     })
 }

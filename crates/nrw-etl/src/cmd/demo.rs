@@ -36,9 +36,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         args.seed,
         args.weights.as_deref(),
         &Bars::new(false),
-        &mut |d| super::run::print_stage(&dataset, d),
+        &mut |d| nrw_pipeline::report::stage(&dataset, d).print(),
     )?;
-    super::synth::print_report(&report);
+    nrw_pipeline::report::synth(&report).print();
     println!("scene:   {}", args.out.join("scene").display());
     println!("dataset: {}", out.dataset.display());
     println!(

@@ -6,13 +6,10 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use nrw_dataset::export::official::DepthMapping;
-use nrw_dataset::export::{ExportConfig, ExportSummary, Layout};
+use nrw_export::official::DepthMapping;
+use nrw_export::{ExportConfig, Layout};
 
 use crate::error::Result;
-
-/// Fewest train views the published triplet sampler can index (`randint(1, 5 + 1)`).
-const PUBLISHED_MIN_TRAIN: usize = 6;
 
 /// `--layout` values: the dataset crate's layouts, each with its help line.
 fn layout_parser() -> impl clap::builder::TypedValueParser<Value = Layout> {
@@ -122,52 +119,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     };
     let summary = nrw_pipeline::export::export(&args.dataset, &cfg, &super::Bars::new(args.quiet))?;
     if !args.quiet {
-        print_summary(&args.dataset, &args.out, &summary);
+        nrw_pipeline::report::export(&args.dataset, &args.out, &summary).print();
     }
     Ok(())
-}
-
-/// What was exported, what was skipped, and the style distances.
-pub fn print_summary(dataset: &std::path::Path, out: &std::path::Path, s: &ExportSummary) {
-    let per: Vec<String> = s
-        .splits
-        .iter()
-        .map(|p| format!("{} {}", p.split, p.image_ids.len()))
-        .collect();
-    println!(
-        "exported {} views ({}) of {} to {} ({} layout)",
-        s.views(),
-        per.join(", "),
-        dataset.display(),
-        out.display(),
-        s.layout
-    );
-    for k in &s.skipped {
-        eprintln!(
-            "skipped {} (image {}, {} split): {}×{} is {}",
-            k.name, k.image_id, k.split, k.width, k.height, k.reason
-        );
-    }
-    for e in &s.empty_splits {
-        eprintln!(
-            "split {e} has no view: not written (the published code's {e} glob will find nothing; `nrw-etl split DATASET --val N` holds out N photos)"
-        );
-    }
-    let train = s
-        .splits
-        .iter()
-        .find(|p| p.split == "train")
-        .map_or(0, |p| p.image_ids.len());
-    if s.dist_pickle.is_some() && train < PUBLISHED_MIN_TRAIN {
-        eprintln!(
-            "warning: {train} train views: the published get_triplet_input_fn draws positives at sorted index 1..5 and fails (IndexError) below {PUBLISHED_MIN_TRAIN}"
-        );
-    }
-    match &s.dist_pickle {
-        Some(p) => println!("style distances: {} (pretrain_appearance loads it)", out.join(p).display()),
-        None if s.layout == Layout::Official => eprintln!(
-            "no dist_NAME.pckl: the dataset has no official style descriptors (`nrw-etl style DATASET --tier official --weights VGG16`)"
-        ),
-        None => {}
-    }
 }

@@ -3,14 +3,13 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use nrw_pipeline::ingest::{IngestConfig, IngestSummary, UnitSummary};
+use nrw_pipeline::ingest::IngestConfig;
 use nrw_render::Filters;
 
 use super::{Bars, Encoding, ShardArgs};
 use crate::error::Result;
 
-/// Exit code when the run completed but every view was dropped by the filters.
-pub const EXIT_NOTHING_KEPT: u8 = 3;
+pub use nrw_pipeline::report::EXIT_NOTHING_KEPT;
 
 /// Arguments of `ingest`.
 #[derive(Debug, Clone, Args)]
@@ -190,7 +189,7 @@ pub fn run(args: &IngestArgs) -> Result<bool> {
         Some(unit) => {
             let s = nrw_pipeline::ingest::ingest_unit(&cfg, unit, &bars)?;
             if !args.quiet {
-                print_unit(&s);
+                nrw_pipeline::report::ingest_unit(&s).print();
             }
             if args.json {
                 println!(
@@ -203,7 +202,7 @@ pub fn run(args: &IngestArgs) -> Result<bool> {
         None => {
             let s = nrw_pipeline::ingest::ingest(&cfg, &bars)?;
             if !args.quiet {
-                print_summary(&s);
+                nrw_pipeline::report::ingest(&s).print();
             }
             if args.json {
                 println!(
@@ -213,62 +212,5 @@ pub fn run(args: &IngestArgs) -> Result<bool> {
             }
             Ok(s.kept > 0)
         }
-    }
-}
-
-fn print_unit(s: &UnitSummary) {
-    for w in &s.warnings {
-        eprintln!("warning: {w}");
-    }
-    eprintln!(
-        "ingest unit {} of {}: {} of {} groups ({} already done), {} views kept, in {:.1} s; run `nrw-etl finalize {}` once every unit has run",
-        s.unit, s.dataset, s.groups_owned, s.groups_total, s.resumed_groups, s.views, s.seconds, s.dataset
-    );
-}
-
-/// The summary lines of a whole ingest (also what `run` and `demo` print for it).
-pub fn print_summary(s: &IngestSummary) {
-    for w in &s.warnings {
-        eprintln!("warning: {w}");
-    }
-    eprintln!(
-        "ingested {}: {} registered, {} kept, {} too sparse (>{}% empty), {} too small (<{} px), {} unreadable; {} shards; {} points ({}) in {:.1} s",
-        s.dataset,
-        s.registered,
-        s.kept,
-        s.too_sparse,
-        percent(s.max_empty),
-        s.too_small,
-        s.min_photo_side,
-        s.unreadable,
-        s.shards,
-        s.points,
-        s.point_source,
-        s.seconds
-    );
-    if s.kept == 0 {
-        eprintln!(
-            "no view survived the filters{}: the dataset records every verdict but holds no view (exit code {EXIT_NOTHING_KEPT}; `nrw-etl inspect {}` shows each verdict)",
-            s.least_empty.map_or(String::new(), |m| format!(" (least empty render: {:.1}% empty)", m * 100.0)),
-            s.dataset
-        );
-    }
-}
-
-/// A fraction as a percentage with the digits it has (0.85 → 85, 0.995 → 99.5), never
-/// rounded across the threshold it describes.
-fn percent(fraction: f64) -> String {
-    let p = (fraction * 100.0 * 1e6).round() / 1e6;
-    format!("{p}")
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn thresholds_print_with_their_own_digits() {
-        assert_eq!(super::percent(0.85), "85");
-        assert_eq!(super::percent(0.995), "99.5");
-        assert_eq!(super::percent(1.0), "100");
-        assert_eq!(super::percent(0.0), "0");
     }
 }

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use nrw_pipeline::inspect::{DatasetSummary, Inspected, ModelSummary};
+use nrw_pipeline::inspect::Inspected;
 
 use super::Encoding;
 use crate::error::Result;
@@ -38,61 +38,6 @@ pub fn run(args: &InspectArgs) -> Result<()> {
         );
         return Ok(());
     }
-    match &found {
-        Inspected::Model(m) => print_model(m),
-        Inspected::Dataset(d) => print_dataset(d),
-    }
+    nrw_pipeline::report::inspected(&found).print();
     Ok(())
-}
-
-fn print_dataset(d: &DatasetSummary) {
-    println!("dataset      {} (schema {})", d.dataset, d.schema_version);
-    println!("registered   {}", d.registered);
-    for (k, n) in &d.verdicts {
-        println!("  {k:<10} {n}");
-    }
-    println!("views        {} in {} shards", d.views, d.shards);
-    for (k, n) in &d.splits {
-        println!("split {k:<6} {n}");
-    }
-}
-
-fn print_model(m: &ModelSummary) {
-    let fmt_px = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4} px"));
-    println!(
-        "model        {} ({}, {})",
-        m.model_dir, m.encoding, m.layout
-    );
-    println!(
-        "cameras      {} ({})",
-        m.cameras,
-        m.camera_models.join(", ")
-    );
-    println!("images       {}", m.images);
-    println!("points       {}", m.points);
-    println!(
-        "observations {} (mean track length {:.2})",
-        m.observations,
-        m.mean_track_length()
-    );
-    println!(
-        "reprojection mean {}, max {} over {} observations{}",
-        fmt_px(m.mean_reprojection_error_px),
-        fmt_px(m.max_reprojection_error_px),
-        m.observations_projected,
-        if m.not_visible_observations > 0 {
-            format!(
-                "; {} observations not visible (behind the camera)",
-                m.not_visible_observations
-            )
-        } else {
-            String::new()
-        }
-    );
-    if m.layout == "colmap4" {
-        println!("rigs/frames  {} / {}", m.rigs, m.frames);
-    }
-    for w in &m.warnings {
-        println!("warning: {w}");
-    }
 }

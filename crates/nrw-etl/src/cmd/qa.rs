@@ -22,21 +22,6 @@ pub fn run(args: &QaArgs) -> Result<()> {
         dataset: args.dataset.clone(),
         out: args.out.clone(),
     })?;
-    print_summary(&w);
+    nrw_pipeline::report::qa(&w).print();
     Ok(())
-}
-
-/// The report's counts, and where it is.
-pub fn print_summary(w: &nrw_qa::Written) {
-    let c = &w.figures.counts;
-    eprintln!(
-        "QA: {} registered → {} rendered → {} kept → {} train / {} val; {} warning(s)",
-        c.registered,
-        c.rendered,
-        c.kept,
-        c.train,
-        c.val,
-        w.figures.warnings.len()
-    );
-    println!("{}", w.report.display());
 }

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use nrw_pipeline::runner::{Pipeline, StageDone};
+use nrw_pipeline::runner::Pipeline;
 
 use super::Bars;
 use crate::error::Result;
@@ -28,23 +28,6 @@ pub struct RunArgs {
     pub segment_weights: Option<PathBuf>,
 }
 
-/// Print a finished stage's summary as its own command would.
-pub fn print_stage(dataset: &std::path::Path, done: StageDone) {
-    match done {
-        StageDone::Ingest(s) => super::ingest::print_summary(s),
-        StageDone::Split(s) => println!(
-            "split {}: {} train, {} val",
-            dataset.display(),
-            s.train,
-            s.val
-        ),
-        StageDone::Style(s) => super::style::print_summary(s),
-        StageDone::Triplets(s) => super::triplets::print_summary(dataset, s),
-        StageDone::Export(out, s) => super::export::print_summary(dataset, out, s),
-        StageDone::Qa(w) => super::qa::print_summary(w),
-    }
-}
-
 /// Run `run`; returns whether any view was kept (the caller maps "none" to exit code 3).
 pub fn run(args: &RunArgs) -> Result<bool> {
     let p = Pipeline::load(&args.pipeline)?;
@@ -58,7 +41,21 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             segformer: args.segment_weights.as_deref(),
         },
         &Bars::new(false),
-        &mut |d| print_stage(&args.out, d),
-    )?;
+        &mut |d| nrw_pipeline::report::stage(&args.out, d).print(),
+    )
+    .map_err(file_setting)?;
     Ok(out.kept)
+}
+
+/// A run's settings come from its pipeline file, so an error names them by their keys there;
+/// only the models are flags of `run` itself.
+fn file_setting(e: nrw_pipeline::PipelineError) -> crate::error::EtlError {
+    use nrw_pipeline::{PipelineError, Setting};
+    match e {
+        PipelineError::Config {
+            setting: Setting::Weights | Setting::SegmentWeights,
+            ..
+        } => e.into(),
+        e => crate::error::EtlError::Pipeline(e),
+    }
 }

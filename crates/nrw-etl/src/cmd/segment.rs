@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use nrw_pipeline::segment::{SegmentConfig, SegmentSummary};
+use nrw_pipeline::segment::SegmentConfig;
 use nrw_segment::{Mode, ModeKind};
 
 use super::{Bars, Encoding, ShardArgs};
@@ -111,7 +111,7 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
     let bars = Bars::new(args.quiet);
     let s = nrw_pipeline::segment::segment(&cfg, &bars)?;
     if !args.quiet {
-        print_summary(&s);
+        nrw_pipeline::report::segment(&s).print();
     }
     if args.json {
         println!(
@@ -120,19 +120,4 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-fn print_summary(s: &SegmentSummary) {
-    eprintln!(
-        "segmented {} of {} photos{} into {} ({} already there, {} unreadable) with {} (mode {}) in {:.1} s",
-        s.segmented,
-        s.photos,
-        if s.unit == "0/1" { String::new() } else { format!(" (unit {})", s.unit) },
-        s.out,
-        s.resumed,
-        s.unreadable.len(),
-        s.model,
-        s.mode,
-        s.seconds
-    );
 }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use nrw_pipeline::split::{SplitConfig, SplitSummary};
+use nrw_pipeline::split::SplitConfig;
 
 use crate::error::Result;
 
@@ -34,47 +34,6 @@ pub fn run(args: &SplitArgs) -> Result<()> {
         from_tsv: args.from_tsv.clone(),
         ..SplitConfig::new(&args.dataset)
     };
-    print_summary(&cfg, &nrw_pipeline::split::split(&cfg)?);
+    nrw_pipeline::report::split(&cfg, &nrw_pipeline::split::split(&cfg)?).print();
     Ok(())
-}
-
-/// What split assigned, and photos that left the split.
-pub fn print_summary(cfg: &SplitConfig, s: &SplitSummary) {
-    for g in &s.gone {
-        eprintln!(
-            "warning: {g} was assigned earlier but is no longer kept; removed from the split"
-        );
-    }
-    if let Some(tsv) = &cfg.from_tsv {
-        println!(
-            "split {}: {} train, {} val, as {} lists them",
-            cfg.dataset.display(),
-            s.train,
-            s.val,
-            tsv.display()
-        );
-        if !s.listed_not_kept.is_empty() {
-            eprintln!(
-                "{} listed photo(s) were dropped by ingest and are in no split, e.g. {}",
-                s.listed_not_kept.len(),
-                s.listed_not_kept[0]
-            );
-        }
-        if s.unlisted > 0 {
-            eprintln!(
-                "{} kept photo(s) are not listed and are in no split",
-                s.unlisted
-            );
-        }
-        return;
-    }
-    println!(
-        "split {}: {} train, {} val ({} kept as before, {} newly assigned with seed {})",
-        cfg.dataset.display(),
-        s.train,
-        s.val,
-        s.kept,
-        s.new,
-        cfg.seed
-    );
 }

@@ -100,25 +100,7 @@ pub fn run(args: &StyleArgs) -> Result<()> {
         None => nrw_pipeline::style::style(&cfg, &bars)?,
     };
     if !args.quiet {
-        print_summary(&s);
+        nrw_pipeline::report::style(&s).print();
     }
     Ok(())
-}
-
-/// The summary line of a style run or unit.
-pub fn print_summary(s: &nrw_pipeline::style::StyleSummary) {
-    let unit = if s.unit == "0/1" {
-        String::new()
-    } else {
-        format!(" (unit {})", s.unit)
-    };
-    eprintln!(
-        "described {} photos with {} into {}/{}{unit} ({} parts written, {} already there)",
-        s.photos,
-        s.tier,
-        s.dataset,
-        nrw_dataset::descriptors::DESCRIPTORS_DIR,
-        s.parts_written,
-        s.parts_skipped
-    );
 }

@@ -3,7 +3,6 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use nrw_synth::SynthReport;
 
 use super::Bars;
 use crate::error::Result;
@@ -21,20 +20,12 @@ pub struct SynthArgs {
     pub seed: Option<u64>,
 }
 
-/// What was synthesised.
-pub fn print_report(r: &SynthReport) {
-    eprintln!(
-        "synthesised: {} photos ({} small, {} looking away), {} sparse points, {} observations, {} dense points",
-        r.photos, r.small_photos, r.away_photos, r.sparse_points, r.observations, r.dense_points
-    );
-}
-
 /// Run `synth`.
 pub fn run(args: &SynthArgs) -> Result<()> {
     let spec = nrw_pipeline::synth::load_spec(args.spec.as_deref(), args.seed)?;
     let t = std::time::Instant::now();
     let report = nrw_pipeline::synth::generate(&spec, &args.out, &Bars::new(false))?;
-    print_report(&report);
+    nrw_pipeline::report::synth(&report).print();
     eprintln!("{:?} in {:.1} s", spec.name, t.elapsed().as_secs_f64());
     println!("{}", args.out.display());
     Ok(())

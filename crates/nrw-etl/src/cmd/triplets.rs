@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use nrw_pipeline::triplets::{TripletsConfig, TripletsSummary};
+use nrw_pipeline::triplets::TripletsConfig;
 
 use crate::error::Result;
 
@@ -37,26 +37,6 @@ pub fn run(args: &TripletsArgs) -> Result<()> {
         check_up_to: args.check_up_to,
         ..TripletsConfig::new(&args.dataset)
     };
-    print_summary(&args.dataset, &nrw_pipeline::triplets::triplets(&cfg)?);
+    nrw_pipeline::report::triplets(&args.dataset, &nrw_pipeline::triplets::triplets(&cfg)?).print();
     Ok(())
-}
-
-/// The table's summary (and the approximate path's recall).
-pub fn print_summary(dataset: &std::path::Path, s: &TripletsSummary) {
-    if let Some((n, f)) = s.recall {
-        eprintln!(
-            "{}: recall@{} against the exact path: nearest {n:.3}, furthest {f:.3}",
-            s.method, s.k
-        );
-    }
-    println!(
-        "triplets {}: {} anchors × {} nearest / {} furthest ({}, scope {}, {})",
-        dataset.display(),
-        s.anchors,
-        s.k,
-        s.k,
-        s.tier,
-        s.scope,
-        s.method
-    );
 }

@@ -25,7 +25,7 @@ use nrw_dataset::{FileEntry, ImageOutcome, SceneSource, Store, ViewRow};
 use nrw_render::{render, render_size, Filters, RenderCloud, Verdict, View};
 use rayon::prelude::*;
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 use crate::model::{describe, images_dir, load_model, undistort_model, undistort_parameters};
 use crate::units::fingerprint;
 use crate::{Progress, Unit};
@@ -126,7 +126,8 @@ pub struct InlineSegment {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct UnitSummary {
     pub dataset: String,
-    pub unit: String,
+    /// The work unit, `I/N`.
+    pub unit: crate::Unit,
     /// Groups (shards) this unit owns, of all groups.
     pub groups_owned: usize,
     pub groups_total: usize,
@@ -159,13 +160,13 @@ struct Prepared {
 fn check_config(cfg: &IngestConfig) -> Result<()> {
     if cfg.rows_per_shard == 0 {
         return Err(PipelineError::config(
-            "--rows-per-shard",
+            Setting::RowsPerShard,
             "must be at least 1",
         ));
     }
     if !(0.0..=MAX_RADIUS).contains(&cfg.radius) {
         return Err(PipelineError::config(
-            "--radius",
+            Setting::Radius,
             format!(
                 "{} is outside 0..={MAX_RADIUS} render pixels (the paper uses 1)",
                 cfg.radius
@@ -174,7 +175,7 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
     }
     if !(0.0..=1.0).contains(&cfg.filters.max_empty_ratio) {
         return Err(PipelineError::config(
-            "--max-empty",
+            Setting::MaxEmpty,
             format!(
                 "{} is not a fraction in 0..=1 (the paper drops views above 0.85)",
                 cfg.filters.max_empty_ratio
@@ -183,7 +184,7 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
     }
     if cfg.estimate_normals.is_some_and(|k| k < 3) {
         return Err(PipelineError::config(
-            "--estimate-normals",
+            Setting::EstimateNormals,
             "K needs K ≥ 3 neighbours (a plane needs three points)",
         ));
     }
@@ -192,7 +193,7 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
     }
     if cfg.semantics.is_some() && cfg.undistort.is_some() {
         return Err(PipelineError::config(
-            "--undistort",
+            Setting::Undistort,
             "cannot be combined with --semantics yet (label maps of the distorted photos \
              would need resampling too); segment the undistorted photos with \
              --segment-weights instead",
@@ -200,7 +201,7 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
     }
     if cfg.semantics.is_some() && cfg.segment.is_some() {
         return Err(PipelineError::config(
-            "--segment-weights",
+            Setting::SegmentWeights,
             "and --semantics both give label maps: use one",
         ));
     }
@@ -336,7 +337,7 @@ pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> R
     units::write_record(store, &rel, &p.record)?;
     Ok(UnitSummary {
         dataset: store.root().display().to_string(),
-        unit: unit.to_string(),
+        unit: unit,
         groups_owned: groups.len(),
         groups_total: p.record.groups,
         resumed_groups: resumed,
@@ -401,4 +402,31 @@ pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSumma
         warnings: f.warnings,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_setting_out_of_range_is_named_by_its_key_for_library_callers() {
+        let tmp = std::env::temp_dir().join("nrw-no-such-scene");
+        let cfg = IngestConfig {
+            radius: 40.0,
+            ..IngestConfig::new(&tmp, &tmp.join("out"))
+        };
+        let e = ingest(&cfg, &crate::Silent).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                PipelineError::Config {
+                    setting: Setting::Radius,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        assert!(e.to_string().starts_with("ingest.radius 40 is outside"), "{e}");
+        assert!(!tmp.join("out").exists(), "nothing written");
+    }
 }

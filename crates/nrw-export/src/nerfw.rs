@@ -20,11 +20,14 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use nrw_colmap::{Camera, CameraModel, Format, Image, Point3D, Reconstruction, Rigid3};
+use nrw_colmap::{Camera, CameraModel, Image, Point3D, Reconstruction, Rigid3};
 
-use super::{refuse, ExportConfig, SplitExport};
-use crate::error::{DatasetError, Result};
-use crate::reader::{Dataset, View};
+use nrw_dataset::reader::{Dataset, View};
+
+use crate::error::{ExportError, Result};
+use crate::format::{Format, Job};
+use crate::staging::Staged;
+use crate::{ExportConfig, ExportSummary, SplitExport};
 
 /// One 3D point of the scene, for `points3D.bin`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,7 +60,7 @@ fn pinhole(v: &View) -> Result<Camera> {
         Some(CameraModel::Pinhole) if p.len() == 4 => p.clone(),
         Some(CameraModel::SimplePinhole) if p.len() == 3 => vec![p[0], p[0], p[1], p[2]],
         _ => {
-            return Err(DatasetError::Value {
+            return Err(ExportError::Value {
                 path: v.name.clone().into(),
                 record: format!("image {}", v.image_id),
                 field: "model".into(),
@@ -82,7 +85,7 @@ fn pinhole(v: &View) -> Result<Camera> {
 /// The model image of a view (no 2D points).
 fn model_image(v: &View, file: &str) -> Result<Image> {
     let (cam_from_world, norm) =
-        Rigid3::from_colmap(v.qvec, v.tvec).ok_or_else(|| DatasetError::Value {
+        Rigid3::from_colmap(v.qvec, v.tvec).ok_or_else(|| ExportError::Value {
             path: v.name.clone().into(),
             record: format!("image {}", v.image_id),
             field: "qvec".into(),
@@ -98,13 +101,36 @@ fn model_image(v: &View, file: &str) -> Result<Image> {
     })
 }
 
+/// NeRF-W's Phototourism layout.
+pub struct Nerfw;
+
+impl Format for Nerfw {
+    fn check(&self, job: &Job) -> Result<()> {
+        job.require_train("")?;
+        job.points().map(|_| ())
+    }
+
+    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
+        summary.empty_splits = job.empty_splits();
+        summary.splits = write(
+            job.ds,
+            job.cfg,
+            job.points()?,
+            &job.splits,
+            staged,
+            job.tick,
+        )?;
+        Ok(())
+    }
+}
+
 /// Write the layout into `staged`: photos, model, tsv. Returns the splits written.
-pub(super) fn write(
+fn write(
     ds: &Dataset,
     cfg: &ExportConfig,
     points: &[ScenePoint],
     splits: &[(String, usize)],
-    staged: &super::Staged,
+    staged: &Staged,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<SplitExport>> {
     let mut rec = Reconstruction::default();
@@ -125,7 +151,7 @@ pub(super) fn write(
             let v = ds.get(id)?;
             let file = file_name(&v.name);
             if let Some(other) = by_file.insert(file.clone(), id) {
-                return Err(refuse(
+                return Err(ExportError::refused(
                     &cfg.out,
                     format!("images {other} and {id} would both be written as dense/images/{file}"),
                 ));
@@ -154,9 +180,12 @@ pub(super) fn write(
             },
         );
     }
+    for file in ["cameras.bin", "images.bin", "points3D.bin"] {
+        staged.claim(&format!("dense/sparse/{file}"))?;
+    }
     let sparse = staged.dir().join("dense/sparse");
-    nrw_colmap::write_model(&rec, &sparse, Format::Binary)
-        .map_err(|e| DatasetError::io(&sparse, e))?;
+    nrw_colmap::write_model(&rec, &sparse, nrw_colmap::Format::Binary)
+        .map_err(|e| ExportError::io(&sparse, e))?;
     let tsv = format!("filename\tid\tsplit\tdataset\n{}\n", rows.join("\n"));
     staged.write(&format!("{}.tsv", cfg.name), tsv.as_bytes())?;
     Ok(out)

@@ -1,14 +1,22 @@
-//! What the paper's published code expects inside its files: the semantic colour coding of
-//! `segment_dataset.py`, depth in 0…255 (its loaders scale every channel by 2/255 − 1), and
-//! `utils.get_central_crop`.
+//! The official layout, and what the paper's published code expects inside its files: the
+//! semantic colour coding of `segment_dataset.py`, depth in 0…255 (its loaders scale every
+//! channel by 2/255 − 1), and `utils.get_central_crop`.
 
 use std::sync::OnceLock;
 
 use image::{GrayImage, RgbImage};
+use nrw_dataset::reader::View;
 use serde::Serialize;
 
+use crate::error::Result;
+use crate::format::{Format, Job};
+use crate::paper::Paper;
+use crate::staging::Staged;
+use crate::stream::{write_views, Encoded, ViewEncoder};
+use crate::ExportSummary;
+
 /// The official colour coding: `schemas/official_colors.csv`.
-pub const OFFICIAL_COLORS_CSV: &str = include_str!("../../../../schemas/official_colors.csv");
+pub const OFFICIAL_COLORS_CSV: &str = include_str!("../../../schemas/official_colors.csv");
 
 /// RGB of each ADE20K id 0…150 in the official coding.
 pub fn official_colors() -> &'static [[u8; 3]; 151] {
@@ -130,6 +138,89 @@ impl DepthScale {
 /// The start of a centred crop along one axis, as `utils.get_central_crop` computes it.
 pub fn crop_start(side: u32, crop: u32) -> u32 {
     (side - crop) / 2
+}
+
+/// The official layout: `train/` and `val/` of `NNNN_{reference,color,depth,seg_rgb}.png`,
+/// and `dist_NAME.pckl` when the dataset has official style descriptors.
+pub struct Official;
+
+impl Format for Official {
+    fn check(&self, job: &Job) -> Result<()> {
+        crate::paper::check(job)
+    }
+
+    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
+        let paper = Paper::of(job)?;
+        paper.begin(job, summary);
+        write_views(job, staged, &OfficialFiles(&paper), summary)?;
+        paper.require_written_train(job, summary)?;
+        let Some(dist) = job.inputs.dist else {
+            return Ok(());
+        };
+        let train = summary
+            .splits
+            .iter()
+            .find(|s| s.split == "train")
+            .expect("checked");
+        if let Some(m) = dist(&train.image_ids)? {
+            let n = train.image_ids.len();
+            let file = format!("dist_{}.pckl", job.cfg.name);
+            staged.write(&file, &crate::pickle::matrix_dict("dist_matrix", n, &m))?;
+            summary.dist_pickle = Some(file);
+        }
+        Ok(())
+    }
+}
+
+/// One view as the official layout's four PNGs.
+struct OfficialFiles<'a>(&'a Paper);
+
+impl ViewEncoder for OfficialFiles<'_> {
+    fn check_view(&self, v: &View) -> Result<()> {
+        self.0.check_view(v)
+    }
+
+    fn skip(&self, v: &View) -> Option<String> {
+        self.0.skip(v)
+    }
+
+    fn encode(&self, v: &View, split: &str, index: &str) -> Result<Encoded> {
+        use nrw_dataset::codec::{encode_gray, encode_rgb, encode_rgba};
+        let paper = self.0;
+        let stem = format!("{split}/{index}");
+        let name = &v.name;
+        let (reference, color, depth, seg) = match paper.crop {
+            // Uncropped, the stored photo and render PNGs are the files already: no decode,
+            // no re-encode.
+            None => (
+                v.photo_png.clone(),
+                v.color_png.clone(),
+                paper.scale.image(v.width, v.height, &v.depth()?.data),
+                paper.seg(v)?,
+            ),
+            Some(_) => {
+                let o = paper.view(v)?;
+                (
+                    encode_rgb(name, &o.reference)?,
+                    encode_rgba(name, &o.color)?,
+                    o.depth,
+                    o.seg,
+                )
+            }
+        };
+        let mut files = vec![
+            (format!("{stem}_reference.png"), reference),
+            (format!("{stem}_color.png"), color),
+            (
+                format!("{stem}_depth.png"),
+                encode_gray(name, depth.width(), depth.height(), depth.as_raw())?,
+            ),
+        ];
+        if let Some(s) = &seg {
+            files.push((format!("{stem}_seg_rgb.png"), encode_rgb(name, s)?));
+        }
+        Ok(files)
+    }
 }
 
 #[cfg(test)]

@@ -23,10 +23,13 @@ use glam::{DMat3, DVec3};
 use nrw_colmap::{CameraModel, PointCloud, Rigid3};
 use serde_json::{json, Map, Value};
 
-use super::nerfw::ScenePoint;
-use super::{refuse, ExportConfig, SplitExport};
-use crate::error::{DatasetError, Result};
-use crate::reader::{Dataset, View};
+use crate::nerfw::ScenePoint;
+use nrw_dataset::reader::{Dataset, View};
+
+use crate::error::{ExportError, Result};
+use crate::format::{Format, Job};
+use crate::staging::Staged;
+use crate::{ExportConfig, ExportSummary, SplitExport};
 
 /// nerfstudio's `applied_transform` (rows of a 3 × 4 matrix): world (x, y, z) → (x, z, −y).
 pub const APPLIED_TRANSFORM: [[f64; 4]; 3] = [
@@ -43,7 +46,7 @@ pub const DEPTH_SCALE: f32 = 1000.0;
 pub fn camera_keys(v: &View) -> Result<Map<String, Value>> {
     let p = &v.params;
     let model = CameraModel::from_name(&v.model);
-    let refused = |why: &str| DatasetError::Value {
+    let refused = |why: &str| ExportError::Value {
         path: v.name.clone().into(),
         record: format!("image {}", v.image_id),
         field: "model".into(),
@@ -151,7 +154,7 @@ fn npy_f32(h: u32, w: u32, data: &[f32]) -> Vec<u8> {
 }
 
 /// One view's files and frame.
-fn frame(v: &View, staged: &super::Staged) -> Result<(String, Value)> {
+fn frame(v: &View, staged: &Staged) -> Result<(String, Value)> {
     let s = stem(&v.name);
     let image = format!("images/{s}.png");
     staged.write(&image, &v.photo_png)?;
@@ -159,7 +162,7 @@ fn frame(v: &View, staged: &super::Staged) -> Result<(String, Value)> {
     let scaled: Vec<f32> = depth.data.iter().map(|z| z * DEPTH_SCALE).collect();
     let depth_file = format!("depth/{s}.npy");
     staged.write(&depth_file, &npy_f32(v.height, v.width, &scaled))?;
-    let pose = transform_matrix(v.qvec, v.tvec).ok_or_else(|| DatasetError::Value {
+    let pose = transform_matrix(v.qvec, v.tvec).ok_or_else(|| ExportError::Value {
         path: v.name.clone().into(),
         record: format!("image {}", v.image_id),
         field: "qvec".into(),
@@ -173,20 +176,43 @@ fn frame(v: &View, staged: &super::Staged) -> Result<(String, Value)> {
     if let Some(t) = v.transient()? {
         let mask: Vec<u8> = t.as_raw().iter().map(|m| 255 - m).collect();
         let mask_file = format!("masks/{s}.png");
-        let png = crate::codec::encode_gray(&v.name, v.width, v.height, &mask)?;
+        let png = nrw_dataset::codec::encode_gray(&v.name, v.width, v.height, &mask)?;
         staged.write(&mask_file, &png)?;
         f.insert("mask_path".into(), mask_file.into());
     }
     Ok((image, Value::Object(f)))
 }
 
+/// nerfstudio's layout.
+pub struct Nerfstudio;
+
+impl Format for Nerfstudio {
+    fn check(&self, job: &Job) -> Result<()> {
+        job.require_train("")?;
+        job.points().map(|_| ())
+    }
+
+    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
+        summary.empty_splits = job.empty_splits();
+        summary.splits = write(
+            job.ds,
+            job.cfg,
+            job.points()?,
+            &job.splits,
+            staged,
+            job.tick,
+        )?;
+        Ok(())
+    }
+}
+
 /// Write the layout into `staged`. Returns the splits written.
-pub(super) fn write(
+fn write(
     ds: &Dataset,
     cfg: &ExportConfig,
     points: &[ScenePoint],
     splits: &[(String, usize)],
-    staged: &super::Staged,
+    staged: &Staged,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<SplitExport>> {
     let mut frames = Vec::new();
@@ -208,7 +234,7 @@ pub(super) fn write(
             let v = ds.get(id)?;
             let (image, f) = frame(&v, staged)?;
             if !seen.insert(image.clone()) {
-                return Err(refuse(
+                return Err(ExportError::refused(
                     &cfg.out,
                     format!("two views would both be written as {image}"),
                 ));
@@ -224,7 +250,7 @@ pub(super) fn write(
             "train" => "train_filenames",
             "val" => "val_filenames",
             other => {
-                return Err(refuse(
+                return Err(ExportError::refused(
                     &cfg.out,
                     format!("split `{other}`: nerfstudio knows train, val and test"),
                 ))
@@ -271,5 +297,5 @@ fn write_points(points: &[ScenePoint], path: &Path) -> Result<()> {
         colors: Some(points.iter().map(|p| p.rgb).collect()),
         normals: None,
     };
-    nrw_colmap::write_ply(&cloud, path).map_err(|e| DatasetError::io(path, e))
+    nrw_colmap::write_ply(&cloud, path).map_err(|e| ExportError::io(path, e))
 }

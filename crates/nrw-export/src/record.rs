@@ -1,4 +1,4 @@
-//! TFRecord files of `tf.train.Example`s, written without TensorFlow: the protobuf encoding of
+//! The TFRecord wire format of `tf.train.Example`s, written without TensorFlow: the protobuf encoding of
 //! the few message types an Example uses, and TFRecord framing (length, masked CRC-32C of the
 //! length, data, masked CRC-32C of the data), as `tf.io.TFRecordWriter` writes them.
 

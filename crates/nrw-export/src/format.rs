@@ -1,0 +1,88 @@
+//! The seam every layout plugs into: a [`Format`] checks what it can export and writes its
+//! files into the staging folder; [`crate::export`] does the rest (staging, `export.json`,
+//! publishing) the same way for all.
+
+use nrw_dataset::reader::Dataset;
+
+use crate::error::{ExportError, Result};
+use crate::nerfw::ScenePoint;
+use crate::staging::Staged;
+use crate::{ExportConfig, ExportSummary, Inputs, Layout};
+
+/// One export's inputs, as every layout sees them.
+pub struct Job<'a> {
+    pub ds: &'a Dataset,
+    pub cfg: &'a ExportConfig,
+    /// The dataset's splits and their view counts, in order.
+    pub splits: Vec<(String, usize)>,
+    pub inputs: &'a Inputs<'a>,
+    /// Called once per view done (written or skipped).
+    pub tick: &'a (dyn Fn() + Sync),
+}
+
+impl Job<'_> {
+    /// Refuse a dataset without train views, which every layout but `files` needs.
+    pub fn require_train(&self, advice: &str) -> Result<()> {
+        if self.splits.iter().any(|(s, n)| s == "train" && *n > 0) {
+            return Ok(());
+        }
+        Err(ExportError::refused(
+            &self.ds.dir,
+            format!(
+                "the {:?} layout needs a train split with views; run `nrw-etl split {} --val N` first{advice}",
+                self.cfg.layout,
+                self.ds.dir.display()
+            ),
+        ))
+    }
+
+    /// The scene's 3D points, which the NeRF layouts carry: refused when not given or empty.
+    pub fn points(&self) -> Result<&[ScenePoint]> {
+        match self.inputs.points {
+            Some(p) if !p.is_empty() => Ok(p),
+            Some(_) => Err(ExportError::refused(
+                &self.cfg.out,
+                "the scene has no 3D points (NeRF-W loaders take near and far bounds from them, \
+                 splatting trainers their initial Gaussians)",
+            )),
+            None => Err(ExportError::refused(
+                &self.cfg.out,
+                format!(
+                    "the {} layout needs the scene's 3D points (Inputs::points)",
+                    self.cfg.layout
+                ),
+            )),
+        }
+    }
+
+    /// The splits with no view, as `export.json` lists them.
+    pub fn empty_splits(&self) -> Vec<String> {
+        self.splits
+            .iter()
+            .filter(|(_, n)| *n == 0)
+            .map(|(s, _)| s.clone())
+            .collect()
+    }
+}
+
+/// One export layout: what it refuses before anything is written, and the files it writes.
+pub trait Format: Sync {
+    /// Refuse what this layout cannot export (settings, dataset), before the staging folder
+    /// exists.
+    fn check(&self, job: &Job) -> Result<()>;
+
+    /// Write every file of the layout except `export.json` through `staged`, and fill in
+    /// `summary` (which becomes `export.json`).
+    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()>;
+}
+
+/// The format that writes `layout`.
+pub fn of(layout: Layout) -> &'static dyn Format {
+    match layout {
+        Layout::Official => &crate::official::Official,
+        Layout::Tfrecord => &crate::tfrecord::Tfrecord,
+        Layout::Files => &crate::files::Files,
+        Layout::Nerfw => &crate::nerfw::Nerfw,
+        Layout::Nerfstudio => &crate::nerfstudio::Nerfstudio,
+    }
+}

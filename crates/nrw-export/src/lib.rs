@@ -1,0 +1,85 @@
+//! Exports of a dataset as files other tools read: the paper's published code (`official`
+//! PNG folders and `tfrecord`), one folder per photo (`files`), NeRF-W's Phototourism layout
+//! (`nerfw`) and nerfstudio's `transforms.json` (`nerfstudio`).
+//!
+//! One entry point, [`export`]; one seam per layout, [`format::Format`] (the layouts of one
+//! file set per view share [`stream`]). Every file is claimed in a hidden staging folder
+//! ([`staging::Staged`]: the name check and the collision check) and the export is published
+//! whole, to a local folder or under an object-store URL.
+
+pub mod error;
+pub mod files;
+pub mod format;
+pub mod layout;
+pub mod nerfstudio;
+pub mod nerfw;
+pub mod official;
+pub mod paper;
+pub mod pickle;
+pub mod record;
+pub mod staging;
+pub mod stream;
+pub mod summary;
+pub mod tfrecord;
+
+pub use error::{ExportError, Result};
+pub use layout::Layout;
+pub use nerfw::ScenePoint;
+pub use staging::{join_under, EXPORT_JSON};
+pub use stream::index_width;
+pub use summary::{DepthRecord, ExportConfig, ExportSummary, Skipped, SplitExport};
+pub use tfrecord::tfrecord_name;
+
+use nrw_dataset::reader::Dataset;
+
+/// The train views' style distance matrix (row-major, f64) for the given image ids in that
+/// order, or None when the dataset has no official descriptors. Given by the caller, which
+/// owns the style stage.
+pub type DistMatrix<'a> = &'a (dyn Fn(&[u32]) -> nrw_dataset::Result<Option<Vec<f64>>> + Sync);
+
+/// What some layouts need beyond the dataset, supplied by the caller (which owns the style
+/// stage and the scene's model).
+#[derive(Clone, Copy, Default)]
+pub struct Inputs<'a> {
+    /// The official layout's `dist_NAME.pckl` (none: no pickle is written).
+    pub dist: Option<DistMatrix<'a>>,
+    /// The scene's 3D points, which `nerfw` and `nerfstudio` carry.
+    pub points: Option<&'a [ScenePoint]>,
+}
+
+/// Export `ds` as `cfg` says into `cfg.out` (a folder or an object-store URL), replacing an
+/// earlier export there whole; `tick` is called once per view done.
+pub fn export(
+    ds: &Dataset,
+    cfg: &ExportConfig,
+    inputs: &Inputs,
+    tick: &(dyn Fn() + Sync),
+) -> Result<ExportSummary> {
+    let job = format::Job {
+        ds,
+        cfg,
+        splits: ds.splits(),
+        inputs,
+        tick,
+    };
+    let layout = format::of(cfg.layout);
+    layout.check(&job)?;
+    let staged = staging::Staged::new(&cfg.out)?;
+    let mut summary = ExportSummary::begin(&ds.dir.display().to_string(), cfg);
+    let written = layout.write(&job, &staged, &mut summary).and_then(|()| {
+        staged.write(
+            EXPORT_JSON,
+            &serde_json::to_vec_pretty(&summary).expect("json"),
+        )
+    });
+    match written {
+        Ok(()) => {
+            staged.publish()?;
+            Ok(summary)
+        }
+        Err(e) => {
+            staged.abandon();
+            Err(e)
+        }
+    }
+}

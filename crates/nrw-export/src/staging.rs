@@ -1,0 +1,264 @@
+//! Where an export is built and how it is published. Every export is written into a hidden
+//! local folder first, every file claimed through the one checked join; then the folder is
+//! moved into place whole (a local destination) or uploaded file by file with `export.json`
+//! last (an object-store destination), so a reader never sees a half-written export or
+//! files left from an earlier one.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use nrw_dataset::Store;
+
+use crate::error::{ExportError, Result};
+
+/// The JSON an export writes beside its files: what it holds and how to read it back. Its
+/// presence marks a folder as an export this tool may replace.
+pub const EXPORT_JSON: &str = "export.json";
+
+/// Where a finished export goes.
+enum Destination {
+    /// A local folder: the staging folder is renamed to it.
+    Folder,
+    /// An object-store prefix: the staged files are uploaded under it.
+    Remote(Store),
+}
+
+/// The hidden folder an export is built in, and every file claimed in it so far: no two
+/// files of one export may have names equal, or equal but for letter case or Unicode
+/// normalisation ([`nrw_colmap::names::fold_key`]), since on macOS and Windows the second
+/// would overwrite the first. Every file an export writes is claimed here.
+pub struct Staged {
+    dir: PathBuf,
+    /// The export's destination, named in messages (the hidden folder means nothing to a user).
+    out: PathBuf,
+    dest: Destination,
+    claimed: Mutex<HashMap<String, String>>,
+}
+
+impl Staged {
+    /// Check the destination `out` (a folder or an object-store URL) and make the hidden
+    /// folder the export is built in.
+    pub fn new(out: &Path) -> Result<Staged> {
+        let text = out.to_string_lossy();
+        let (dir, dest) = if nrw_dataset::store::is_url(&text) {
+            let store = Store::open(&text)?;
+            refuse_foreign(out, &store.list("")?, |k| k == EXPORT_JSON)?;
+            (remote_staging()?, Destination::Remote(store))
+        } else {
+            (local_staging(out)?, Destination::Folder)
+        };
+        Ok(Staged {
+            dir,
+            out: out.into(),
+            dest,
+            claimed: Default::default(),
+        })
+    }
+
+    /// The hidden folder itself (for files of fixed names written by other code, such as a
+    /// COLMAP model).
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The destination as the user gave it.
+    pub fn out(&self) -> &Path {
+        &self.out
+    }
+
+    /// `dir/rel` through the checked join ([`join_under`]), claimed for one file.
+    pub fn claim(&self, rel: &str) -> Result<PathBuf> {
+        // Named by the export folder: the hidden staging folder means nothing to a user.
+        let path = join_under(&self.dir, rel).map_err(|e| match e {
+            ExportError::Value { problem, .. } => name_error(&self.out, problem),
+            e => e,
+        })?;
+        let key = nrw_colmap::names::fold_key(rel);
+        let mut claimed = self.claimed.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(first) = claimed.get(&key) {
+            let how = if first == rel {
+                "two views would write the same file"
+            } else {
+                "the names differ only in letter case or Unicode normalisation, so on macOS and Windows they are one file"
+            };
+            return Err(name_error(
+                &self.out,
+                format!("{rel:?} and {first:?}: {how}; rename one photo in the model (or leave one out) and export again"),
+            ));
+        }
+        claimed.insert(key, rel.to_string());
+        Ok(path)
+    }
+
+    /// Write `bytes` to a claimed `rel`, creating its folders.
+    pub fn write(&self, rel: &str, bytes: &[u8]) -> Result<()> {
+        write_file(&self.claim(rel)?, bytes)
+    }
+
+    /// Make the finished export visible at its destination, replacing an earlier one whole.
+    pub fn publish(self) -> Result<()> {
+        let published = match &self.dest {
+            Destination::Folder => rename_into_place(&self.dir, &self.out),
+            Destination::Remote(store) => upload(&self.dir, store),
+        };
+        if published.is_ok() && self.dir.exists() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+        published
+    }
+
+    /// Remove what was staged (the export failed).
+    pub fn abandon(self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Refuse a non-empty destination that is not an earlier export (`has_marker` tells whether a
+/// listed name is its `export.json`).
+fn refuse_foreign(out: &Path, names: &[String], has_marker: impl Fn(&str) -> bool) -> Result<()> {
+    if names.is_empty() || names.iter().any(|n| has_marker(n)) {
+        return Ok(());
+    }
+    Err(ExportError::refused(
+        out,
+        format!("holds files that are not an nrw-etl export (no {EXPORT_JSON}); export into an empty or new folder, or into an earlier export to replace it"),
+    ))
+}
+
+/// The hidden folder beside a local destination (same file system, so publishing is a rename),
+/// after removing leftovers of interrupted exports into it.
+fn local_staging(out: &Path) -> Result<PathBuf> {
+    if out.is_file() {
+        return Err(ExportError::refused(
+            out,
+            "is a file; give a folder to export into",
+        ));
+    }
+    if out.is_dir() {
+        let names: Vec<String> = std::fs::read_dir(out)
+            .map_err(|e| ExportError::io(out, e))?
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        refuse_foreign(out, &names, |n| n == EXPORT_JSON && out.join(n).is_file())?;
+    }
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(|e| ExportError::io(&parent, e))?;
+    let base = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "export".into());
+    if let Ok(entries) = std::fs::read_dir(&parent) {
+        for e in entries.flatten() {
+            let n = e.file_name().to_string_lossy().into_owned();
+            if n.starts_with(&format!(".{base}.export-")) {
+                let _ = std::fs::remove_dir_all(e.path());
+            }
+        }
+    }
+    let staged = parent.join(format!(".{base}.export-new-{}", std::process::id()));
+    std::fs::create_dir_all(&staged).map_err(|e| ExportError::io(&staged, e))?;
+    Ok(staged)
+}
+
+/// A fresh hidden folder in the temporary directory for an export bound for object storage.
+fn remote_staging() -> Result<PathBuf> {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let dir = std::env::temp_dir().join(format!(".nrw-export-new-{}-{nanos}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| ExportError::io(&dir, e))?;
+    Ok(dir)
+}
+
+/// Move the staged folder to `out`, replacing an earlier export whole.
+fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
+    let old = staged.with_file_name(
+        staged
+            .file_name()
+            .expect("named")
+            .to_string_lossy()
+            .replace(".export-new-", ".export-old-"),
+    );
+    nrw_dataset::atomic::commit_pause(out);
+    if out.exists() {
+        std::fs::rename(out, &old).map_err(|e| ExportError::io(out, e))?;
+    }
+    std::fs::rename(staged, out).map_err(|e| ExportError::io(out, e))?;
+    if old.exists() {
+        std::fs::remove_dir_all(&old).map_err(|e| ExportError::io(&old, e))?;
+    }
+    Ok(())
+}
+
+/// Upload the staged files under `store`: an earlier export's `export.json` goes first (so a
+/// half-replaced export is not taken for a whole one), every file but `export.json` next,
+/// `export.json` last, then the earlier export's files that this one does not have.
+fn upload(staged: &Path, store: &Store) -> Result<()> {
+    let earlier = store.list("")?;
+    let files = staged_files(staged)?;
+    nrw_dataset::atomic::commit_pause(&store.root());
+    store.delete(EXPORT_JSON)?;
+    for rel in files.iter().filter(|r| *r != EXPORT_JSON) {
+        store.upload(rel, &staged.join(rel))?;
+    }
+    store.upload(EXPORT_JSON, &staged.join(EXPORT_JSON))?;
+    for rel in earlier.iter().filter(|r| !files.contains(r)) {
+        store.delete(rel)?;
+    }
+    Ok(())
+}
+
+/// Every file under `dir`, relative to it with `/` separators, sorted.
+fn staged_files(dir: &Path) -> Result<Vec<String>> {
+    let mut out = Vec::new();
+    let mut stack = vec![(dir.to_path_buf(), String::new())];
+    while let Some((path, rel)) = stack.pop() {
+        for e in std::fs::read_dir(&path).map_err(|e| ExportError::io(&path, e))? {
+            let e = e.map_err(|e| ExportError::io(&path, e))?;
+            let name = e.file_name().to_string_lossy().into_owned();
+            let child = if rel.is_empty() {
+                name
+            } else {
+                format!("{rel}/{name}")
+            };
+            if e.file_type().is_ok_and(|t| t.is_dir()) {
+                stack.push((e.path(), child));
+            } else {
+                out.push(child);
+            }
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// An output file name refused, naming the export folder.
+fn name_error(out: &Path, problem: String) -> ExportError {
+    ExportError::Value {
+        path: out.into(),
+        record: "output file".into(),
+        field: "name".into(),
+        problem,
+    }
+}
+
+/// `root/rel`, refusing a `rel` that is not a relative path of normal components
+/// ([`nrw_colmap::names::check_name`]): every file an export writes is joined this way (by
+/// [`Staged::claim`]), so no name from a dataset (or an export's `--name`) can put a file
+/// outside the export folder.
+pub fn join_under(root: &Path, rel: &str) -> Result<PathBuf> {
+    nrw_colmap::names::join_checked(root, rel).map_err(|problem| name_error(root, problem))
+}
+
+/// Write a file, creating its folders.
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    if let Some(d) = path.parent() {
+        std::fs::create_dir_all(d).map_err(|e| ExportError::io(d, e))?;
+    }
+    std::fs::write(path, bytes).map_err(|e| ExportError::io(path, e))
+}

@@ -1,0 +1,144 @@
+//! What to export (`ExportConfig`) and what an export wrote (`ExportSummary`, which is also
+//! `export.json`).
+
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::official::{DepthMapping, DepthScale};
+use crate::Layout;
+
+/// What to export and how.
+#[derive(Debug, Clone)]
+pub struct ExportConfig {
+    pub layout: Layout,
+    /// Destination: a folder (created, or replaced whole when it holds an earlier export) or
+    /// an `s3://`, `gs://` or `az://` URL (the same files, uploaded).
+    pub out: PathBuf,
+    /// The dataset name the published code is run with (`--dataset_name`): TFRecord and
+    /// distance-matrix file names.
+    pub name: String,
+    /// A centred `crop` × `crop` of every channel (the published code's 512), official and
+    /// tfrecord layouts; views smaller than it are skipped and listed.
+    pub crop: Option<u32>,
+    /// Write semantics (official and tfrecord): a dataset without them is refused unless this
+    /// is false.
+    pub semantics: bool,
+    pub depth: DepthMapping,
+    /// TFRecord files per split (1: `<name>_<split>.tfrecord`).
+    pub shards: usize,
+}
+
+impl ExportConfig {
+    /// The paper's layout with the defaults the published code runs with.
+    pub fn official(out: PathBuf, name: String) -> Self {
+        ExportConfig {
+            layout: Layout::Official,
+            out,
+            name,
+            crop: Some(crate::official::PUBLISHED_CROP),
+            semantics: true,
+            depth: DepthMapping::Linear,
+            shards: 1,
+        }
+    }
+}
+
+/// A view an export left out, and why.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Skipped {
+    pub split: String,
+    pub image_id: u32,
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub reason: String,
+}
+
+/// One split of an export: its views in file order.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SplitExport {
+    pub split: String,
+    /// Image ids in index order: view k is file k (`NNNN_*` or record k).
+    pub image_ids: Vec<u32>,
+    pub names: Vec<String>,
+    /// Files written for the split, relative to the export folder.
+    pub files: Vec<String>,
+}
+
+impl SplitExport {
+    /// A split with nothing written yet.
+    pub(crate) fn new(split: &str) -> SplitExport {
+        SplitExport {
+            split: split.into(),
+            image_ids: Vec::new(),
+            names: Vec::new(),
+            files: Vec::new(),
+        }
+    }
+}
+
+/// What an export wrote: also the content of `export.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExportSummary {
+    pub tool: String,
+    pub dataset: String,
+    pub layout: Layout,
+    pub name: String,
+    pub crop: Option<u32>,
+    /// Depth levels in the official and tfrecord layouts, with the formula to recover depth.
+    pub depth: Option<DepthRecord>,
+    /// `official` (schemas/official_colors.csv), `ade20k` (ids and colour150), or null.
+    pub semantics: Option<String>,
+    pub splits: Vec<SplitExport>,
+    pub skipped: Vec<Skipped>,
+    /// Splits the dataset has with no view, not written (the published code's glob would fail).
+    pub empty_splits: Vec<String>,
+    /// `dist_<name>.pckl` when the dataset has official style descriptors.
+    pub dist_pickle: Option<String>,
+}
+
+impl ExportSummary {
+    /// The summary before a layout fills in what it wrote: tool, dataset, layout and name.
+    pub(crate) fn begin(dataset: &str, cfg: &ExportConfig) -> ExportSummary {
+        ExportSummary {
+            tool: format!("nrw-etl {}", env!("CARGO_PKG_VERSION")),
+            dataset: dataset.into(),
+            layout: cfg.layout,
+            name: cfg.name.clone(),
+            crop: None,
+            depth: None,
+            semantics: None,
+            splits: Vec::new(),
+            skipped: Vec::new(),
+            empty_splits: Vec::new(),
+            dist_pickle: None,
+        }
+    }
+
+    /// Views written over all splits.
+    pub fn views(&self) -> usize {
+        self.splits.iter().map(|s| s.image_ids.len()).sum()
+    }
+}
+
+/// The depth mapping as recorded in `export.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DepthRecord {
+    #[serde(flatten)]
+    pub scale: DepthScale,
+    pub formula: String,
+    /// What the published loaders do with a level: `level * 2/255 - 1`, so 0 (empty) → −1.
+    pub loader_scaling: String,
+}
+
+impl DepthRecord {
+    /// The record of `scale`, with the published loaders' scaling spelled out.
+    pub(crate) fn of(scale: &DepthScale) -> DepthRecord {
+        DepthRecord {
+            scale: *scale,
+            formula: scale.formula().into(),
+            loader_scaling: "x = level * 2/255 - 1 (data._parser_rendered_dataset, pretrain_appearance._load_and_concatenate_image_channels): empty = -1, near = -0.992, far = 1".into(),
+        }
+    }
+}

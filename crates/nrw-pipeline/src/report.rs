@@ -1,0 +1,420 @@
+//! What each stage says when it is done, as lines for stdout (what a script reads: results,
+//! where they went) and stderr (what a person reads: counts, warnings, advice). The binary
+//! prints them; the judgments in them (a train split too small for the published sampler, a
+//! threshold printed with its own digits) live here with the stages.
+
+use std::path::Path;
+
+use nrw_export::{ExportSummary, Layout};
+
+use crate::ingest::{IngestSummary, UnitSummary};
+use crate::inspect::{DatasetSummary, Inspected, ModelSummary};
+use crate::runner::StageDone;
+use crate::segment::SegmentSummary;
+use crate::split::{SplitConfig, SplitSummary};
+use crate::style::StyleSummary;
+use crate::triplets::TripletsSummary;
+
+/// Exit code of `ingest` and `run` when the run completed but every view was dropped by the
+/// filters.
+pub const EXIT_NOTHING_KEPT: u8 = 3;
+
+/// Fewest train views the published triplet sampler can index (`randint(1, 5 + 1)`).
+pub const PUBLISHED_MIN_TRAIN: usize = 6;
+
+/// One line of a report and the stream it belongs on.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Line {
+    /// stdout: a result.
+    Out(String),
+    /// stderr: a count, warning or piece of advice.
+    Err(String),
+}
+
+/// The lines a finished stage prints, in order.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Report(pub Vec<Line>);
+
+impl Report {
+    fn out(&mut self, s: String) {
+        self.0.push(Line::Out(s));
+    }
+
+    fn err(&mut self, s: String) {
+        self.0.push(Line::Err(s));
+    }
+
+    /// Print every line on its stream.
+    pub fn print(&self) {
+        for l in &self.0 {
+            match l {
+                Line::Out(s) => println!("{s}"),
+                Line::Err(s) => eprintln!("{s}"),
+            }
+        }
+    }
+}
+
+/// A fraction as a percentage with the digits it has (0.85 → 85, 0.995 → 99.5), never
+/// rounded across the threshold it describes.
+pub fn percent(fraction: f64) -> String {
+    let p = (fraction * 100.0 * 1e6).round() / 1e6;
+    format!("{p}")
+}
+
+/// " (unit I/N)" for a work unit, nothing for a whole stage.
+fn unit_suffix(unit: crate::Unit) -> String {
+    if unit.is_whole() {
+        String::new()
+    } else {
+        format!(" (unit {unit})")
+    }
+}
+
+/// A whole ingest: warnings, the verdict counts with their thresholds, and advice when
+/// nothing was kept.
+pub fn ingest(s: &IngestSummary) -> Report {
+    let mut r = Report::default();
+    for w in &s.warnings {
+        r.err(format!("warning: {w}"));
+    }
+    r.err(format!(
+        "ingested {}: {} registered, {} kept, {} too sparse (>{}% empty), {} too small (<{} px), {} unreadable; {} shards; {} points ({}) in {:.1} s",
+        s.dataset,
+        s.registered,
+        s.kept,
+        s.too_sparse,
+        percent(s.max_empty),
+        s.too_small,
+        s.min_photo_side,
+        s.unreadable,
+        s.shards,
+        s.points,
+        s.point_source,
+        s.seconds
+    ));
+    if s.kept == 0 {
+        r.err(format!(
+            "no view survived the filters{}: the dataset records every verdict but holds no view (exit code {EXIT_NOTHING_KEPT}; `nrw-etl inspect {}` shows each verdict)",
+            s.least_empty.map_or(String::new(), |m| format!(" (least empty render: {:.1}% empty)", m * 100.0)),
+            s.dataset
+        ));
+    }
+    r
+}
+
+/// One ingest work unit, and what to run once every unit has.
+pub fn ingest_unit(s: &UnitSummary) -> Report {
+    let mut r = Report::default();
+    for w in &s.warnings {
+        r.err(format!("warning: {w}"));
+    }
+    r.err(format!(
+        "ingest unit {} of {}: {} of {} groups ({} already done), {} views kept, in {:.1} s; run `nrw-etl finalize {}` once every unit has run",
+        s.unit, s.dataset, s.groups_owned, s.groups_total, s.resumed_groups, s.views, s.seconds, s.dataset
+    ));
+    r
+}
+
+/// What was exported, what was skipped, and the style distances.
+pub fn export(dataset: &Path, out: &Path, s: &ExportSummary) -> Report {
+    let mut r = Report::default();
+    let per: Vec<String> = s
+        .splits
+        .iter()
+        .map(|p| format!("{} {}", p.split, p.image_ids.len()))
+        .collect();
+    r.out(format!(
+        "exported {} views ({}) of {} to {} ({} layout)",
+        s.views(),
+        per.join(", "),
+        dataset.display(),
+        out.display(),
+        s.layout
+    ));
+    for k in &s.skipped {
+        r.err(format!(
+            "skipped {} (image {}, {} split): {}×{} is {}",
+            k.name, k.image_id, k.split, k.width, k.height, k.reason
+        ));
+    }
+    for e in &s.empty_splits {
+        r.err(format!(
+            "split {e} has no view: not written (the published code's {e} glob will find nothing; `nrw-etl split DATASET --val N` holds out N photos)"
+        ));
+    }
+    let train = s
+        .splits
+        .iter()
+        .find(|p| p.split == "train")
+        .map_or(0, |p| p.image_ids.len());
+    if s.dist_pickle.is_some() && train < PUBLISHED_MIN_TRAIN {
+        r.err(format!(
+            "warning: {train} train views: the published get_triplet_input_fn draws positives at sorted index 1..5 and fails (IndexError) below {PUBLISHED_MIN_TRAIN}"
+        ));
+    }
+    match &s.dist_pickle {
+        Some(p) => r.out(format!(
+            "style distances: {} (pretrain_appearance loads it)",
+            out.join(p).display()
+        )),
+        None if s.layout == Layout::Official => r.err(
+            "no dist_NAME.pckl: the dataset has no official style descriptors (`nrw-etl style DATASET --tier official --weights VGG16`)".into(),
+        ),
+        None => {}
+    }
+    r
+}
+
+/// The report's counts, and where it is.
+pub fn qa(w: &nrw_qa::Written) -> Report {
+    let mut r = Report::default();
+    let c = &w.figures.counts;
+    r.err(format!(
+        "QA: {} registered → {} rendered → {} kept → {} train / {} val; {} warning(s)",
+        c.registered,
+        c.rendered,
+        c.kept,
+        c.train,
+        c.val,
+        w.figures.warnings.len()
+    ));
+    r.out(w.report.display().to_string());
+    r
+}
+
+/// What split assigned, and photos that left the split.
+pub fn split(cfg: &SplitConfig, s: &SplitSummary) -> Report {
+    let mut r = Report::default();
+    for g in &s.gone {
+        r.err(format!(
+            "warning: {g} was assigned earlier but is no longer kept; removed from the split"
+        ));
+    }
+    let Some(tsv) = &cfg.from_tsv else {
+        r.out(format!(
+            "split {}: {} train, {} val ({} kept as before, {} newly assigned with seed {})",
+            cfg.dataset.display(),
+            s.train,
+            s.val,
+            s.kept,
+            s.new,
+            cfg.seed
+        ));
+        return r;
+    };
+    r.out(format!(
+        "split {}: {} train, {} val, as {} lists them",
+        cfg.dataset.display(),
+        s.train,
+        s.val,
+        tsv.display()
+    ));
+    if let Some(first) = s.listed_not_kept.first() {
+        r.err(format!(
+            "{} listed photo(s) were dropped by ingest and are in no split, e.g. {first}",
+            s.listed_not_kept.len(),
+        ));
+    }
+    if s.unlisted > 0 {
+        r.err(format!(
+            "{} kept photo(s) are not listed and are in no split",
+            s.unlisted
+        ));
+    }
+    r
+}
+
+/// The summary line of a style run or unit.
+pub fn style(s: &StyleSummary) -> Report {
+    let mut r = Report::default();
+    r.err(format!(
+        "described {} photos with {} into {}/{}{} ({} parts written, {} already there)",
+        s.photos,
+        s.tier,
+        s.dataset,
+        nrw_dataset::descriptors::DESCRIPTORS_DIR,
+        unit_suffix(s.unit),
+        s.parts_written,
+        s.parts_skipped
+    ));
+    r
+}
+
+/// The triplet table's summary (and the approximate path's recall).
+pub fn triplets(dataset: &Path, s: &TripletsSummary) -> Report {
+    let mut r = Report::default();
+    if let Some((n, f)) = s.recall {
+        r.err(format!(
+            "{}: recall@{} against the exact path: nearest {n:.3}, furthest {f:.3}",
+            s.method, s.k
+        ));
+    }
+    r.out(format!(
+        "triplets {}: {} anchors × {} nearest / {} furthest ({}, scope {}, {})",
+        dataset.display(),
+        s.anchors,
+        s.k,
+        s.k,
+        s.tier,
+        s.scope,
+        s.method
+    ));
+    r
+}
+
+/// What segment labelled.
+pub fn segment(s: &SegmentSummary) -> Report {
+    let mut r = Report::default();
+    r.err(format!(
+        "segmented {} of {} photos{} into {} ({} already there, {} unreadable) with {} (mode {}) in {:.1} s",
+        s.segmented,
+        s.photos,
+        unit_suffix(s.unit),
+        s.out,
+        s.resumed,
+        s.unreadable.len(),
+        s.model,
+        s.mode,
+        s.seconds
+    ));
+    r
+}
+
+/// What was synthesised.
+pub fn synth(s: &nrw_synth::SynthReport) -> Report {
+    let mut r = Report::default();
+    r.err(format!(
+        "synthesised: {} photos ({} small, {} looking away), {} sparse points, {} observations, {} dense points",
+        s.photos, s.small_photos, s.away_photos, s.sparse_points, s.observations, s.dense_points
+    ));
+    r
+}
+
+/// A finished stage of a pipeline run, as its own command reports it.
+pub fn stage(dataset: &Path, done: StageDone) -> Report {
+    match done {
+        StageDone::Ingest(s) => ingest(s),
+        StageDone::Split(s) => Report(vec![Line::Out(format!(
+            "split {}: {} train, {} val",
+            dataset.display(),
+            s.train,
+            s.val
+        ))]),
+        StageDone::Style(s) => style(s),
+        StageDone::Triplets(s) => triplets(dataset, s),
+        StageDone::Export(out, s) => export(dataset, out, s),
+        StageDone::Qa(w) => qa(w),
+    }
+}
+
+/// A model's or a dataset's summary, as `inspect` prints it.
+pub fn inspected(found: &Inspected) -> Report {
+    match found {
+        Inspected::Model(m) => model(m),
+        Inspected::Dataset(d) => dataset(d),
+    }
+}
+
+fn dataset(d: &DatasetSummary) -> Report {
+    let mut r = Report::default();
+    r.out(format!(
+        "dataset      {} (schema {})",
+        d.dataset, d.schema_version
+    ));
+    r.out(format!("registered   {}", d.registered));
+    for (k, n) in &d.verdicts {
+        r.out(format!("  {k:<10} {n}"));
+    }
+    r.out(format!("views        {} in {} shards", d.views, d.shards));
+    for (k, n) in &d.splits {
+        r.out(format!("split {k:<6} {n}"));
+    }
+    r
+}
+
+fn model(m: &ModelSummary) -> Report {
+    let mut r = Report::default();
+    let fmt_px = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4} px"));
+    r.out(format!(
+        "model        {} ({}, {})",
+        m.model_dir, m.encoding, m.layout
+    ));
+    r.out(format!(
+        "cameras      {} ({})",
+        m.cameras,
+        m.camera_models.join(", ")
+    ));
+    r.out(format!("images       {}", m.images));
+    r.out(format!("points       {}", m.points));
+    r.out(format!(
+        "observations {} (mean track length {:.2})",
+        m.observations,
+        m.mean_track_length()
+    ));
+    let hidden = if m.not_visible_observations > 0 {
+        format!(
+            "; {} observations not visible (behind the camera)",
+            m.not_visible_observations
+        )
+    } else {
+        String::new()
+    };
+    r.out(format!(
+        "reprojection mean {}, max {} over {} observations{hidden}",
+        fmt_px(m.mean_reprojection_error_px),
+        fmt_px(m.max_reprojection_error_px),
+        m.observations_projected,
+    ));
+    if m.layout == "colmap4" {
+        r.out(format!("rigs/frames  {} / {}", m.rigs, m.frames));
+    }
+    for w in &m.warnings {
+        r.out(format!("warning: {w}"));
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thresholds_print_with_their_own_digits() {
+        assert_eq!(percent(0.85), "85");
+        assert_eq!(percent(0.995), "99.5");
+        assert_eq!(percent(1.0), "100");
+        assert_eq!(percent(0.0), "0");
+    }
+
+    #[test]
+    fn a_train_split_the_published_sampler_cannot_index_is_warned_about() {
+        let mut s = ExportSummary {
+            tool: "t".into(),
+            dataset: "d".into(),
+            layout: Layout::Official,
+            name: "n".into(),
+            crop: None,
+            depth: None,
+            semantics: None,
+            splits: vec![nrw_export::SplitExport {
+                split: "train".into(),
+                image_ids: vec![1, 2, 3, 4, 5],
+                names: vec![String::new(); 5],
+                files: Vec::new(),
+            }],
+            skipped: Vec::new(),
+            empty_splits: Vec::new(),
+            dist_pickle: Some("dist_n.pckl".into()),
+        };
+        let warned = |s: &ExportSummary| {
+            export(Path::new("d"), Path::new("o"), s)
+                .0
+                .iter()
+                .any(|l| matches!(l, Line::Err(e) if e.contains("IndexError")))
+        };
+        assert!(warned(&s), "5 train views");
+        s.splits[0].image_ids.push(6);
+        assert!(!warned(&s), "6 train views");
+    }
+}

@@ -273,6 +273,31 @@ fn every_export_layout_on_s3_holds_the_bytes_of_the_local_export_and_replaces_an
 }
 
 #[test]
+fn a_file_larger_than_one_part_uploads_in_parts_and_reads_back_whole() {
+    let Some(m) = moto(false) else {
+        return;
+    };
+    m.bucket("nrw");
+    let tmp = tempfile::tempdir().unwrap();
+    let local = tmp.path().join("big.bin");
+    // 2.5 parts of distinct bytes, so a part out of order or missing cannot go unseen.
+    let n = nrw_dataset::store::UPLOAD_PART * 5 / 2;
+    let bytes: Vec<u8> = (0..n as u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
+        .collect();
+    std::fs::write(&local, &bytes).unwrap();
+    let opts: Vec<(String, String)> = m
+        .env()
+        .into_iter()
+        .map(|(k, v)| (k.to_ascii_lowercase(), v))
+        .collect();
+    let store = nrw_dataset::Store::open_with("s3://nrw/big", &opts).unwrap();
+    store.upload("a/big.bin", &local).unwrap();
+    assert_eq!(store.read("a/big.bin").unwrap().as_ref(), bytes.as_slice());
+    assert_eq!(store.list("").unwrap(), vec!["a/big.bin".to_string()]);
+}
+
+#[test]
 fn every_stage_on_s3_gives_the_bytes_of_local_disk_on_the_demo_scene() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = tmp.path().join("scene");

@@ -426,7 +426,10 @@ mod tests {
             ),
             "{e:?}"
         );
-        assert!(e.to_string().starts_with("ingest.radius 40 is outside"), "{e}");
+        assert!(
+            e.to_string().starts_with("ingest.radius 40 is outside"),
+            "{e}"
+        );
         assert!(!tmp.join("out").exists(), "nothing written");
     }
 }

@@ -1,13 +1,21 @@
 //! The seam every layout plugs into: a [`Format`] checks what it can export and writes its
-//! files into the staging folder; [`crate::export`] does the rest (staging, `export.json`,
-//! publishing) the same way for all.
+//! files into the staging folder; [`crate::export`] picks the layout's format and does the
+//! rest (staging, `export.json`, publishing) the same way for all.
 
 use nrw_dataset::reader::Dataset;
 
 use crate::error::{ExportError, Result};
-use crate::nerfw::ScenePoint;
 use crate::staging::Staged;
-use crate::{ExportConfig, ExportSummary, Inputs, Layout};
+use crate::{ExportConfig, ExportSummary, Inputs};
+
+/// One 3D point of the scene, for `points3D.bin`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScenePoint {
+    pub id: u64,
+    pub xyz: [f64; 3],
+    pub rgb: [u8; 3],
+    pub error: f64,
+}
 
 /// One export's inputs, as every layout sees them.
 pub struct Job<'a> {
@@ -74,15 +82,4 @@ pub trait Format: Sync {
     /// Write every file of the layout except `export.json` through `staged`, and fill in
     /// `summary` (which becomes `export.json`).
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()>;
-}
-
-/// The format that writes `layout`.
-pub fn of(layout: Layout) -> &'static dyn Format {
-    match layout {
-        Layout::Official => &crate::official::Official,
-        Layout::Tfrecord => &crate::tfrecord::Tfrecord,
-        Layout::Files => &crate::files::Files,
-        Layout::Nerfw => &crate::nerfw::Nerfw,
-        Layout::Nerfstudio => &crate::nerfstudio::Nerfstudio,
-    }
 }

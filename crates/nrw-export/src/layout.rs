@@ -69,7 +69,7 @@ impl Layout {
     /// The crop when none is asked: the published 512 for the paper's layouts, none (views
     /// kept whole) for the others.
     pub fn default_crop(self) -> Option<u32> {
-        self.paper().then_some(crate::official::PUBLISHED_CROP)
+        self.paper().then_some(crate::published::PUBLISHED_CROP)
     }
 }
 

@@ -16,6 +16,7 @@ pub mod nerfw;
 pub mod official;
 pub mod paper;
 pub mod pickle;
+pub mod published;
 pub mod record;
 pub mod staging;
 pub mod stream;
@@ -23,8 +24,8 @@ pub mod summary;
 pub mod tfrecord;
 
 pub use error::{ExportError, Result};
+pub use format::ScenePoint;
 pub use layout::Layout;
-pub use nerfw::ScenePoint;
 pub use staging::{join_under, EXPORT_JSON};
 pub use stream::index_width;
 pub use summary::{DepthRecord, ExportConfig, ExportSummary, Skipped, SplitExport};
@@ -62,7 +63,7 @@ pub fn export(
         inputs,
         tick,
     };
-    let layout = format::of(cfg.layout);
+    let layout = format_of(cfg.layout);
     layout.check(&job)?;
     let staged = staging::Staged::new(&cfg.out)?;
     let mut summary = ExportSummary::begin(&ds.dir.display().to_string(), cfg);
@@ -81,5 +82,16 @@ pub fn export(
             staged.abandon();
             Err(e)
         }
+    }
+}
+
+/// The format that writes `layout`.
+fn format_of(layout: Layout) -> &'static dyn format::Format {
+    match layout {
+        Layout::Official => &official::Official,
+        Layout::Tfrecord => &tfrecord::Tfrecord,
+        Layout::Files => &files::Files,
+        Layout::Nerfw => &nerfw::Nerfw,
+        Layout::Nerfstudio => &nerfstudio::Nerfstudio,
     }
 }

@@ -23,11 +23,10 @@ use glam::{DMat3, DVec3};
 use nrw_colmap::{CameraModel, PointCloud, Rigid3};
 use serde_json::{json, Map, Value};
 
-use crate::nerfw::ScenePoint;
 use nrw_dataset::reader::{Dataset, View};
 
 use crate::error::{ExportError, Result};
-use crate::format::{Format, Job};
+use crate::format::{Format, Job, ScenePoint};
 use crate::staging::Staged;
 use crate::{ExportConfig, ExportSummary, SplitExport};
 

@@ -25,18 +25,9 @@ use nrw_colmap::{Camera, CameraModel, Image, Point3D, Reconstruction, Rigid3};
 use nrw_dataset::reader::{Dataset, View};
 
 use crate::error::{ExportError, Result};
-use crate::format::{Format, Job};
+use crate::format::{Format, Job, ScenePoint};
 use crate::staging::Staged;
 use crate::{ExportConfig, ExportSummary, SplitExport};
-
-/// One 3D point of the scene, for `points3D.bin`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ScenePoint {
-    pub id: u64,
-    pub xyz: [f64; 3],
-    pub rgb: [u8; 3],
-    pub error: f64,
-}
 
 /// The tsv `split` value of one of our splits: NeRF-W's loaders call the held-out set `test`.
 pub fn tsv_split(split: &str) -> &str {

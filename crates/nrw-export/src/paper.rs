@@ -10,7 +10,7 @@ use nrw_dataset::reader::View;
 
 use crate::error::{ExportError, Result};
 use crate::format::Job;
-use crate::official::{crop_start, official_seg_rgb, DepthScale};
+use crate::published::{crop_start, official_seg_rgb, DepthScale};
 use crate::{DepthRecord, ExportConfig, ExportSummary};
 
 /// The settings of a paper layout's views: depth levels, crop, semantics.

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
-use crate::official::{DepthMapping, DepthScale};
+use crate::published::{DepthMapping, DepthScale};
 use crate::Layout;
 
 /// What to export and how.
@@ -36,7 +36,7 @@ impl ExportConfig {
             layout: Layout::Official,
             out,
             name,
-            crop: Some(crate::official::PUBLISHED_CROP),
+            crop: Some(crate::published::PUBLISHED_CROP),
             semantics: true,
             depth: DepthMapping::Linear,
             shards: 1,

@@ -18,7 +18,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use nrw_style::winograd::isa;
+use nrw_style::isa::isa;
 use nrw_style::{grams, ConvAlgo, Parallelism, Vgg, STYLE_LAYERS};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;

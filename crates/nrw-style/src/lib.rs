@@ -3,6 +3,8 @@
 //! gives; the tool never downloads anything.
 
 pub mod backend;
+#[macro_use]
+pub mod isa;
 pub mod conv;
 pub mod descriptor;
 pub mod error;

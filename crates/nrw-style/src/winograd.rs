@@ -18,99 +18,10 @@
 use gemm::Parallelism;
 use rayon::prelude::*;
 
+#[cfg(test)]
+use crate::isa::{isa, Isa};
 use crate::matmul::{gemm_strided, GemmOperands};
 use crate::tensor::Activation;
-
-/// The vector instructions the transforms are compiled for, chosen once at run time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Isa {
-    Avx512,
-    Avx2,
-    Baseline,
-}
-
-impl Isa {
-    /// The name reported with benchmark figures.
-    pub fn name(self) -> &'static str {
-        match self {
-            Isa::Avx512 => "avx512f",
-            Isa::Avx2 => "avx2+fma",
-            Isa::Baseline => "baseline",
-        }
-    }
-}
-
-/// The widest instruction set this machine and build allow: AVX-512 only with the crate's
-/// `avx512` feature (on by default; off, the `gemm` crate's AVX-512 kernels are off too, which
-/// is how a benchmark measures an AVX2-only machine on an AVX-512 one).
-pub fn isa() -> Isa {
-    static ISA: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
-    *ISA.get_or_init(|| {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if cfg!(feature = "avx512")
-                && std::arch::is_x86_feature_detected!("avx512f")
-                && std::arch::is_x86_feature_detected!("avx512vl")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                return Isa::Avx512;
-            }
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
-    })
-}
-
-#[cfg(test)]
-thread_local! {
-    /// Tests force an instruction set on their own thread to compare the three builds.
-    static FORCE: std::cell::Cell<Option<Isa>> = const { std::cell::Cell::new(None) };
-}
-
-/// The instruction set the transforms run with on this thread: [`isa`], or in tests a forced one.
-fn current_isa() -> Isa {
-    #[cfg(test)]
-    if let Some(forced) = FORCE.get() {
-        return forced;
-    }
-    isa()
-}
-
-/// Defines `$name` with the given body compiled three times (AVX-512, AVX2 + FMA, baseline)
-/// and run in the build [`isa`] chose. Rust never contracts a·b + c into an FMA by itself, so
-/// the three give the same bits.
-macro_rules! multiversion {
-    ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {
-        $(#[$meta])*
-        fn $name($($arg: $ty),*) {
-            #[inline(always)]
-            fn imp($($arg: $ty),*) $body
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-                unsafe fn wide($($arg: $ty),*) {
-                    imp($($arg),*)
-                }
-                #[target_feature(enable = "avx2,fma")]
-                unsafe fn narrow($($arg: $ty),*) {
-                    imp($($arg),*)
-                }
-                match current_isa() {
-                    // SAFETY: isa() detected these instructions on this CPU (tests force
-                    // only what it allows).
-                    Isa::Avx512 => return unsafe { wide($($arg),*) },
-                    Isa::Avx2 => return unsafe { narrow($($arg),*) },
-                    Isa::Baseline => {}
-                }
-            }
-            imp($($arg),*)
-        }
-    };
-}
 
 /// Bᵀ of F(4×4, 3×3): the 6 × 6 input transform (Lavin & Gray's points 0, ±1, ±2, ∞).
 pub const BT: [[f64; 6]; 6] = [
@@ -649,9 +560,9 @@ mod tests {
         let conv = WinogradConv::from_oihw(co, ci, &wt, b);
         let input = Activation::from_chw(&x, ci, h, w);
         let run = |forced: Isa| {
-            FORCE.set(Some(forced));
+            crate::isa::FORCE.set(Some(forced));
             let out = conv3x3_relu(&conv, &input, Parallelism::None).data;
-            FORCE.set(None);
+            crate::isa::FORCE.set(None);
             out
         };
         let baseline = run(Isa::Baseline);

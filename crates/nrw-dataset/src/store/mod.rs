@@ -10,13 +10,19 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Duration;
 
 use bytes::Bytes;
 use futures_util::TryStreamExt;
 use object_store::{ObjectStore, ObjectStoreExt};
 
 use crate::error::{DatasetError, Result};
+
+mod chunks;
+mod remote;
+
+pub use chunks::{Chunks, RemoteFile, RemoteRead};
+use remote::{build_remote, remote_err, runtime, upload_parts, Upload};
+pub use remote::{is_url, UPLOAD_PART};
 
 /// A dataset's location and the operations on its files (paths relative to the dataset).
 #[derive(Clone)]
@@ -35,22 +41,6 @@ struct Remote {
     store: Arc<dyn ObjectStore>,
     prefix: object_store::path::Path,
     rt: &'static tokio::runtime::Runtime,
-}
-
-/// The one async runtime of the process, shared by every object-store location it opens
-/// (made on the first open; a process that stays local never starts it).
-fn runtime(url: &str) -> Result<&'static tokio::runtime::Runtime> {
-    static RT: std::sync::OnceLock<tokio::runtime::Runtime> = std::sync::OnceLock::new();
-    if let Some(rt) = RT.get() {
-        return Ok(rt);
-    }
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .map_err(|e| DatasetError::io(url, e))?;
-    // Two threads racing here each build one; the loser's is dropped unused.
-    Ok(RT.get_or_init(|| rt))
 }
 
 impl std::fmt::Debug for Store {
@@ -80,170 +70,6 @@ impl From<&Store> for Store {
 impl From<&PathBuf> for Store {
     fn from(p: &PathBuf) -> Store {
         Store::local(p)
-    }
-}
-
-/// Whether a location names an object store (`scheme://…` other than `file://`).
-pub fn is_url(location: &str) -> bool {
-    location.split_once("://").is_some_and(|(s, _)| {
-        !s.is_empty() && s != "file" && s.chars().all(|c| c.is_ascii_alphanumeric())
-    })
-}
-
-/// Environment variables object_store's builders read (never printed).
-fn provider_env() -> Vec<(String, String)> {
-    std::env::vars()
-        .filter(|(k, _)| {
-            ["AWS_", "GOOGLE_", "AZURE_"]
-                .iter()
-                .any(|p| k.starts_with(p))
-        })
-        .map(|(k, v)| (k.to_ascii_lowercase(), v))
-        .collect()
-}
-
-/// Retries of one request: a few, over at most half a minute, so an unreachable endpoint
-/// fails in seconds rather than the providers' minutes.
-fn retry() -> object_store::RetryConfig {
-    object_store::RetryConfig {
-        max_retries: 2,
-        retry_timeout: Duration::from_secs(30),
-        backoff: object_store::BackoffConfig::default(),
-    }
-}
-
-fn client_options() -> object_store::ClientOptions {
-    object_store::ClientOptions::new()
-        .with_connect_timeout(Duration::from_secs(5))
-        .with_timeout(Duration::from_secs(120))
-}
-
-fn build_remote(
-    url: &str,
-    extra: &[(String, String)],
-) -> std::result::Result<(Arc<dyn ObjectStore>, object_store::path::Path), String> {
-    let parsed = url::Url::parse(url).map_err(|e| e.to_string())?;
-    let (scheme, path) =
-        object_store::ObjectStoreScheme::parse(&parsed).map_err(|e| e.to_string())?;
-    let prefix = object_store::path::Path::parse(path).map_err(|e| e.to_string())?;
-    let mut env = provider_env();
-    env.extend(extra.iter().cloned());
-    macro_rules! with_env {
-        ($b:expr) => {
-            env.iter().fold($b, |b, (k, v)| match k.parse() {
-                Ok(key) => b.with_config(key, v.clone()),
-                Err(_) => b,
-            })
-        };
-    }
-    // One builder per provider, each with our client options and retries, then the
-    // environment's settings, then the URL.
-    macro_rules! build {
-        ($builder:expr) => {
-            Arc::new(
-                with_env!($builder
-                    .with_client_options(client_options())
-                    .with_retry(retry()))
-                .with_url(url)
-                .build()
-                .map_err(|e| e.to_string())?,
-            )
-        };
-    }
-    let store: Arc<dyn ObjectStore> = match scheme {
-        object_store::ObjectStoreScheme::AmazonS3 => {
-            build!(object_store::aws::AmazonS3Builder::new())
-        }
-        object_store::ObjectStoreScheme::GoogleCloudStorage => {
-            build!(object_store::gcp::GoogleCloudStorageBuilder::new())
-        }
-        object_store::ObjectStoreScheme::MicrosoftAzure => {
-            build!(object_store::azure::MicrosoftAzureBuilder::new())
-        }
-        other => {
-            return Err(format!(
-                "{other:?} URLs are not supported (s3://, gs://, az:// are)"
-            ))
-        }
-    };
-    Ok((store, prefix))
-}
-
-/// Part size of a multipart upload: above it a file travels in parts of this size.
-pub const UPLOAD_PART: usize = 16 << 20;
-
-/// Why an upload stopped: reading the local file, or the object store.
-enum Upload {
-    Read(std::io::Error),
-    Store(object_store::Error),
-}
-
-/// `from` to `key` in parts of [`UPLOAD_PART`] bytes, at most two in flight; aborted (no
-/// object left) on any error.
-async fn upload_parts(
-    r: &Remote,
-    key: &object_store::path::Path,
-    from: &Path,
-) -> std::result::Result<(), Upload> {
-    use std::io::Read;
-    let mut file = std::fs::File::open(from).map_err(Upload::Read)?;
-    let upload = r.store.put_multipart(key).await.map_err(Upload::Store)?;
-    let mut w = object_store::WriteMultipart::new_with_chunk_size(upload, UPLOAD_PART);
-    let mut buf = vec![0u8; UPLOAD_PART];
-    loop {
-        let n = match file.read(&mut buf) {
-            Ok(n) => n,
-            Err(e) => {
-                let _ = w.abort().await;
-                return Err(Upload::Read(e));
-            }
-        };
-        if n == 0 {
-            break;
-        }
-        if let Err(e) = w.wait_for_capacity(2).await {
-            let _ = w.abort().await;
-            return Err(Upload::Store(e));
-        }
-        w.write(&buf[..n]);
-    }
-    w.finish().await.map(|_| ()).map_err(Upload::Store)
-}
-
-/// An object-store error as a dataset error naming the object's URL (object_store's
-/// messages carry no credentials).
-fn remote_err(url: String, e: object_store::Error) -> DatasetError {
-    let kind = match &e {
-        object_store::Error::NotFound { .. } => std::io::ErrorKind::NotFound,
-        object_store::Error::AlreadyExists { .. } => std::io::ErrorKind::AlreadyExists,
-        _ => std::io::ErrorKind::Other,
-    };
-    let text = e.to_string();
-    let message = match hint(&text) {
-        Some(h) => format!("{h} ({text})"),
-        None => text,
-    };
-    DatasetError::Io {
-        path: url.into(),
-        source: std::io::Error::new(kind, message),
-    }
-}
-
-/// What a provider's error means for the user, from its code or the client's failure.
-fn hint(text: &str) -> Option<&'static str> {
-    let has = |s: &str| text.contains(s);
-    if has("NoSuchBucket") {
-        Some("the bucket does not exist")
-    } else if has("InvalidAccessKeyId")
-        || has("SignatureDoesNotMatch")
-        || has("AccessDenied")
-        || has("403 Forbidden")
-    {
-        Some("access denied: check the credentials (AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY or the provider's equivalents)")
-    } else if has("error sending request") || has("Connection refused") {
-        Some("cannot reach the endpoint (AWS_ENDPOINT_URL, or the provider's default)")
-    } else {
-        None
     }
 }
 
@@ -584,107 +410,6 @@ impl Store {
                     .map_err(|e| std::io::Error::other(format!("{}: {e}", r.url)))
             }
             Inner::Local(_) => unreachable!("ranges are read from remote stores only"),
-        }
-    }
-}
-
-/// A file opened for random access (see [`Store::chunks`]).
-pub enum Chunks {
-    File(std::fs::File),
-    Remote(Arc<RemoteFile>),
-}
-
-/// An object read by ranges through a read-ahead window: the Parquet reader asks for page
-/// headers and column chunks in many small reads, and one GET per window serves them.
-pub struct RemoteFile {
-    store: Store,
-    key: object_store::path::Path,
-    size: u64,
-    window: std::sync::Mutex<Option<(u64, Bytes)>>,
-}
-
-/// Bytes fetched ahead of a read (a row group's column chunks are contiguous).
-const READ_AHEAD: u64 = 8 << 20;
-/// Bytes fetched at the end of a file when any of them is read (the Parquet footer).
-const TAIL: u64 = 64 << 10;
-
-impl RemoteFile {
-    /// `len` bytes from `start` (fewer at the end), from the window or one GET that refills it.
-    fn bytes(&self, start: u64, len: u64) -> std::io::Result<Bytes> {
-        let end = (start + len).min(self.size);
-        if start >= end {
-            return Ok(Bytes::new());
-        }
-        let mut window = self.window.lock().expect("window lock");
-        if let Some((at, b)) = window.as_ref() {
-            if *at <= start && end <= *at + b.len() as u64 {
-                return Ok(b.slice((start - at) as usize..(end - at) as usize));
-            }
-        }
-        let (from, to) = if end + TAIL >= self.size {
-            (start.min(self.size.saturating_sub(TAIL)), self.size)
-        } else {
-            (start, (start + len.max(READ_AHEAD)).min(self.size))
-        };
-        let b = self.store.get_range(&self.key, from..to)?;
-        *window = Some((from, b.clone()));
-        Ok(b.slice((start - from) as usize..(end - from) as usize))
-    }
-}
-
-/// A reader from an offset of a remote file, fetching through its window as it goes.
-pub struct RemoteRead {
-    file: Arc<RemoteFile>,
-    pos: u64,
-}
-
-impl std::io::Read for RemoteRead {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let b = self.file.bytes(self.pos, buf.len() as u64)?;
-        buf[..b.len()].copy_from_slice(&b);
-        self.pos += b.len() as u64;
-        Ok(b.len())
-    }
-}
-
-impl parquet::file::reader::Length for Chunks {
-    fn len(&self) -> u64 {
-        match self {
-            Chunks::File(f) => parquet::file::reader::Length::len(f),
-            Chunks::Remote(r) => r.size,
-        }
-    }
-}
-
-impl parquet::file::reader::ChunkReader for Chunks {
-    type T = Box<dyn std::io::Read + Send>;
-
-    fn get_read(&self, start: u64) -> parquet::errors::Result<Self::T> {
-        match self {
-            Chunks::File(f) => Ok(Box::new(f.get_read(start)?)),
-            Chunks::Remote(r) => Ok(Box::new(RemoteRead {
-                file: r.clone(),
-                pos: start,
-            })),
-        }
-    }
-
-    fn get_bytes(&self, start: u64, length: usize) -> parquet::errors::Result<Bytes> {
-        match self {
-            Chunks::File(f) => f.get_bytes(start, length),
-            Chunks::Remote(r) => {
-                let b = r
-                    .bytes(start, length as u64)
-                    .map_err(|e| parquet::errors::ParquetError::External(Box::new(e)))?;
-                if b.len() < length {
-                    return Err(parquet::errors::ParquetError::EOF(format!(
-                        "{}: {length} bytes at {start} run past the end ({} bytes)",
-                        r.store.root().display(),
-                        r.size
-                    )));
-                }
-                Ok(b)
-            }
         }
     }
 }

@@ -56,6 +56,27 @@ pub fn part_path(k: usize) -> String {
     format!("{DESCRIPTORS_DIR}/part-{k:05}.parquet")
 }
 
+/// The group index of a part's dataset-relative path ([`part_path`]'s inverse), or None for
+/// any other file.
+pub fn part_index(rel: &str) -> Option<usize> {
+    rel.strip_prefix(DESCRIPTORS_DIR)?
+        .strip_prefix("/part-")?
+        .strip_suffix(".parquet")?
+        .parse()
+        .ok()
+}
+
+/// Every part present in the dataset, by group index, ascending.
+pub fn existing_parts(store: &Store) -> Result<Vec<usize>> {
+    let mut parts: Vec<usize> = store
+        .list(DESCRIPTORS_DIR)?
+        .iter()
+        .filter_map(|rel| part_index(rel))
+        .collect();
+    parts.sort_unstable();
+    Ok(parts)
+}
+
 /// Whether a dataset-relative path (a manifest entry) is a descriptor part.
 pub fn is_part(rel: &str) -> bool {
     rel.strip_prefix(DESCRIPTORS_DIR)

@@ -104,7 +104,7 @@ pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
 }
 
 /// A built reader's batches as results: the parquet crate's errors, and its panics on
-/// damaged pages (see [`crate::contain`]), both become errors naming `path`; iteration
+/// damaged pages (see [`crate::panic_guard`]), both become errors naming `path`; iteration
 /// stops at the first.
 pub fn guarded(
     mut reader: parquet::arrow::arrow_reader::ParquetRecordBatchReader,
@@ -116,7 +116,7 @@ pub fn guarded(
         if failed {
             return None;
         }
-        let next = match crate::contain::contained(|| reader.next()) {
+        let next = match crate::panic_guard::contained(|| reader.next()) {
             Ok(None) => return None,
             Ok(Some(Ok(b))) => return Some(Ok(b)),
             Ok(Some(Err(e))) => DatasetError::Arrow {
@@ -133,7 +133,7 @@ pub fn guarded(
     })
 }
 
-/// The page headers of the column chunks about to be read, checked ([`crate::footer::check_pages`])
+/// The page headers of the column chunks about to be read, checked ([`crate::thrift_bounds::check_pages`])
 /// before the parquet crate allocates what they claim: row groups `groups` (all when `None`)
 /// and the top-level columns `columns` (all when `None`). Costs one more read of those
 /// chunks' bytes (from memory or the page cache; on object storage, the read-ahead).
@@ -168,7 +168,7 @@ pub fn check_pages<R: parquet::file::reader::ChunkReader>(
                 Physical::INT96 => 12,
                 Physical::FIXED_LEN_BYTE_ARRAY => 1,
             };
-            crate::footer::check_pages(&bytes, min_value_bytes).map_err(|problem| {
+            crate::thrift_bounds::check_pages(&bytes, min_value_bytes).map_err(|problem| {
                 DatasetError::Schema {
                     path: path.to_path_buf(),
                     problem: format!(
@@ -182,7 +182,7 @@ pub fn check_pages<R: parquet::file::reader::ChunkReader>(
     Ok(())
 }
 
-/// The footer's counts checked against its bytes ([`crate::footer`]) before the parquet
+/// The footer's counts checked against its bytes ([`crate::thrift_bounds`]) before the parquet
 /// crate allocates what they claim. Files too short for a footer are left to the parquet
 /// crate's own error.
 fn check_footer_of<R: parquet::file::reader::ChunkReader>(
@@ -203,7 +203,7 @@ fn check_footer_of<R: parquet::file::reader::ChunkReader>(
         return Ok(());
     }
     let footer = f.get_bytes(len - 8 - meta, meta as usize).map_err(io)?;
-    crate::footer::check_footer(&footer, path)
+    crate::thrift_bounds::check_footer(&footer, path)
 }
 
 /// A Parquet reader over `f` whose footer has been checked for what the parquet crate

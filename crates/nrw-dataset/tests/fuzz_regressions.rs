@@ -1,11 +1,11 @@
 //! Every input a fuzz target ever crashed on (`fuzz/regressions/TARGET/`) run through the
-//! target's own code (`nrw_dataset::probe`): each must now be an error, never a panic or a
+//! target's own code (`nrw_dataset::fuzz_entry`): each must now be an error, never a panic or a
 //! huge allocation. The committed seeds (`fuzz/seeds/TARGET/`) must still read. So every
 //! `cargo test` runs the targets' code on what matters most.
 
 use std::path::{Path, PathBuf};
 
-use nrw_dataset::probe;
+use nrw_dataset::fuzz_entry;
 
 fn inputs(kind: &str, target: &str) -> Vec<(PathBuf, Vec<u8>)> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -47,21 +47,21 @@ fn refused(p: &Path, e: String) {
 fn every_input_a_fuzz_target_crashed_on_is_now_an_error() {
     let mut n = 0;
     for (p, b) in inputs("regressions", "shard") {
-        refused(&p, probe::shard(&b).unwrap_err().to_string());
+        refused(&p, fuzz_entry::shard(&b).unwrap_err().to_string());
         n += 1;
     }
     // A payload's header is read and checked against the view's size before any pixel
     // buffer exists, so any error here comes before the allocation.
     for (p, b) in inputs("regressions", "payload") {
-        assert!(probe::payload(&b).is_err(), "{}", p.display());
+        assert!(fuzz_entry::payload(&b).is_err(), "{}", p.display());
         n += 1;
     }
     for (p, b) in inputs("regressions", "descriptors") {
-        refused(&p, probe::descriptors(&b).unwrap_err().to_string());
+        refused(&p, fuzz_entry::descriptors(&b).unwrap_err().to_string());
         n += 1;
     }
     for (p, b) in inputs("regressions", "triplets") {
-        refused(&p, probe::triplets(&b).unwrap_err().to_string());
+        refused(&p, fuzz_entry::triplets(&b).unwrap_err().to_string());
         n += 1;
     }
     assert!(
@@ -73,21 +73,21 @@ fn every_input_a_fuzz_target_crashed_on_is_now_an_error() {
 #[test]
 fn the_fuzz_seeds_read_whole() {
     for (p, b) in inputs("seeds", "shard") {
-        assert_eq!(probe::shard(&b).unwrap(), 2, "{}", p.display());
+        assert_eq!(fuzz_entry::shard(&b).unwrap(), 2, "{}", p.display());
     }
     for (p, b) in inputs("seeds", "payload") {
-        probe::payload(&b).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        fuzz_entry::payload(&b).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
     }
     for (p, b) in inputs("seeds", "descriptors") {
-        assert!(probe::descriptors(&b).unwrap() > 0, "{}", p.display());
+        assert!(fuzz_entry::descriptors(&b).unwrap() > 0, "{}", p.display());
     }
     for (p, b) in inputs("seeds", "triplets") {
-        assert!(probe::triplets(&b).unwrap() > 0, "{}", p.display());
+        assert!(fuzz_entry::triplets(&b).unwrap() > 0, "{}", p.display());
     }
     for (_, b) in inputs("seeds", "manifest") {
-        probe::manifest(&b).unwrap();
+        fuzz_entry::manifest(&b).unwrap();
     }
     for (p, b) in inputs("seeds", "photo") {
-        assert!(probe::photo(&b).unwrap() > 0, "{}", p.display());
+        assert!(fuzz_entry::photo(&b).unwrap() > 0, "{}", p.display());
     }
 }

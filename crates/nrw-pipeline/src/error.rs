@@ -26,6 +26,27 @@ pub enum PipelineError {
     /// A setting outside what the stage accepts, named by its key (the binary shows its flag).
     #[error("{} {problem}", setting.key())]
     Config { setting: Setting, problem: String },
+    /// A camera COLMAP's undistorter cannot undistort (named by the model folder).
+    #[error("{}: {source}", path.display())]
+    Undistort {
+        path: PathBuf,
+        #[source]
+        source: nrw_colmap::UndistortError,
+    },
+    /// A file or folder that could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A pipeline file that is not the TOML the runner reads.
+    #[error("{}: {source}", path.display())]
+    PipelineFile {
+        path: PathBuf,
+        #[source]
+        source: toml::de::Error,
+    },
     /// An input file or folder that cannot serve (missing, inconsistent with the model, …).
     #[error("{}: {problem}", path.display())]
     Input { path: PathBuf, problem: String },
@@ -104,6 +125,14 @@ impl PipelineError {
         PipelineError::Config {
             setting,
             problem: problem.into(),
+        }
+    }
+
+    /// An I/O error with its file.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        PipelineError::Io {
+            path: path.into(),
+            source,
         }
     }
 

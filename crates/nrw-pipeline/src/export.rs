@@ -35,7 +35,7 @@ pub fn export(
     progress: &dyn Progress,
 ) -> Result<ExportSummary> {
     let store = &nrw_dataset::Store::open_path(dataset)?;
-    crate::qa::timed(store, "export", || {
+    crate::timing::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
         let points = if cfg.layout.needs_points() {

@@ -101,7 +101,7 @@ fn dataset_summary(location: &Path) -> Result<DatasetSummary> {
 fn model_summary(location: &Path, format: Option<Format>) -> Result<ModelSummary> {
     let (dir, rec) = crate::model::load_model(location, format)?;
     let stats = nrw_colmap::reprojection_stats(&rec);
-    let (encoding, layout) = crate::model::describe(&rec);
+    let (encoding, layout) = crate::model::encoding_and_layout(&rec);
     Ok(ModelSummary {
         model_dir: dir.display().to_string(),
         encoding,

@@ -21,6 +21,7 @@ pub mod segment;
 pub mod split;
 pub mod style;
 pub mod synth;
+pub mod timing;
 pub mod triplets;
 pub mod units;
 pub mod verify;

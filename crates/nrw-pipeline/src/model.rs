@@ -27,7 +27,10 @@ pub fn undistort_model(
     let distorted = rec.cameras.clone();
     for cam in rec.cameras.values_mut() {
         *cam = nrw_colmap::undistort_camera(cam, options)
-            .map_err(|e| PipelineError::input(model_dir, e.to_string()))?;
+            .map_err(|source| PipelineError::Undistort {
+                path: model_dir.into(),
+                source,
+            })?;
     }
     Ok(distorted)
 }
@@ -77,7 +80,7 @@ pub fn reread_model(
 }
 
 /// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.
-pub fn describe(rec: &Reconstruction) -> (&'static str, &'static str) {
+pub fn encoding_and_layout(rec: &Reconstruction) -> (&'static str, &'static str) {
     let enc = rec.format.map_or("?", |f| f.ext());
     let layout = if rec.is_colmap4() {
         "colmap4"

@@ -1,4 +1,4 @@
-//! QA: the dataset report, and the per-stage timings the report shows.
+//! QA: the dataset report (report.html, qa.json) beside the dataset or where asked.
 
 use std::path::PathBuf;
 
@@ -23,17 +23,4 @@ pub fn qa(cfg: &QaConfig) -> Result<nrw_qa::Written> {
         None => store.sub(nrw_dataset::QA_DIR)?,
     };
     Ok(nrw_qa::build(&store, &out)?)
-}
-
-/// Record a stage's time; a dataset that cannot take it (read-only copy) loses only the timing.
-pub(crate) fn record_timing(dataset: &Store, stage: &str, seconds: f64) {
-    let _ = nrw_dataset::timings::record(dataset, stage, seconds);
-}
-
-/// Run a stage and, when it succeeds, record its duration in the dataset's timings.
-pub(crate) fn timed<T>(dataset: &Store, stage: &str, run: impl FnOnce() -> Result<T>) -> Result<T> {
-    let started = std::time::Instant::now();
-    let r = run()?;
-    record_timing(dataset, stage, started.elapsed().as_secs_f64());
-    Ok(r)
 }

@@ -114,9 +114,11 @@ fn yes() -> bool {
 impl Pipeline {
     /// Parse a pipeline file, naming the file in errors.
     pub fn load(path: &Path) -> Result<Pipeline> {
-        let text =
-            std::fs::read_to_string(path).map_err(|e| PipelineError::input(path, e.to_string()))?;
-        toml::from_str(&text).map_err(|e| PipelineError::input(path, e.to_string()))
+        let text = std::fs::read_to_string(path).map_err(|e| PipelineError::io(path, e))?;
+        toml::from_str(&text).map_err(|source| PipelineError::PipelineFile {
+            path: path.into(),
+            source,
+        })
     }
 
     /// The demo's pipeline: the paper's settings, the synthetic scene's ground-truth labels
@@ -132,7 +134,7 @@ impl Pipeline {
                 max_empty: paper.filters.max_empty_ratio,
                 min_photo_side: paper.filters.min_photo_side,
                 rows_per_shard: paper.rows_per_shard,
-                semantics: Some("ground_truth/semantics".into()),
+                semantics: Some(nrw_synth::truth::SEMANTICS.into()),
                 strict: false,
                 segment_mode: None,
                 segment_size: None,

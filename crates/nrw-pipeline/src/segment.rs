@@ -180,10 +180,10 @@ fn photo_list(cfg: &SegmentConfig) -> Result<(PathBuf, Vec<String>)> {
     let mut names = Vec::new();
     let mut stack = vec![dir.clone()];
     while let Some(d) = stack.pop() {
-        let entries = std::fs::read_dir(&d).map_err(|e| PipelineError::input(&d, e.to_string()))?;
+        let entries = std::fs::read_dir(&d).map_err(|e| PipelineError::io(&d, e))?;
         for e in entries {
             let p = e
-                .map_err(|e| PipelineError::input(&d, e.to_string()))?
+                .map_err(|e| PipelineError::io(&d, e))?
                 .path();
             let photo = p
                 .extension()
@@ -224,7 +224,7 @@ fn claim_folder(out: &Path, record: &SegmentRecord) -> Result<()> {
         }
         return Ok(());
     }
-    std::fs::create_dir_all(out).map_err(|e| PipelineError::input(out, e.to_string()))?;
+    std::fs::create_dir_all(out).map_err(|e| PipelineError::io(out, e))?;
     let text = serde_json::to_string_pretty(record).expect("record serialises");
     nrw_dataset::atomic::write_bytes_atomic(&path, text.as_bytes())?;
     Ok(())
@@ -256,7 +256,7 @@ fn segment_one(
     )?;
     let out = nrw_dataset::semantics::label_path(&cfg.out, name)?;
     if let Some(dir) = out.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| PipelineError::input(dir, e.to_string()))?;
+        std::fs::create_dir_all(dir).map_err(|e| PipelineError::io(dir, e))?;
     }
     let png =
         nrw_dataset::codec::encode_gray(name, labels.width(), labels.height(), labels.as_raw())?;

@@ -99,7 +99,7 @@ fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> 
 /// Assign the kept photos and list the table in the manifest.
 pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
     let store = &Store::open_path(&cfg.dataset)?;
-    crate::qa::timed(store, "split", || {
+    crate::timing::timed(store, "split", || {
         if let Some(tsv) = &cfg.from_tsv {
             return split_from_tsv(tsv, store);
         }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use nrw_dataset::descriptors::{
-    part_path, read_part, write_part, DescriptorKind, DescriptorRow, DESCRIPTORS_DIR,
+    existing_parts, part_path, read_part, write_part, DescriptorKind, DescriptorRow,
 };
 use nrw_dataset::reader::Dataset;
 use nrw_dataset::units::{self, UnitRecord};
@@ -182,21 +182,6 @@ fn clear_other_kinds(
         }
     }
     Ok(())
-}
-
-/// Every existing part index in the dataset.
-fn existing_parts(dataset: &Store) -> Result<Vec<usize>> {
-    Ok(dataset
-        .list(DESCRIPTORS_DIR)?
-        .iter()
-        .filter_map(|rel| {
-            rel.strip_prefix(DESCRIPTORS_DIR)?
-                .strip_prefix("/part-")?
-                .strip_suffix(".parquet")?
-                .parse()
-                .ok()
-        })
-        .collect())
 }
 
 /// List parts `0..groups` in the manifest and remove parts past them (of a larger earlier run).

@@ -88,7 +88,7 @@ fn in_scope(
 /// Compute and write the triplet table.
 pub fn triplets(cfg: &TripletsConfig) -> Result<TripletsSummary> {
     let store = &Store::open_path(&cfg.dataset)?;
-    crate::qa::timed(store, "triplets", || run(cfg, store))
+    crate::timing::timed(store, "triplets", || run(cfg, store))
 }
 
 fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {

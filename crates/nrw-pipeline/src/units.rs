@@ -229,7 +229,7 @@ pub(crate) fn close_stage(dataset: &Store, stage: &str) -> Result<()> {
         .iter()
         .map(|r| r.seconds)
         .sum();
-    crate::qa::record_timing(dataset, stage, seconds);
+    crate::timing::record_timing(dataset, stage, seconds);
     Ok(units::clear_stage(dataset, stage)?)
 }
 

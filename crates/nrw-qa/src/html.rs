@@ -448,7 +448,7 @@ fn triplets(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<()> {
             &by_split.into_iter().collect::<Vec<_>>(),
         )?);
         // Synthetic scenes know each photo's true appearance.
-        let truth = Path::new(&inp.manifest.scene.scene_dir).join("ground_truth/appearance.json");
+        let truth = Path::new(&inp.manifest.scene.scene_dir).join(nrw_synth::truth::APPEARANCE);
         if let Some(labels) = std::fs::read_to_string(&truth)
             .ok()
             .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())

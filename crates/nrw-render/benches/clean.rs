@@ -39,7 +39,7 @@ fn main() {
     let dir = tmp.path();
     let cloud = nrw_colmap::read_ply(&dir.join("dense/fused.ply")).unwrap();
     let truth: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("ground_truth/outliers.json")).unwrap())
+        serde_json::from_slice(&std::fs::read(dir.join(nrw_synth::truth::OUTLIERS)).unwrap())
             .unwrap();
     let surface = truth["surface_points"].as_u64().unwrap() as usize;
     let rec = nrw_colmap::read_scene(dir).unwrap();

@@ -23,7 +23,7 @@ fn scene(outliers: Option<f64>, points: usize) -> Scene {
     nrw_synth::generate(&spec, tmp.path(), &|| {}).unwrap();
     let cloud = nrw_colmap::read_ply(&tmp.path().join("dense/fused.ply")).unwrap();
     let truth: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(tmp.path().join("ground_truth/outliers.json")).unwrap(),
+        &std::fs::read(tmp.path().join(nrw_synth::truth::OUTLIERS)).unwrap(),
     )
     .unwrap();
     let rec = nrw_colmap::read_scene(tmp.path()).unwrap();
@@ -174,7 +174,7 @@ fn removing_floating_points_brings_rendered_depth_back_to_the_truth() {
     // The same cloud without its floating points (they are its last vertices): the floor
     // that splatting alone leaves.
     let truth: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(tmp.path().join("ground_truth/outliers.json")).unwrap(),
+        &std::fs::read(tmp.path().join(nrw_synth::truth::OUTLIERS)).unwrap(),
     )
     .unwrap();
     let surface = truth["surface_points"].as_u64().unwrap() as usize;

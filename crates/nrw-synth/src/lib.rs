@@ -54,6 +54,21 @@ pub struct SynthReport {
     pub counters: BTreeMap<&'static str, u64>,
 }
 
+/// Where a synthetic scene keeps its ground truth, relative to the scene folder: one name for
+/// the generator, the pipeline files that read the labels and the QA report.
+pub mod truth {
+    /// True depth per photo, `STEM.exr`.
+    pub const DEPTH: &str = "ground_truth/depth";
+    /// ADE20K label maps per photo, `STEM.png` (what `ingest --semantics` reads).
+    pub const SEMANTICS: &str = "ground_truth/semantics";
+    /// Each photo's true appearance ([`super::PhotoTruth`]).
+    pub const APPEARANCE: &str = "ground_truth/appearance.json";
+    /// The floating points the generator added ([`super::spec`]'s outliers).
+    pub const OUTLIERS: &str = "ground_truth/outliers.json";
+    /// The generator's report.
+    pub const REPORT: &str = "ground_truth/report.json";
+}
+
 /// Ground truth of one photo, as written to ground_truth/appearance.json.
 #[derive(Debug, Clone, Serialize)]
 pub struct PhotoTruth {
@@ -196,8 +211,8 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
         "images",
         "sparse/0",
         "dense",
-        "ground_truth/depth",
-        "ground_truth/semantics",
+        truth::DEPTH,
+        truth::SEMANTICS,
     ] {
         let p = out.join(d);
         std::fs::create_dir_all(&p).map_err(io(&p))?;
@@ -251,7 +266,7 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
             let stem = Path::new(&shot.name).with_extension("");
             let stem = stem.to_string_lossy();
             write_exr(
-                &out.join("ground_truth/depth").join(format!("{stem}.exr")),
+                &out.join(truth::DEPTH).join(format!("{stem}.exr")),
                 &DepthMap {
                     width: buf.width,
                     height: buf.height,
@@ -259,8 +274,7 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
                 },
             )?;
             encode(
-                &out.join("ground_truth/semantics")
-                    .join(format!("{stem}.png")),
+                &out.join(truth::SEMANTICS).join(format!("{stem}.png")),
                 buf.width,
                 buf.height,
                 &buf.semantics,
@@ -404,7 +418,7 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
     });
     nrw_colmap::write_ply(&cloud, &cloud.path).map_err(io(&cloud.path))?;
     write_bytes_atomic(
-        &out.join("ground_truth/outliers.json"),
+        &out.join(truth::OUTLIERS),
         format!(
             "{{\"surface_points\": {}, \"outliers\": {outliers}, \"note\": \"outliers are the last vertices of dense/fused.ply\"}}\n",
             cloud.len() - outliers
@@ -424,15 +438,15 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
         counters: counters.snapshot(),
     };
     let truths: Vec<&PhotoTruth> = results.iter().map(|r| &r.truth).collect();
-    let json = |v: &dyn erased::Json, name: &str| -> Result<()> {
-        let p = out.join("ground_truth").join(name);
+    let json = |v: &dyn erased::Json, rel: &str| -> Result<()> {
+        let p = out.join(rel);
         let mut text = v.to_json();
         text.push('\n');
         write_bytes_atomic(&p, text.as_bytes())?;
         Ok(())
     };
-    json(&truths, "appearance.json")?;
-    json(&report, "report.json")?;
+    json(&truths, truth::APPEARANCE)?;
+    json(&report, truth::REPORT)?;
     let spec_text = toml::to_string(spec).expect("a spec serialises");
     write_bytes_atomic(&out.join("scene.toml"), spec_text.as_bytes())?;
     Ok(report)

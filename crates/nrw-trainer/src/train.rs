@@ -188,7 +188,7 @@ pub fn class_agreement(
 /// True appearance labels of a synthetic scene's photos (ground_truth/appearance.json next to
 /// the scene the dataset was made from), by image id; None for real scenes.
 pub fn appearance_labels(ds: &Dataset) -> Option<HashMap<u32, String>> {
-    let path = Path::new(&ds.manifest.scene.scene_dir).join("ground_truth/appearance.json");
+    let path = Path::new(&ds.manifest.scene.scene_dir).join(nrw_synth::truth::APPEARANCE);
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()?;
     let by_name: HashMap<String, String> = v
         .as_array()?

@@ -26,7 +26,9 @@ use nrw_render::{render, render_size, Filters, RenderCloud, Verdict, View};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result, Setting};
-use crate::model::{describe, images_dir, load_model, undistort_model, undistort_parameters};
+use crate::model::{
+    encoding_and_layout, images_dir, load_model, undistort_model, undistort_parameters,
+};
 use crate::units::fingerprint;
 use crate::{Progress, Unit};
 
@@ -238,7 +240,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     let (raw, source, source_path) = point_source(cfg, &model_dir, &rec)?;
     let (cloud, cleaned) = render_cloud(cfg, raw, rec.scene_origin(), &mut warnings);
     let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
-    let (enc, layout) = describe(&rec);
+    let (enc, layout) = encoding_and_layout(&rec);
     let mut parameters = serde_json::Map::new();
     parameters.insert("format".into(), enc.into());
     parameters.insert("point_source".into(), source.clone().into());

@@ -9,6 +9,9 @@ use crate::error::{PipelineError, Result};
 pub use crate::ingest::{finalize_ingest, IngestMerge};
 pub use crate::style::{finalize_style, StyleMerge};
 use crate::units::units_error;
+/// Whether a stage's units started in a dataset without any finishing.
+type StartedUnfinished = fn(&Store) -> Result<bool>;
+
 /// What `finalize` did; both `None` when there was nothing to merge.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct FinalizeSummary {
@@ -17,26 +20,22 @@ pub struct FinalizeSummary {
     pub style: Option<StyleMerge>,
 }
 
-/// Merge whatever units wait in the dataset (ingest first, then style).
+/// Merge whatever units wait in the dataset: each sharded stage in pipeline order (ingest,
+/// then style), through its own merge.
 pub fn finalize(dataset: &Store) -> Result<FinalizeSummary> {
-    let has = |stage| units::unit_records(dataset, stage).map(|r| !r.is_empty());
-    for stage in [units::INGEST, units::STYLE] {
-        if !dataset.list(&units::stage_dir(stage))?.is_empty() && !has(stage)? {
+    let stages: [(&str, StartedUnfinished); 2] = [
+        (units::INGEST, crate::ingest::started_unfinished),
+        (units::STYLE, crate::style::started_unfinished),
+    ];
+    for (stage, started_unfinished) in stages {
+        if started_unfinished(dataset)? {
             return Err(units_error(dataset, format!(
                 "{stage} units have started here but none has finished: run every unit (again; each resumes), then finalize"
             )));
         }
     }
-    let ingest = if has(units::INGEST)? {
-        Some(finalize_ingest(dataset)?)
-    } else {
-        None
-    };
-    let style = if has(units::STYLE)? {
-        Some(finalize_style(dataset)?)
-    } else {
-        None
-    };
+    let ingest = crate::ingest::merge(dataset)?;
+    let style = crate::style::merge(dataset)?;
     if ingest.is_none() && style.is_none() && !dataset.exists(Manifest::FILE)? {
         return Err(PipelineError::Units {
             dataset: dataset.root(),

@@ -19,6 +19,7 @@ pub mod report;
 pub mod runner;
 pub mod segment;
 pub mod split;
+pub mod stage;
 pub mod style;
 pub mod synth;
 pub mod timing;

@@ -26,11 +26,12 @@ pub fn undistort_model(
 ) -> Result<BTreeMap<u32, nrw_colmap::Camera>> {
     let distorted = rec.cameras.clone();
     for cam in rec.cameras.values_mut() {
-        *cam = nrw_colmap::undistort_camera(cam, options)
-            .map_err(|source| PipelineError::Undistort {
+        *cam = nrw_colmap::undistort_camera(cam, options).map_err(|source| {
+            PipelineError::Undistort {
                 path: model_dir.into(),
                 source,
-            })?;
+            }
+        })?;
     }
     Ok(distorted)
 }

@@ -182,9 +182,7 @@ fn photo_list(cfg: &SegmentConfig) -> Result<(PathBuf, Vec<String>)> {
     while let Some(d) = stack.pop() {
         let entries = std::fs::read_dir(&d).map_err(|e| PipelineError::io(&d, e))?;
         for e in entries {
-            let p = e
-                .map_err(|e| PipelineError::io(&d, e))?
-                .path();
+            let p = e.map_err(|e| PipelineError::io(&d, e))?.path();
             let photo = p
                 .extension()
                 .and_then(|x| x.to_str())

@@ -15,6 +15,7 @@ use nrw_style::{describe, Convention, Parallelism, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result, Setting};
+use crate::stage::Sharded;
 use crate::units::{check_units, close_stage, units_error};
 use crate::{Progress, Unit};
 
@@ -254,6 +255,43 @@ pub fn style_unit(cfg: &StyleConfig, unit: Unit, progress: &dyn Progress) -> Res
     run_unit(cfg, unit, net.as_ref(), progress)
 }
 
+/// Style as a sharded stage: one descriptor part per group of `photos_per_part` photos.
+struct StyleStage<'a> {
+    cfg: &'a StyleConfig,
+    ds: &'a Dataset,
+    net: Option<&'a Vgg>,
+    kind: &'a DescriptorKind,
+}
+
+impl Sharded for StyleStage<'_> {
+    const STAGE: &'static str = units::STYLE;
+    const ITEMS: &'static str = "photos";
+    type Merge = StyleMerge;
+
+    fn done(&self, k: usize, ids: &[u32]) -> Result<bool> {
+        part_done(&self.ds.store, k, self.kind, ids)
+    }
+
+    fn run(&self, k: usize, ids: &[u32], progress: &dyn Progress) -> Result<usize> {
+        describe_part(self.cfg, self.ds, self.net, self.kind, k, ids, progress)?;
+        Ok(ids.len())
+    }
+
+    fn merge(dataset: &Store) -> Result<StyleMerge> {
+        finalize_style(dataset)
+    }
+}
+
+/// Style's merge, as `finalize` runs it.
+pub fn merge(dataset: &Store) -> Result<Option<StyleMerge>> {
+    crate::stage::merge_stage::<StyleStage>(dataset)
+}
+
+/// Whether style units started here but none finished.
+pub fn started_unfinished(dataset: &Store) -> Result<bool> {
+    crate::stage::started_unfinished::<StyleStage>(dataset)
+}
+
 fn run_unit(
     cfg: &StyleConfig,
     unit: Unit,
@@ -281,6 +319,7 @@ fn run_unit(
         .enumerate()
         .filter(|(k, _)| unit.owns(*k))
         .collect();
+    let owned_photos: usize = groups.iter().map(|(_, g)| g.len()).sum();
     // A whole run owns every part: it refuses (or clears) other kinds anywhere; a unit only
     // among its own parts.
     if unit.is_whole() {
@@ -288,21 +327,21 @@ fn run_unit(
     } else {
         clear_other_kinds(cfg, store, &kind, groups.iter().map(|(k, _)| *k))?;
     }
-    let mut todo = Vec::new();
-    for (k, g) in &groups {
-        if !part_done(store, *k, &kind, g)? {
-            todo.push((*k, *g));
-        }
-    }
-    progress.start(
+    let stage = StyleStage {
+        cfg,
+        ds: &ds,
+        net,
+        kind: &kind,
+    };
+    let d = crate::stage::drive(
+        &stage,
+        unit,
+        &ids,
+        cfg.photos_per_part,
         &kind.tier,
-        todo.iter().map(|(_, g)| g.len() as u64).sum(),
-        "photos",
-    );
-    for (k, g) in &todo {
-        describe_part(cfg, &ds, net, &kind, *k, g, progress)?;
-    }
-    progress.finish();
+        progress,
+        &|_, _| Ok(()),
+    )?;
     let mut parameters = serde_json::Map::new();
     parameters.insert("tier".into(), kind.tier.clone().into());
     parameters.insert("weights_sha256".into(), kind.weights_sha256.clone().into());
@@ -327,18 +366,14 @@ fn run_unit(
         groups: ids.len().div_ceil(cfg.photos_per_part),
         seconds: t0.elapsed().as_secs_f64(),
     };
-    units::write_record(
-        store,
-        &units::unit_record_path(units::STYLE, unit.index, unit.count),
-        &record,
-    )?;
+    crate::stage::record_unit::<StyleStage>(store, unit, &record)?;
     Ok(StyleSummary {
         dataset: store.root().display().to_string(),
-        unit: unit,
+        unit,
         tier: kind.tier,
-        photos: groups.iter().map(|(_, g)| g.len()).sum(),
-        parts_written: todo.len(),
-        parts_skipped: groups.len() - todo.len(),
+        photos: owned_photos,
+        parts_written: d.ran,
+        parts_skipped: d.resumed,
         seconds: record.seconds,
     })
 }

@@ -29,6 +29,7 @@ use crate::error::{PipelineError, Result, Setting};
 use crate::model::{
     encoding_and_layout, images_dir, load_model, undistort_model, undistort_parameters,
 };
+use crate::stage::Sharded;
 use crate::units::fingerprint;
 use crate::{Progress, Unit};
 
@@ -297,6 +298,54 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     })
 }
 
+/// Ingest as a sharded stage: one group of `rows_per_shard` images per shard.
+struct IngestStage<'a> {
+    cfg: &'a IngestConfig,
+    store: &'a Store,
+    p: &'a Prepared,
+}
+
+impl Sharded for IngestStage<'_> {
+    const STAGE: &'static str = units::INGEST;
+    const ITEMS: &'static str = "views";
+    type Merge = IngestMerge;
+
+    fn done(&self, g: usize, _ids: &[u32]) -> Result<bool> {
+        Ok(done_group(self.store, g, &self.p.record.fingerprint).is_some())
+    }
+
+    fn run(&self, g: usize, ids: &[u32], progress: &dyn Progress) -> Result<usize> {
+        run_group(self.cfg, self.store, self.p, g, ids, progress)
+    }
+
+    fn merge(dataset: &Store) -> Result<IngestMerge> {
+        finalize_ingest(dataset)
+    }
+}
+
+/// Ingest's merge, as `finalize` runs it.
+pub fn merge(dataset: &Store) -> Result<Option<IngestMerge>> {
+    crate::stage::merge_stage::<IngestStage>(dataset)
+}
+
+/// Whether ingest units started here but none finished.
+pub fn started_unfinished(dataset: &Store) -> Result<bool> {
+    crate::stage::started_unfinished::<IngestStage>(dataset)
+}
+
+/// The test hooks of a unit: a pause after each group, a stop after some.
+fn after_group(cfg: &IngestConfig, ran: usize, todo: usize) -> Result<()> {
+    if let Some(d) = cfg.pause_after_group {
+        std::thread::sleep(d);
+    }
+    if cfg.stop_after_groups.is_some_and(|n| ran >= n) && ran < todo {
+        return Err(PipelineError::Interrupted(format!(
+            "stopped after {ran} groups as asked; run the same command again to resume"
+        )));
+    }
+    Ok(())
+}
+
 /// Run one unit of ingest: render the groups `unit` owns (skipping those already done) and
 /// record the unit as done. Writes only this unit's shards and records; deletes nothing.
 pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> Result<UnitSummary> {
@@ -304,46 +353,25 @@ pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> R
     let mut p = prepare(cfg, unit)?;
     let store = &Store::open_path(&cfg.out)?;
     let ids: Vec<u32> = p.rec.images.keys().copied().collect();
-    let groups: Vec<(usize, &[u32])> = ids
-        .chunks(cfg.rows_per_shard)
-        .enumerate()
-        .filter(|(g, _)| unit.owns(*g))
-        .collect();
-    let todo: Vec<&(usize, &[u32])> = groups
-        .iter()
-        .filter(|(g, _)| done_group(store, *g, &p.record.fingerprint).is_none())
-        .collect();
-    let resumed = groups.len() - todo.len();
-    progress.start(
+    let stage = IngestStage { cfg, store, p: &p };
+    let d = crate::stage::drive(
+        &stage,
+        unit,
+        &ids,
+        cfg.rows_per_shard,
         "rendering",
-        todo.iter().map(|(_, ids)| ids.len() as u64).sum(),
-        "views",
-    );
-    let mut views = 0;
-    for (written, (g, group)) in todo.iter().enumerate() {
-        views += run_group(cfg, store, &p, *g, group, progress)?;
-        if let Some(d) = cfg.pause_after_group {
-            std::thread::sleep(d);
-        }
-        if cfg.stop_after_groups.is_some_and(|n| written + 1 >= n) && written + 1 < todo.len() {
-            progress.finish();
-            return Err(PipelineError::Interrupted(format!(
-                "stopped after {} groups as asked; run the same command again to resume",
-                written + 1
-            )));
-        }
-    }
-    progress.finish();
+        progress,
+        &|ran, todo| after_group(cfg, ran, todo),
+    )?;
     p.record.seconds = t0.elapsed().as_secs_f64();
-    let rel = units::unit_record_path(units::INGEST, unit.index, unit.count);
-    units::write_record(store, &rel, &p.record)?;
+    crate::stage::record_unit::<IngestStage>(store, unit, &p.record)?;
     Ok(UnitSummary {
         dataset: store.root().display().to_string(),
-        unit: unit,
-        groups_owned: groups.len(),
+        unit,
+        groups_owned: d.owned,
         groups_total: p.record.groups,
-        resumed_groups: resumed,
-        views,
+        resumed_groups: d.resumed,
+        views: d.items,
         point_source: p.source,
         points: p.cloud.len(),
         warnings: p.record.warnings,
@@ -415,7 +443,7 @@ mod tests {
         let tmp = std::env::temp_dir().join("nrw-no-such-scene");
         let cfg = IngestConfig {
             radius: 40.0,
-            ..IngestConfig::new(&tmp, &tmp.join("out"))
+            ..IngestConfig::new(&tmp, tmp.join("out"))
         };
         let e = ingest(&cfg, &crate::Silent).unwrap_err();
         assert!(

@@ -14,6 +14,7 @@ pub mod manifest;
 pub mod panic_guard;
 pub mod parquet_io;
 pub mod payload;
+pub mod provenance;
 pub mod reader;
 pub mod scene;
 pub mod schema;

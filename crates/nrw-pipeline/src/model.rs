@@ -36,24 +36,24 @@ pub fn undistort_model(
     Ok(distorted)
 }
 
-/// The manifest's record of `--undistort` (absent without it).
-pub fn undistort_parameters(o: &UndistortOptions) -> serde_json::Value {
-    serde_json::json!({
-        "blank_pixels": o.blank_pixels,
-        "min_scale": o.min_scale,
-        "max_scale": o.max_scale,
-        "max_image_size": o.max_image_size,
-    })
+/// The undistorter's options as the unit record and manifest keep them.
+pub fn undistort_record(o: &UndistortOptions) -> nrw_dataset::provenance::UndistortRecord {
+    nrw_dataset::provenance::UndistortRecord {
+        blank_pixels: o.blank_pixels,
+        min_scale: o.min_scale,
+        max_scale: o.max_scale,
+        max_image_size: o.max_image_size,
+    }
 }
 
-/// The options recorded by [`undistort_parameters`], read back (finalize).
-pub fn undistort_from_parameters(v: &serde_json::Value) -> Option<UndistortOptions> {
-    Some(UndistortOptions {
-        blank_pixels: v.get("blank_pixels")?.as_f64()?,
-        min_scale: v.get("min_scale")?.as_f64()?,
-        max_scale: v.get("max_scale")?.as_f64()?,
-        max_image_size: v.get("max_image_size")?.as_u64(),
-    })
+/// The options recorded by [`undistort_record`], read back (finalize).
+pub fn undistort_options(r: &nrw_dataset::provenance::UndistortRecord) -> UndistortOptions {
+    UndistortOptions {
+        blank_pixels: r.blank_pixels,
+        min_scale: r.min_scale,
+        max_scale: r.max_scale,
+        max_image_size: r.max_image_size,
+    }
 }
 
 /// The model a dataset was ingested from (its manifest's or unit record's `scene`), read

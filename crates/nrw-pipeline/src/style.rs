@@ -18,6 +18,7 @@ use crate::error::{PipelineError, Result, Setting};
 use crate::stage::Sharded;
 use crate::units::{check_units, close_stage, units_error};
 use crate::{Progress, Unit};
+use nrw_dataset::provenance::{from_parameters, to_parameters, StyleParameters};
 
 /// Photos per descriptor part by default.
 pub const PART_PHOTOS: usize = 64;
@@ -139,20 +140,15 @@ fn kind(cfg: &StyleConfig, net: Option<&Vgg>) -> DescriptorKind {
     }
 }
 
-/// The descriptor kind a style unit record describes.
-pub(crate) fn kind_of(r: &UnitRecord) -> DescriptorKind {
-    let s = |k: &str| {
-        r.parameters
-            .get(k)
-            .and_then(|v| v.as_str())
-            .unwrap_or_default()
-            .to_string()
-    };
-    DescriptorKind {
-        tier: s("tier"),
-        weights_sha256: s("weights_sha256"),
-        preprocess: s("preprocess"),
-    }
+/// The descriptor kind a style unit record describes (its typed parameters).
+pub(crate) fn kind_of(dataset: &Store, r: &UnitRecord) -> Result<DescriptorKind> {
+    let file = dataset.name(&units::unit_record_path(units::STYLE, r.index, r.count));
+    let p: StyleParameters = from_parameters(&file, &r.parameters)?;
+    Ok(DescriptorKind {
+        tier: p.tier,
+        weights_sha256: p.weights_sha256,
+        preprocess: p.preprocess,
+    })
 }
 
 /// Remove parts of another kind among `parts` (or refuse without `overwrite`).
@@ -342,12 +338,13 @@ fn run_unit(
         progress,
         &|_, _| Ok(()),
     )?;
-    let mut parameters = serde_json::Map::new();
-    parameters.insert("tier".into(), kind.tier.clone().into());
-    parameters.insert("weights_sha256".into(), kind.weights_sha256.clone().into());
-    parameters.insert("preprocess".into(), kind.preprocess.clone().into());
-    parameters.insert("photos".into(), ids.len().into());
-    parameters.insert("photos_per_part".into(), cfg.photos_per_part.into());
+    let parameters = to_parameters(&StyleParameters {
+        tier: kind.tier.clone(),
+        weights_sha256: kind.weights_sha256.clone(),
+        preprocess: kind.preprocess.clone(),
+        photos: ids.len(),
+        photos_per_part: cfg.photos_per_part,
+    });
     let ids_entry = nrw_dataset::FileEntry {
         path: "kept image ids".into(),
         bytes: ids.len() as u64,
@@ -400,7 +397,7 @@ pub struct StyleMerge {
 /// (of an earlier, larger run) removed, all parts listed in the manifest.
 pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
     let unit = check_units(dataset, units::STYLE)?;
-    let kind = crate::style::kind_of(&unit);
+    let kind = kind_of(dataset, &unit)?;
     for k in 0..unit.groups {
         let rel = nrw_dataset::descriptors::part_path(k);
         // Only the kind columns: the descriptors themselves are megabytes per photo.

@@ -119,23 +119,6 @@ pub fn record_timing(dir: &nrw_dataset::Store, stage: &str, seconds: f64) -> Res
     Ok(nrw_dataset::timings::record(dir, stage, seconds)?)
 }
 
-/// A numeric ingest parameter of the manifest (ingest always records them; the filters'
-/// defaults live in nrw-render alone, so a missing one is an error, not a guess).
-fn param_f64(
-    dir: &nrw_dataset::Store,
-    p: &serde_json::Map<String, serde_json::Value>,
-    key: &str,
-) -> Result<f64> {
-    p.get(key).and_then(|v| v.as_f64()).ok_or_else(|| {
-        QaError::Dataset(nrw_dataset::DatasetError::Value {
-            path: dir.name(nrw_dataset::Manifest::FILE),
-            record: "parameters".into(),
-            field: key.into(),
-            problem: "missing or not a number; re-run ingest".into(),
-        })
-    })
-}
-
 /// Compute the figures and write `report.html` and `qa.json` into `out` (a folder or an
 /// object-store prefix, through its `Store`).
 pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Written> {
@@ -176,7 +159,11 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         descriptors: descriptors.as_ref().map_or(0, |d| d.1.len()),
     };
     let p = &manifest.parameters;
-    let max_empty = param_f64(dir, p, "max_empty")?;
+    // Ingest always records its filters; their defaults live in nrw-render alone, so a
+    // missing one is an error, not a guess.
+    let ingest: nrw_dataset::provenance::IngestParameters =
+        nrw_dataset::provenance::from_parameters(&dir.name(nrw_dataset::Manifest::FILE), p)?;
+    let max_empty = ingest.max_empty;
     let short = |r: &ImageRow| match (r.photo_width, r.photo_height) {
         (Some(w), Some(h)) => Some(w.min(h) as f64),
         _ => None,
@@ -230,7 +217,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         triplets: triplets.as_ref(),
         descriptors: descriptors.as_ref().map(|d| &d.1),
         max_empty,
-        min_side: param_f64(dir, p, "min_photo_side")?,
+        min_side: ingest.min_photo_side as f64,
     })?;
     out.write(REPORT_FILE, page.into_bytes())?;
     let mut text = serde_json::to_string_pretty(&figures).expect("figures serialise");

@@ -2,6 +2,7 @@
 //! when asked, re-centred on the scene origin.
 
 use super::*;
+use nrw_dataset::provenance::DenoiseRecord;
 
 /// A cloud as read, before clean-up: f64 positions, its channels, and per point where it
 /// is seen from (the mean centre of the cameras that observe a sparse point; the scene's
@@ -78,6 +79,13 @@ pub(super) fn keep_where<T>(v: &mut Vec<T>, keep: &[bool]) {
     v.retain(|_| *flags.next().expect("one flag per element"));
 }
 
+/// What clean-up did to the cloud, for the manifest (None: not asked for, or not needed).
+#[derive(Debug, Default)]
+pub(super) struct Cleaned {
+    pub denoise: Option<DenoiseRecord>,
+    pub estimated_normals_k: Option<usize>,
+}
+
 /// The cloud to render: outliers removed (`--denoise`), normals estimated where it has none
 /// (`--estimate-normals`), re-centred on `origin`. Returns what clean-up did, for the
 /// manifest (absent keys: not asked for).
@@ -86,8 +94,8 @@ pub(super) fn render_cloud(
     raw: RawCloud,
     origin: glam::DVec3,
     warnings: &mut Vec<String>,
-) -> (RenderCloud, serde_json::Map<String, serde_json::Value>) {
-    let mut report = serde_json::Map::new();
+) -> (RenderCloud, Cleaned) {
+    let mut report = Cleaned::default();
     let RawCloud {
         mut positions,
         mut colors,
@@ -104,7 +112,15 @@ pub(super) fn render_cloud(
         if let Some(n) = normals.as_mut() {
             keep_where(n, &keep);
         }
-        report.insert("denoise".into(), serde_json::to_value(&r).expect("json"));
+        report.denoise = Some(DenoiseRecord {
+            k: r.k,
+            sigma: r.sigma,
+            mean: r.mean,
+            std: r.std,
+            threshold: r.threshold,
+            points: r.points,
+            removed: r.removed,
+        });
     }
     if let Some(k) = cfg.estimate_normals {
         if normals.is_some() {
@@ -114,7 +130,7 @@ pub(super) fn render_cloud(
         } else {
             let n = nrw_render::clean::estimate_normals(&positions, origin, k, &|i| seen_from[i]);
             normals = Some(n);
-            report.insert("estimated_normals_k".into(), k.into());
+            report.estimated_normals_k = Some(k);
         }
     }
     let cloud = RenderCloud::new(origin, &positions, colors.as_deref(), normals.as_deref());

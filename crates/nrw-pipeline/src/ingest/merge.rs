@@ -1,6 +1,7 @@
 //! Ingest's merge: the units' group records into the scene tables and the manifest (what
 //! `finalize` runs for ingest, and a whole ingest runs at its end).
 
+use nrw_dataset::provenance::{from_parameters, IngestParameters};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -76,13 +77,15 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         ));
     }
     // `ingest --undistort` stored the undistorted PINHOLE cameras: the scene tables list those.
-    if let Some(v) = unit.parameters.get("undistort") {
-        let options = crate::model::undistort_from_parameters(v).ok_or_else(|| {
-            units_error(
-                dataset,
-                format!("ingest unit record: unreadable `undistort` parameters {v}"),
-            )
-        })?;
+    let recorded: IngestParameters = from_parameters(
+        &dataset.name(&format!(
+            "{}/ (ingest unit record)",
+            nrw_dataset::units::stage_dir(nrw_dataset::units::INGEST)
+        )),
+        &unit.parameters,
+    )?;
+    if let Some(u) = &recorded.undistort {
+        let options = crate::model::undistort_options(u);
         crate::model::undistort_model(&mut rec, &options, Path::new(&scene.model_dir))?;
     }
     // Shards of an earlier run with other parameters must not linger next to these.

@@ -27,11 +27,12 @@ use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result, Setting};
 use crate::model::{
-    encoding_and_layout, images_dir, load_model, undistort_model, undistort_parameters,
+    encoding_and_layout, images_dir, load_model, undistort_model, undistort_record,
 };
 use crate::stage::Sharded;
 use crate::units::fingerprint;
 use crate::{Progress, Unit};
+use nrw_dataset::provenance::IngestParameters;
 
 mod cloud;
 mod merge;
@@ -242,31 +243,27 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     let (cloud, cleaned) = render_cloud(cfg, raw, rec.scene_origin(), &mut warnings);
     let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
     let (enc, layout) = encoding_and_layout(&rec);
-    let mut parameters = serde_json::Map::new();
-    parameters.insert("format".into(), enc.into());
-    parameters.insert("point_source".into(), source.clone().into());
-    parameters.insert("points".into(), cloud.len().into());
-    parameters.insert("min_dim".into(), cfg.min_dim.into());
-    parameters.insert("radius".into(), (cfg.radius as f64).into());
-    parameters.insert("max_empty".into(), cfg.filters.max_empty_ratio.into());
-    parameters.insert("min_photo_side".into(), cfg.filters.min_photo_side.into());
-    parameters.insert("rows_per_shard".into(), cfg.rows_per_shard.into());
-    if let Some(d) = &cfg.semantics {
-        parameters.insert("semantics".into(), d.display().to_string().into());
-    }
-    if let Some(o) = &cfg.undistort {
-        parameters.insert("undistort".into(), undistort_parameters(o));
-    }
-    parameters.extend(cleaned);
     let segmenter = match &cfg.segment {
-        Some(s) => {
-            let model = crate::segment::load_model(&s.weights)?;
-            parameters.insert("segment_model_sha256".into(), model.sha256.clone().into());
-            parameters.insert("segment_mode".into(), s.mode.to_string().into());
-            Some((model, s.mode))
-        }
+        Some(s) => Some((crate::segment::load_model(&s.weights)?, s.mode)),
         None => None,
     };
+    let parameters = nrw_dataset::provenance::to_parameters(&IngestParameters {
+        format: enc.into(),
+        point_source: source.clone(),
+        points: cloud.len(),
+        min_dim: cfg.min_dim,
+        // f32 → f64 is exact: the record holds the radius the renderer used.
+        radius: cfg.radius as f64,
+        max_empty: cfg.filters.max_empty_ratio,
+        min_photo_side: cfg.filters.min_photo_side,
+        rows_per_shard: cfg.rows_per_shard,
+        semantics: cfg.semantics.as_ref().map(|d| d.display().to_string()),
+        undistort: cfg.undistort.as_ref().map(undistort_record),
+        denoise: cleaned.denoise,
+        estimated_normals_k: cleaned.estimated_normals_k,
+        segment_model_sha256: segmenter.as_ref().map(|(m, _)| m.sha256.clone()),
+        segment_mode: segmenter.as_ref().map(|(_, mode)| mode.to_string()),
+    });
     let record = UnitRecord {
         stage: units::INGEST.into(),
         index: unit.index,

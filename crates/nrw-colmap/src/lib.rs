@@ -12,6 +12,7 @@ pub mod names;
 mod parse;
 pub mod ply;
 pub mod pose;
+pub mod scene;
 pub mod stats;
 mod txt;
 pub mod undistort;
@@ -29,6 +30,7 @@ pub use model::{
 };
 pub use ply::{read_ply, read_ply_from, write_ply, PointCloud};
 pub use pose::{LocalRigid3, Rigid3};
+pub use scene::Scene;
 pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};
 pub use undistort::{undistort_camera, UndistortError, UndistortOptions};
 pub use write::write_model;

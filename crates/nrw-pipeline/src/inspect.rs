@@ -99,7 +99,8 @@ fn dataset_summary(location: &Path) -> Result<DatasetSummary> {
 }
 
 fn model_summary(location: &Path, format: Option<Format>) -> Result<ModelSummary> {
-    let (dir, rec) = crate::model::load_model(location, format)?;
+    let (scene, rec) = crate::model::load_model(location, format)?;
+    let dir = scene.model_dir;
     let stats = nrw_colmap::reprojection_stats(&rec);
     let (encoding, layout) = crate::model::encoding_and_layout(&rec);
     Ok(ModelSummary {

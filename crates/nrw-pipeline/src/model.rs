@@ -5,16 +5,16 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nrw_colmap::{Format, Reconstruction, UndistortOptions};
+use nrw_colmap::{Format, Reconstruction, Scene, UndistortOptions};
 use nrw_dataset::{FileEntry, SceneSource};
 
 use crate::error::{PipelineError, Result};
 
 /// Find and read the model of a scene folder (or a model folder itself).
-pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(PathBuf, Reconstruction)> {
-    let dir = nrw_colmap::find_model_dir(scene)?;
-    let rec = nrw_colmap::read_model(&dir, format)?;
-    Ok((dir, rec))
+pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(Scene, Reconstruction)> {
+    let scene = Scene::find(scene)?;
+    let rec = scene.read(format)?;
+    Ok((scene, rec))
 }
 
 /// The model with every camera replaced by the PINHOLE camera COLMAP's `image_undistorter`
@@ -91,28 +91,25 @@ pub fn encoding_and_layout(rec: &Reconstruction) -> (&'static str, &'static str)
     (enc, layout)
 }
 
-/// The photo folder: given, or `images/` next to the model as COLMAP lays scenes out.
-pub fn images_dir(images: Option<&Path>, scene: &Path, model_dir: &Path) -> Result<PathBuf> {
+/// The photo folder: given, or `images/` where COLMAP lays it out ([`Scene::images_dir`]).
+pub fn images_dir(images: Option<&Path>, scene: &Scene) -> Result<PathBuf> {
     if let Some(d) = images {
         if !d.is_dir() {
             return Err(PipelineError::input(d, "--images is not a folder"));
         }
         return Ok(d.to_path_buf());
     }
-    let mut tried = vec![scene.join("images")];
-    for up in model_dir.ancestors().skip(1).take(2) {
-        tried.push(up.join("images"));
-    }
-    tried.iter().find(|d| d.is_dir()).cloned().ok_or_else(|| {
+    scene.images_dir().ok_or_else(|| {
+        let tried: Vec<String> = scene
+            .image_dir_candidates()
+            .iter()
+            .map(|d| d.display().to_string())
+            .collect();
         PipelineError::input(
-            scene,
+            &scene.dir,
             format!(
                 "no photo folder found (tried {}); pass --images DIR",
-                tried
-                    .iter()
-                    .map(|d| d.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                tried.join(", ")
             ),
         )
     })

@@ -127,7 +127,7 @@ mod tests {
         type Merge = ();
 
         fn done(&self, _g: usize, ids: &[u32]) -> Result<bool> {
-            Ok(ids[0] % 2 == 0)
+            Ok(ids[0].is_multiple_of(2))
         }
 
         fn run(&self, g: usize, ids: &[u32], _p: &dyn Progress) -> Result<usize> {

@@ -17,20 +17,10 @@ pub(super) struct RawCloud {
 /// Which cloud to render, what it is called, and the file it came from (if any).
 pub(super) fn point_source(
     cfg: &IngestConfig,
-    model_dir: &Path,
+    scene: &nrw_colmap::Scene,
     rec: &Reconstruction,
 ) -> Result<(RawCloud, String, Option<PathBuf>)> {
-    let candidate = cfg.points.clone().or_else(|| {
-        std::iter::once(cfg.scene.join("dense/fused.ply"))
-            .chain(
-                model_dir
-                    .ancestors()
-                    .skip(1)
-                    .take(2)
-                    .map(|d| d.join("dense/fused.ply")),
-            )
-            .find(|p| p.is_file())
-    });
+    let candidate = cfg.points.clone().or_else(|| scene.dense_cloud());
     let centres: BTreeMap<u32, glam::DVec3> = rec
         .images
         .iter()
@@ -67,7 +57,7 @@ pub(super) fn point_source(
             Ok((raw, "sparse".into(), None))
         }
         None => Err(PipelineError::input(
-            model_dir,
+            &scene.model_dir,
             "nothing to render: no dense/fused.ply, no --points FILE, and the model has no 3D points",
         )),
     }

@@ -231,15 +231,16 @@ fn hashed_inputs(files: impl Iterator<Item = PathBuf>) -> Result<Vec<FileEntry>>
 
 fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     check_config(cfg)?;
-    let (model_dir, mut rec) = load_model(&cfg.scene, cfg.format)?;
-    let photos_dir = images_dir(cfg.images.as_deref(), &cfg.scene, &model_dir)?;
+    let (scene, mut rec) = load_model(&cfg.scene, cfg.format)?;
+    let model_dir = scene.model_dir.clone();
+    let photos_dir = images_dir(cfg.images.as_deref(), &scene)?;
     let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
     let photos = photo_sizes(&rec, &photos_dir, cfg, &mut warnings)?;
     let distorted = match &cfg.undistort {
         Some(o) => Some(undistort_model(&mut rec, o, &model_dir)?),
         None => None,
     };
-    let (raw, source, source_path) = point_source(cfg, &model_dir, &rec)?;
+    let (raw, source, source_path) = point_source(cfg, &scene, &rec)?;
     let (cloud, cleaned) = render_cloud(cfg, raw, rec.scene_origin(), &mut warnings);
     let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
     let (enc, layout) = encoding_and_layout(&rec);

@@ -6,7 +6,7 @@ use nrw_dataset::reader::Dataset;
 
 use crate::error::{ExportError, Result};
 use crate::staging::Staged;
-use crate::{ExportConfig, ExportSummary, Inputs};
+use crate::{ExportConfig, ExportSummary, Inputs, SplitExport};
 
 /// One 3D point of the scene, for `points3D.bin`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -82,4 +82,39 @@ pub trait Format: Sync {
     /// Write every file of the layout except `export.json` through `staged`, and fill in
     /// `summary` (which becomes `export.json`).
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()>;
+}
+
+/// A layout that carries the scene's points (nerfw, nerfstudio): its writer, given the
+/// dataset, settings, points and splits, returns the splits written.
+pub type PointsWriter = fn(
+    &Dataset,
+    &ExportConfig,
+    &[ScenePoint],
+    &[(String, usize)],
+    &Staged,
+    &(dyn Fn() + Sync),
+) -> Result<Vec<SplitExport>>;
+
+/// The [`Format`] of a layout with points: it needs train views and the points, and lists the
+/// splits without views as empty.
+pub struct WithPoints(pub PointsWriter);
+
+impl Format for WithPoints {
+    fn check(&self, job: &Job) -> Result<()> {
+        job.require_train("")?;
+        job.points().map(|_| ())
+    }
+
+    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
+        summary.empty_splits = job.empty_splits();
+        summary.splits = (self.0)(
+            job.ds,
+            job.cfg,
+            job.points()?,
+            &job.splits,
+            staged,
+            job.tick,
+        )?;
+        Ok(())
+    }
 }

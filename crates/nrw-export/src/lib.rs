@@ -91,7 +91,7 @@ fn format_of(layout: Layout) -> &'static dyn format::Format {
         Layout::Official => &official::Official,
         Layout::Tfrecord => &tfrecord::Tfrecord,
         Layout::Files => &files::Files,
-        Layout::Nerfw => &nerfw::Nerfw,
-        Layout::Nerfstudio => &nerfstudio::Nerfstudio,
+        Layout::Nerfw => &nerfw::NERFW,
+        Layout::Nerfstudio => &nerfstudio::NERFSTUDIO,
     }
 }

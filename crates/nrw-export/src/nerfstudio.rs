@@ -26,9 +26,9 @@ use serde_json::{json, Map, Value};
 use nrw_dataset::reader::{Dataset, View};
 
 use crate::error::{ExportError, Result};
-use crate::format::{Format, Job, ScenePoint};
+use crate::format::{ScenePoint, WithPoints};
 use crate::staging::Staged;
-use crate::{ExportConfig, ExportSummary, SplitExport};
+use crate::{ExportConfig, SplitExport};
 
 /// nerfstudio's `applied_transform` (rows of a 3 × 4 matrix): world (x, y, z) → (x, z, −y).
 pub const APPLIED_TRANSFORM: [[f64; 4]; 3] = [
@@ -183,27 +183,7 @@ fn frame(v: &View, staged: &Staged) -> Result<(String, Value)> {
 }
 
 /// nerfstudio's layout.
-pub struct Nerfstudio;
-
-impl Format for Nerfstudio {
-    fn check(&self, job: &Job) -> Result<()> {
-        job.require_train("")?;
-        job.points().map(|_| ())
-    }
-
-    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
-        summary.empty_splits = job.empty_splits();
-        summary.splits = write(
-            job.ds,
-            job.cfg,
-            job.points()?,
-            &job.splits,
-            staged,
-            job.tick,
-        )?;
-        Ok(())
-    }
-}
+pub static NERFSTUDIO: WithPoints = WithPoints(write);
 
 /// Write the layout into `staged`. Returns the splits written.
 fn write(

@@ -25,9 +25,9 @@ use nrw_colmap::{Camera, CameraModel, Image, Point3D, Reconstruction, Rigid3};
 use nrw_dataset::reader::{Dataset, View};
 
 use crate::error::{ExportError, Result};
-use crate::format::{Format, Job, ScenePoint};
+use crate::format::{ScenePoint, WithPoints};
 use crate::staging::Staged;
-use crate::{ExportConfig, ExportSummary, SplitExport};
+use crate::{ExportConfig, SplitExport};
 
 /// The tsv `split` value of one of our splits: NeRF-W's loaders call the held-out set `test`.
 pub fn tsv_split(split: &str) -> &str {
@@ -93,27 +93,7 @@ fn model_image(v: &View, file: &str) -> Result<Image> {
 }
 
 /// NeRF-W's Phototourism layout.
-pub struct Nerfw;
-
-impl Format for Nerfw {
-    fn check(&self, job: &Job) -> Result<()> {
-        job.require_train("")?;
-        job.points().map(|_| ())
-    }
-
-    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
-        summary.empty_splits = job.empty_splits();
-        summary.splits = write(
-            job.ds,
-            job.cfg,
-            job.points()?,
-            &job.splits,
-            staged,
-            job.tick,
-        )?;
-        Ok(())
-    }
-}
+pub static NERFW: WithPoints = WithPoints(write);
 
 /// Write the layout into `staged`: photos, model, tsv. Returns the splits written.
 fn write(

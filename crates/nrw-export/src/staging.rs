@@ -200,7 +200,7 @@ fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
 /// `export.json` last, then the earlier export's files that this one does not have.
 fn upload(staged: &Path, store: &Store) -> Result<()> {
     let earlier = store.list("")?;
-    let files = staged_files(staged)?;
+    let files = Store::local(staged).list("")?;
     nrw_dataset::atomic::commit_pause(&store.root());
     store.delete(EXPORT_JSON)?;
     for rel in files.iter().filter(|r| *r != EXPORT_JSON) {
@@ -213,29 +213,6 @@ fn upload(staged: &Path, store: &Store) -> Result<()> {
     Ok(())
 }
 
-/// Every file under `dir`, relative to it with `/` separators, sorted.
-fn staged_files(dir: &Path) -> Result<Vec<String>> {
-    let mut out = Vec::new();
-    let mut stack = vec![(dir.to_path_buf(), String::new())];
-    while let Some((path, rel)) = stack.pop() {
-        for e in std::fs::read_dir(&path).map_err(|e| ExportError::io(&path, e))? {
-            let e = e.map_err(|e| ExportError::io(&path, e))?;
-            let name = e.file_name().to_string_lossy().into_owned();
-            let child = if rel.is_empty() {
-                name
-            } else {
-                format!("{rel}/{name}")
-            };
-            if e.file_type().is_ok_and(|t| t.is_dir()) {
-                stack.push((e.path(), child));
-            } else {
-                out.push(child);
-            }
-        }
-    }
-    out.sort();
-    Ok(out)
-}
 
 /// An output file name refused, naming the export folder.
 fn name_error(out: &Path, problem: String) -> ExportError {

@@ -16,6 +16,11 @@ use crate::error::{DatasetError, Result};
 /// Table path of the split inside a dataset.
 pub const SPLITS_TABLE: &str = "splits.parquet";
 
+/// The split the paper trains on, as every table and export names it.
+pub const TRAIN: &str = "train";
+/// The held-out split (NeRF-W's `test`, the published code's `val/`).
+pub const VAL: &str = "val";
+
 /// One photo's assignment.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Assignment {
@@ -72,7 +77,7 @@ pub fn assign(
     for (id, name) in eligible {
         match by_name.get(name.as_str()) {
             Some(a) => {
-                if a.split == "val" {
+                if a.split == VAL {
                     change.kept_val += 1;
                 } else {
                     change.kept_train += 1;
@@ -108,8 +113,8 @@ pub fn assign(
     }
     fresh.sort();
     for (k, (_, name, id)) in fresh.iter().enumerate() {
-        let split = if k < need { "val" } else { "train" };
-        if split == "val" {
+        let split = if k < need { VAL } else { TRAIN };
+        if split == VAL {
             change.new_val += 1;
         } else {
             change.new_train += 1;
@@ -188,8 +193,8 @@ pub fn parse_phototourism_tsv(path: &std::path::Path, text: &str) -> Result<Vec<
             return Err(bad(line, "filename", "empty".into()));
         }
         let split = match get(s) {
-            "train" => "train",
-            "test" => "val",
+            "train" => TRAIN,
+            "test" => VAL,
             other => {
                 return Err(bad(
                     line,

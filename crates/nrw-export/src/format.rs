@@ -3,6 +3,7 @@
 //! rest (staging, `export.json`, publishing) the same way for all.
 
 use nrw_dataset::reader::Dataset;
+use nrw_dataset::split::TRAIN;
 
 use crate::error::{ExportError, Result};
 use crate::staging::Staged;
@@ -31,7 +32,7 @@ pub struct Job<'a> {
 impl Job<'_> {
     /// Refuse a dataset without train views, which every layout but `files` needs.
     pub fn require_train(&self, advice: &str) -> Result<()> {
-        if self.splits.iter().any(|(s, n)| s == "train" && *n > 0) {
+        if self.splits.iter().any(|(s, n)| s == TRAIN && *n > 0) {
             return Ok(());
         }
         Err(ExportError::refused(

@@ -17,6 +17,7 @@
 //! rotation (`applied_transform`, z up). The split goes into `train_filenames`,
 //! `val_filenames` and `test_filenames` (= val).
 
+use nrw_dataset::split::{TRAIN, VAL};
 use std::path::Path;
 
 use glam::{DMat3, DVec3};
@@ -226,8 +227,8 @@ fn write(
             tick();
         }
         let key = match split.as_str() {
-            "train" => "train_filenames",
-            "val" => "val_filenames",
+            TRAIN => "train_filenames",
+            VAL => "val_filenames",
             other => {
                 return Err(ExportError::refused(
                     &cfg.out,

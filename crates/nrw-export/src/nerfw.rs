@@ -17,6 +17,7 @@
 //! - `points3D.bin` holds the scene's 3D points, from which the loaders derive each image's
 //!   near and far bounds (tracks are not written; images carry no 2D points).
 
+use nrw_dataset::split::VAL;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -32,7 +33,7 @@ use crate::{ExportConfig, SplitExport};
 /// The tsv `split` value of one of our splits: NeRF-W's loaders call the held-out set `test`.
 pub fn tsv_split(split: &str) -> &str {
     match split {
-        "val" => "test",
+        VAL => "test",
         s => s,
     }
 }

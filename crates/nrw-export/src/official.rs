@@ -3,6 +3,7 @@
 //! and `dist_NAME.pckl`.
 
 use nrw_dataset::reader::View;
+use nrw_dataset::split::TRAIN;
 
 use crate::error::Result;
 use crate::format::{Format, Job};
@@ -36,7 +37,7 @@ impl Format for Official {
         let train = summary
             .splits
             .iter()
-            .find(|s| s.split == "train")
+            .find(|s| s.split == TRAIN)
             .expect("checked");
         if let Some(m) = dist(&train.image_ids)? {
             let n = train.image_ids.len();

@@ -2,6 +2,7 @@
 //! share: their checks, the depth levels, the centred crop, the published colour coding of
 //! the labels, and the summary fields they fill in.
 
+use nrw_dataset::split::{TRAIN, VAL};
 use std::path::PathBuf;
 
 use image::imageops::crop_imm;
@@ -67,14 +68,14 @@ impl Paper {
         summary.crop = self.crop;
         summary.depth = Some(DepthRecord::of(&self.scale));
         summary.semantics = self.semantics.then(|| "official".into());
-        if !job.splits.iter().any(|(s, _)| s == "val") {
-            summary.empty_splits.push("val".into());
+        if !job.splits.iter().any(|(s, _)| s == VAL) {
+            summary.empty_splits.push(VAL.into());
         }
     }
 
     /// Refuse an export left with no train view (every one smaller than the crop).
     pub fn require_written_train(&self, job: &Job, summary: &ExportSummary) -> Result<()> {
-        if summary.splits.iter().any(|s| s.split == "train") {
+        if summary.splits.iter().any(|s| s.split == TRAIN) {
             return Ok(());
         }
         Err(ExportError::refused(

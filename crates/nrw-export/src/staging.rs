@@ -213,7 +213,6 @@ fn upload(staged: &Path, store: &Store) -> Result<()> {
     Ok(())
 }
 
-
 /// An output file name refused, naming the export folder.
 fn name_error(out: &Path, problem: String) -> ExportError {
     ExportError::Value {

@@ -3,6 +3,7 @@
 //! prints them; the judgments in them (a train split too small for the published sampler, a
 //! threshold printed with its own digits) live here with the stages.
 
+use nrw_dataset::split::TRAIN;
 use std::path::Path;
 
 use nrw_export::{ExportSummary, Layout};
@@ -146,7 +147,7 @@ pub fn export(dataset: &Path, out: &Path, s: &ExportSummary) -> Report {
     let train = s
         .splits
         .iter()
-        .find(|p| p.split == "train")
+        .find(|p| p.split == TRAIN)
         .map_or(0, |p| p.image_ids.len());
     if s.dist_pickle.is_some() && train < PUBLISHED_MIN_TRAIN {
         r.err(format!(

@@ -1,6 +1,7 @@
 //! The pipeline runner: the stages a pipeline file lists, in order (`nrw-etl run`), and the
 //! demo's pipeline on the embedded synthetic scene (`nrw-etl demo`).
 
+use nrw_dataset::split::TRAIN;
 use std::path::{Path, PathBuf};
 
 use nrw_export::{ExportConfig, ExportSummary};
@@ -349,7 +350,7 @@ fn capped_k(k: usize, dataset: &Path, progress: &dyn Progress) -> Result<usize> 
     let scope = if splits.is_empty() {
         nrw_dataset::reader::Dataset::open(dataset)?.len()
     } else {
-        splits.iter().filter(|a| a.split == "train").count()
+        splits.iter().filter(|a| a.split == TRAIN).count()
     };
     let cap = scope.saturating_sub(1).max(1);
     if k > cap {

@@ -1,5 +1,6 @@
 //! Split: a reproducible, incremental train/validation assignment of the kept photos.
 
+use nrw_dataset::split::VAL;
 use std::path::PathBuf;
 
 use nrw_dataset::split::{assign, read_splits, write_splits};
@@ -84,7 +85,7 @@ fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> 
     );
     manifest.parameters.remove("split_val");
     manifest.write(store)?;
-    let val = a.rows.iter().filter(|r| r.split == "val").count();
+    let val = a.rows.iter().filter(|r| r.split == VAL).count();
     Ok(SplitSummary {
         train: a.rows.len() - val,
         val,
@@ -117,7 +118,7 @@ pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
             .parameters
             .insert("split_val".into(), cfg.val.into());
         manifest.write(store)?;
-        let val = rows.iter().filter(|a| a.split == "val").count();
+        let val = rows.iter().filter(|a| a.split == VAL).count();
         Ok(SplitSummary {
             train: rows.len() - val,
             val,

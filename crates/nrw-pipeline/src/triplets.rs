@@ -1,6 +1,7 @@
 //! Triplets: for each anchor photo, its k nearest and k furthest photos under the style
 //! distance, from the descriptors style wrote; and the official export's distance matrix.
 
+use nrw_dataset::split::TRAIN;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
@@ -73,7 +74,7 @@ fn in_scope(
     }
     let train: BTreeSet<u32> = splits
         .iter()
-        .filter(|a| a.split == "train")
+        .filter(|a| a.split == TRAIN)
         .map(|a| a.image_id)
         .collect();
     if let Some(missing) = train.iter().find(|id| !ids.contains(id)) {
@@ -82,7 +83,7 @@ fn in_scope(
             format!("training photo {missing} has no descriptor; run `nrw-etl style` again"),
         ));
     }
-    Ok(("train", Some(train)))
+    Ok((TRAIN, Some(train)))
 }
 
 /// Compute and write the triplet table.

@@ -2,6 +2,7 @@
 //! script that checks every image decoded (a broken one logs a console error and marks the
 //! page, so a headless browser test can catch it).
 
+use nrw_dataset::split::{TRAIN, VAL};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -78,8 +79,8 @@ pub fn render(inp: &Inputs) -> Result<String> {
         ("registered", c.registered),
         ("rendered", c.rendered),
         (nrw_dataset::scene::VERDICT_KEPT, c.kept),
-        ("train", c.train),
-        ("val", c.val),
+        (TRAIN, c.train),
+        (VAL, c.val),
     ];
     for (i, (name, n)) in stages.iter().enumerate() {
         if i > 0 {
@@ -382,27 +383,27 @@ fn split(h: &mut String, inp: &Inputs) -> Result<()> {
     let _ = write!(h, "<p>{} train, {} validation photos. Validation should look like training: similar coverage, sizes and depths.</p><div class=\"charts\">", c.train, c.val);
     let empty = |r: &ImageRow| r.empty_ratio;
     let short = |r: &ImageRow| Some(r.photo_width?.min(r.photo_height?) as f64);
-    let (te, ve) = (of("train", &empty), of("val", &empty));
-    let (ts, vs) = (of("train", &short), of("val", &short));
-    let (td, vd) = (of("train", &|r| r.depth_max), of("val", &|r| r.depth_max));
+    let (te, ve) = (of(TRAIN, &empty), of(VAL, &empty));
+    let (ts, vs) = (of(TRAIN, &short), of(VAL, &short));
+    let (td, vd) = (of(TRAIN, &|r| r.depth_max), of(VAL, &|r| r.depth_max));
     h.push_str(&plots::histogram(
         "empty ratio: train vs val",
         "empty ratio",
-        &[("train", &te), ("val", &ve)],
+        &[(TRAIN, &te), (VAL, &ve)],
         Some((0.0, 1.0)),
         &[],
     )?);
     h.push_str(&plots::histogram(
         "photo size: train vs val",
         "shorter side (px)",
-        &[("train", &ts), ("val", &vs)],
+        &[(TRAIN, &ts), (VAL, &vs)],
         None,
         &[],
     )?);
     h.push_str(&plots::histogram(
         "furthest depth: train vs val",
         "depth (scene units)",
-        &[("train", &td), ("val", &vd)],
+        &[(TRAIN, &td), (VAL, &vd)],
         None,
         &[],
     )?);

@@ -8,6 +8,7 @@ pub mod plots;
 pub mod tables;
 pub mod thumbs;
 
+use nrw_dataset::split::{TRAIN, VAL};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -150,11 +151,11 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         shard_rows,
         train: images
             .iter()
-            .filter(|r| r.split.as_deref() == Some("train"))
+            .filter(|r| r.split.as_deref() == Some(TRAIN))
             .count(),
         val: images
             .iter()
-            .filter(|r| r.split.as_deref() == Some("val"))
+            .filter(|r| r.split.as_deref() == Some(VAL))
             .count(),
         descriptors: descriptors.as_ref().map_or(0, |d| d.1.len()),
     };

@@ -73,15 +73,13 @@ fn main() -> std::process::ExitCode {
         Command::Segment(a) => a.threads,
         _ => None,
     };
-    {
-        if let Some(n) = threads {
-            if let Err(e) = rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build_global()
-            {
-                eprintln!("error: --threads {n}: {e}");
-                return std::process::ExitCode::FAILURE;
-            }
+    if let Some(n) = threads {
+        if let Err(e) = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+        {
+            eprintln!("error: --threads {n}: {e}");
+            return std::process::ExitCode::FAILURE;
         }
     }
     // Each command ends in success, an error, or one of its own documented exit codes.

@@ -65,6 +65,39 @@ pub enum DepthMapping {
     Inverse,
 }
 
+impl DepthMapping {
+    /// Every mapping, in the order help lists them.
+    pub const ALL: [DepthMapping; 2] = [DepthMapping::Linear, DepthMapping::Inverse];
+
+    /// The mapping's name on the command line, in pipeline files and in `export.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            DepthMapping::Linear => "linear",
+            DepthMapping::Inverse => "inverse",
+        }
+    }
+
+    /// What the mapping does, in one line (the CLI's help for each value).
+    pub fn summary(self) -> &'static str {
+        match self {
+            DepthMapping::Linear => "Levels even in depth between the dataset's nearest and farthest depth (more levels on the landmark in docs/bench/official_export.md)",
+            DepthMapping::Inverse => "Levels even in inverse depth between the dataset's nearest and farthest depth (finer near the camera)",
+        }
+    }
+}
+
+impl std::str::FromStr for DepthMapping {
+    type Err = String;
+
+    /// A mapping by its name; the error lists the names.
+    fn from_str(s: &str) -> std::result::Result<DepthMapping, String> {
+        DepthMapping::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("{s:?} is not a depth mapping: linear, inverse"))
+    }
+}
+
 /// A depth mapping with the range it spans (the dataset's nearest and farthest rendered depth).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct DepthScale {

@@ -61,6 +61,48 @@ pub enum ModeKind {
     Crop,
 }
 
+impl ModeKind {
+    /// Every kind, in the order help lists them.
+    pub const ALL: [ModeKind; 4] = [
+        ModeKind::Resize,
+        ModeKind::Whole,
+        ModeKind::Slide,
+        ModeKind::Crop,
+    ];
+
+    /// The kind's name on the command line and in pipeline files.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModeKind::Resize => "resize",
+            ModeKind::Whole => "whole",
+            ModeKind::Slide => "slide",
+            ModeKind::Crop => "crop",
+        }
+    }
+
+    /// What the kind does, in one line (the CLI's help for each value).
+    pub fn summary(self) -> &'static str {
+        match self {
+            ModeKind::Resize => "Hugging Face's default: the photo resized to SIZE×SIZE, logits upsampled to the photo",
+            ModeKind::Whole => "mmsegmentation's ADE20K protocol: aspect ratio kept, shorter side SIZE, one pass",
+            ModeKind::Slide => "SIZE×SIZE windows (stride ⅔) over the photo scaled to a shorter side of SIZE, logits averaged",
+            ModeKind::Crop => "The published code: the central SIZE×SIZE crop, unresized; 0 (unlabelled) outside it",
+        }
+    }
+}
+
+impl std::str::FromStr for ModeKind {
+    type Err = String;
+
+    /// A kind by its name; the error lists the names.
+    fn from_str(name: &str) -> std::result::Result<ModeKind, String> {
+        ModeKind::ALL
+            .into_iter()
+            .find(|k| k.name() == name)
+            .ok_or_else(|| format!("unknown mode `{name}`: resize, whole, slide or crop"))
+    }
+}
+
 impl Mode {
     /// A mode of `kind` at `size` pixels, refusing sizes the kind cannot take.
     pub fn new(kind: ModeKind, size: u32) -> std::result::Result<Mode, String> {
@@ -86,17 +128,7 @@ impl Mode {
     /// From the words of pipeline files: `resize`, `whole`, `slide` or `crop`, with the size
     /// in pixels.
     pub fn parse(name: &str, size: u32) -> std::result::Result<Mode, String> {
-        let kind = match name {
-            "whole" => ModeKind::Whole,
-            "resize" => ModeKind::Resize,
-            "slide" => ModeKind::Slide,
-            "crop" => ModeKind::Crop,
-            other => {
-                return Err(format!(
-                    "unknown mode `{other}`: resize, whole, slide or crop"
-                ))
-            }
-        };
+        let kind: ModeKind = name.parse()?;
         Mode::new(kind, size)
     }
 }

@@ -5,30 +5,11 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use nrw_export::official::DepthMapping;
 use nrw_export::{ExportConfig, Layout};
 
 use crate::error::Result;
-
-/// `--layout` values: the dataset crate's layouts, each with its help line.
-fn layout_parser() -> impl clap::builder::TypedValueParser<Value = Layout> {
-    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-    PossibleValuesParser::new(Layout::ALL.map(|l| PossibleValue::new(l.name()).help(l.summary())))
-        .map(|name| {
-            name.parse::<Layout>()
-                .expect("clap passes only the listed names")
-        })
-}
-
-/// `--depth` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Depth {
-    /// Levels even in depth between the dataset's nearest and farthest depth (more levels on the landmark in docs/bench/official_export.md)
-    Linear,
-    /// Levels even in inverse depth between the dataset's nearest and farthest depth (finer near the camera)
-    Inverse,
-}
 
 /// `--crop` values: a side in pixels, or `none`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,7 +46,7 @@ pub struct ExportArgs {
     /// Dataset folder written by `ingest` (and `split`)
     pub dataset: PathBuf,
     /// Which layout to write
-    #[arg(long, value_parser = layout_parser(), default_value = "official")]
+    #[arg(long, value_parser = super::names(&Layout::ALL, Layout::name, Layout::summary), default_value = "official")]
     pub layout: Layout,
     /// Folder to write into (created; an earlier export there is replaced whole)
     #[arg(long)]
@@ -85,8 +66,8 @@ pub struct ExportArgs {
     #[arg(long)]
     pub no_semantics: bool,
     /// How depth becomes the levels 1-255 the published loaders expect
-    #[arg(long, value_enum, default_value = "linear")]
-    pub depth: Depth,
+    #[arg(long, value_parser = super::names(&DepthMapping::ALL, DepthMapping::name, DepthMapping::summary), default_value = "linear")]
+    pub depth: DepthMapping,
     /// TFRecord files per split
     #[arg(long, default_value_t = 1)]
     pub shards: usize,
@@ -110,10 +91,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             None => layout.default_crop(),
         },
         semantics: !args.no_semantics,
-        depth: match args.depth {
-            Depth::Inverse => DepthMapping::Inverse,
-            Depth::Linear => DepthMapping::Linear,
-        },
+        depth: args.depth,
         shards: args.shards,
         ..nrw_pipeline::export::official(&args.dataset, &args.out)
     };

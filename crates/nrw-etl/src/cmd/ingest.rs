@@ -45,8 +45,8 @@ pub struct IngestArgs {
     #[arg(long, conflicts_with = "semantics")]
     pub segment_weights: Option<PathBuf>,
     /// With --segment-weights: how a photo is fed to the network
-    #[arg(long, value_enum, default_value = "resize")]
-    pub segment_mode: super::segment::ModeArg,
+    #[arg(long, value_parser = super::names(&nrw_segment::ModeKind::ALL, nrw_segment::ModeKind::name, nrw_segment::ModeKind::summary), default_value = "resize")]
+    pub segment_mode: nrw_segment::ModeKind,
     /// With --segment-weights: network input size in pixels
     #[arg(long, default_value_t = 512)]
     pub segment_size: u32,

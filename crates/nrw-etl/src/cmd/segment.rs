@@ -3,34 +3,15 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use nrw_pipeline::segment::SegmentConfig;
 use nrw_segment::{Mode, ModeKind};
 
 use super::{Bars, Encoding, ShardArgs};
 use crate::error::{EtlError, Result};
 
-/// `--mode` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ModeArg {
-    /// Hugging Face's default: the photo resized to SIZE×SIZE, logits upsampled to the photo
-    Resize,
-    /// mmsegmentation's ADE20K protocol: aspect ratio kept, shorter side SIZE, one pass
-    Whole,
-    /// SIZE×SIZE windows (stride ⅔) over the photo scaled to a shorter side of SIZE, logits averaged
-    Slide,
-    /// The published code: the central SIZE×SIZE crop, unresized; 0 (unlabelled) outside it
-    Crop,
-}
-
 /// The library's mode for `--mode`/`--size` (or ingest's `--segment-mode`/`--segment-size`).
-pub fn mode(arg: ModeArg, size: u32) -> Result<Mode> {
-    let kind = match arg {
-        ModeArg::Resize => ModeKind::Resize,
-        ModeArg::Whole => ModeKind::Whole,
-        ModeArg::Slide => ModeKind::Slide,
-        ModeArg::Crop => ModeKind::Crop,
-    };
+pub fn mode(kind: ModeKind, size: u32) -> Result<Mode> {
     Mode::new(kind, size).map_err(|problem| EtlError::Flag {
         flag: "--size",
         problem: format!("{size}: {problem}"),
@@ -71,8 +52,8 @@ pub struct SegmentArgs {
     #[arg(long, value_enum)]
     pub format: Option<Encoding>,
     /// How a photo is fed to the network
-    #[arg(long, value_enum, default_value = "resize")]
-    pub mode: ModeArg,
+    #[arg(long, value_parser = super::names(&ModeKind::ALL, ModeKind::name, ModeKind::summary), default_value = "resize")]
+    pub mode: ModeKind,
     /// Network input size in pixels (resize: SIZE×SIZE; whole: shorter side; slide: window and shorter side; crop: crop side)
     #[arg(long, default_value_t = 512)]
     pub size: u32,

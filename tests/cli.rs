@@ -1,5 +1,7 @@
 //! End-to-end tests of the `nrw-etl` binary on the real scenes in ../shared/data.
 
+#[path = "architecture.rs"]
+mod architecture;
 #[path = "bad_inputs.rs"]
 mod bad_inputs;
 #[path = "clean.rs"]

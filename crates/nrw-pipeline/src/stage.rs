@@ -96,6 +96,18 @@ pub fn record_unit<S: Sharded>(store: &Store, unit: Unit, record: &UnitRecord) -
     Ok(units::write_record(store, &rel, record)?)
 }
 
+/// The whole stage in this process: earlier unfinished unit runs' records are cleared (this
+/// run owns the dataset; their group outputs are reused when they match), `run_whole` runs
+/// unit 0 of 1, and the stage's merge makes the dataset whole.
+pub fn whole<S: Sharded, T>(
+    dataset: &Store,
+    run_whole: impl FnOnce() -> Result<T>,
+) -> Result<(T, S::Merge)> {
+    units::remove_unit_records(dataset, S::STAGE, None)?;
+    let done = run_whole()?;
+    Ok((done, S::merge(dataset)?))
+}
+
 /// Whether units of stage `S` started in `dataset` (its unit folder holds files) although
 /// none has finished (no unit record): merging would be premature.
 pub fn started_unfinished<S: Sharded>(dataset: &Store) -> Result<bool> {

@@ -379,10 +379,10 @@ fn run_unit(
 /// of another kind are replaced only with `overwrite`.
 pub fn style(cfg: &StyleConfig, progress: &dyn Progress) -> Result<StyleSummary> {
     let store = &Store::open_path(&cfg.dataset)?;
-    units::remove_unit_records(store, units::STYLE, None)?;
-    let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
-    let s = run_unit(cfg, Unit::WHOLE, net.as_ref(), progress)?;
-    finalize_style(store)?;
+    let (s, _) = crate::stage::whole::<StyleStage, _>(store, || {
+        let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
+        run_unit(cfg, Unit::WHOLE, net.as_ref(), progress)
+    })?;
     Ok(s)
 }
 

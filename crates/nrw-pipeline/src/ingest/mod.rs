@@ -409,9 +409,8 @@ pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSumma
     let t0 = Instant::now();
     check_config(cfg)?;
     let store = &Store::open_path(&cfg.out)?;
-    units::remove_unit_records(store, units::INGEST, None)?;
-    let u = ingest_unit(cfg, Unit::WHOLE, progress)?;
-    let f = finalize_ingest(store)?;
+    let (u, f) =
+        crate::stage::whole::<IngestStage, _>(store, || ingest_unit(cfg, Unit::WHOLE, progress))?;
     Ok(IngestSummary {
         dataset: u.dataset,
         registered: f.registered,

@@ -85,16 +85,9 @@ pub trait Format: Sync {
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()>;
 }
 
-/// A layout that carries the scene's points (nerfw, nerfstudio): its writer, given the
-/// dataset, settings, points and splits, returns the splits written.
-pub type PointsWriter = fn(
-    &Dataset,
-    &ExportConfig,
-    &[ScenePoint],
-    &[(String, usize)],
-    &Staged,
-    &(dyn Fn() + Sync),
-) -> Result<Vec<SplitExport>>;
+/// A layout that carries the scene's points (nerfw, nerfstudio): its writer, given the job
+/// and the points, returns the splits written.
+pub type PointsWriter = fn(&Job, &[ScenePoint], &Staged) -> Result<Vec<SplitExport>>;
 
 /// The [`Format`] of a layout with points: it needs train views and the points, and lists the
 /// splits without views as empty.
@@ -108,14 +101,7 @@ impl Format for WithPoints {
 
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
         summary.empty_splits = job.empty_splits();
-        summary.splits = (self.0)(
-            job.ds,
-            job.cfg,
-            job.points()?,
-            &job.splits,
-            staged,
-            job.tick,
-        )?;
+        summary.splits = (self.0)(job, job.points()?, staged)?;
         Ok(())
     }
 }

@@ -24,12 +24,12 @@ use glam::{DMat3, DVec3};
 use nrw_colmap::{CameraModel, PointCloud, Rigid3};
 use serde_json::{json, Map, Value};
 
-use nrw_dataset::reader::{Dataset, View};
+use nrw_dataset::reader::View;
 
 use crate::error::{ExportError, Result};
-use crate::format::{ScenePoint, WithPoints};
+use crate::format::{Job, ScenePoint, WithPoints};
 use crate::staging::Staged;
-use crate::{ExportConfig, SplitExport};
+use crate::SplitExport;
 
 /// nerfstudio's `applied_transform` (rows of a 3 × 4 matrix): world (x, y, z) → (x, z, −y).
 pub const APPLIED_TRANSFORM: [[f64; 4]; 3] = [
@@ -187,28 +187,17 @@ fn frame(v: &View, staged: &Staged) -> Result<(String, Value)> {
 pub static NERFSTUDIO: WithPoints = WithPoints(write);
 
 /// Write the layout into `staged`. Returns the splits written.
-fn write(
-    ds: &Dataset,
-    cfg: &ExportConfig,
-    points: &[ScenePoint],
-    splits: &[(String, usize)],
-    staged: &Staged,
-    tick: &(dyn Fn() + Sync),
-) -> Result<Vec<SplitExport>> {
+fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitExport>> {
+    let (ds, cfg, tick) = (job.ds, job.cfg, job.tick);
     let mut frames = Vec::new();
     let mut lists: Map<String, Value> = Map::new();
     let mut out = Vec::new();
     let mut seen = std::collections::BTreeSet::new();
-    for (split, n) in splits {
+    for (split, n) in &job.splits {
         if *n == 0 {
             continue;
         }
-        let mut s = SplitExport {
-            split: split.clone(),
-            image_ids: Vec::new(),
-            names: Vec::new(),
-            files: Vec::new(),
-        };
+        let mut s = SplitExport::new(split);
         let mut files = Vec::new();
         for &id in ds.ids(split)? {
             let v = ds.get(id)?;

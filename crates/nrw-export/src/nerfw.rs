@@ -23,12 +23,12 @@ use std::path::Path;
 
 use nrw_colmap::{Camera, CameraModel, Image, Point3D, Reconstruction, Rigid3};
 
-use nrw_dataset::reader::{Dataset, View};
+use nrw_dataset::reader::View;
 
 use crate::error::{ExportError, Result};
-use crate::format::{ScenePoint, WithPoints};
+use crate::format::{Job, ScenePoint, WithPoints};
 use crate::staging::Staged;
-use crate::{ExportConfig, SplitExport};
+use crate::SplitExport;
 
 /// The tsv `split` value of one of our splits: NeRF-W's loaders call the held-out set `test`.
 pub fn tsv_split(split: &str) -> &str {
@@ -97,28 +97,17 @@ fn model_image(v: &View, file: &str) -> Result<Image> {
 pub static NERFW: WithPoints = WithPoints(write);
 
 /// Write the layout into `staged`: photos, model, tsv. Returns the splits written.
-fn write(
-    ds: &Dataset,
-    cfg: &ExportConfig,
-    points: &[ScenePoint],
-    splits: &[(String, usize)],
-    staged: &Staged,
-    tick: &(dyn Fn() + Sync),
-) -> Result<Vec<SplitExport>> {
+fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitExport>> {
+    let (ds, cfg, tick) = (job.ds, job.cfg, job.tick);
     let mut rec = Reconstruction::default();
     let mut rows = Vec::new();
     let mut by_file: BTreeMap<String, u32> = BTreeMap::new();
     let mut out = Vec::new();
-    for (split, n) in splits {
+    for (split, n) in &job.splits {
         if *n == 0 {
             continue;
         }
-        let mut s = SplitExport {
-            split: split.clone(),
-            image_ids: Vec::new(),
-            names: Vec::new(),
-            files: Vec::new(),
-        };
+        let mut s = SplitExport::new(split);
         for &id in ds.ids(split)? {
             let v = ds.get(id)?;
             let file = file_name(&v.name);

@@ -20,8 +20,9 @@ pub const EXPORT_JSON: &str = "export.json";
 enum Destination {
     /// A local folder: the staging folder is renamed to it.
     Folder,
-    /// An object-store prefix: the staged files are uploaded under it.
-    Remote(Store),
+    /// An object-store prefix: the staged files are uploaded under it; `earlier` lists what
+    /// it held when the export began (listed once, to check and then to clean up).
+    Remote { store: Store, earlier: Vec<String> },
 }
 
 /// The hidden folder an export is built in, and every file claimed in it so far: no two
@@ -43,8 +44,9 @@ impl Staged {
         let text = out.to_string_lossy();
         let (dir, dest) = if nrw_dataset::store::is_url(&text) {
             let store = Store::open(&text)?;
-            refuse_foreign(out, &store.list("")?, |k| k == EXPORT_JSON)?;
-            (remote_staging()?, Destination::Remote(store))
+            let earlier = store.list("")?;
+            refuse_foreign(out, &earlier, |k| k == EXPORT_JSON)?;
+            (remote_staging()?, Destination::Remote { store, earlier })
         } else {
             (local_staging(out)?, Destination::Folder)
         };
@@ -100,7 +102,7 @@ impl Staged {
     pub fn publish(self) -> Result<()> {
         let published = match &self.dest {
             Destination::Folder => rename_into_place(&self.dir, &self.out),
-            Destination::Remote(store) => upload(&self.dir, store),
+            Destination::Remote { store, earlier } => upload(&self.dir, store, earlier),
         };
         if published.is_ok() && self.dir.exists() {
             let _ = std::fs::remove_dir_all(&self.dir);
@@ -198,8 +200,7 @@ fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
 /// Upload the staged files under `store`: an earlier export's `export.json` goes first (so a
 /// half-replaced export is not taken for a whole one), every file but `export.json` next,
 /// `export.json` last, then the earlier export's files that this one does not have.
-fn upload(staged: &Path, store: &Store) -> Result<()> {
-    let earlier = store.list("")?;
+fn upload(staged: &Path, store: &Store, earlier: &[String]) -> Result<()> {
     let files = Store::local(staged).list("")?;
     nrw_dataset::atomic::commit_pause(&store.root());
     store.delete(EXPORT_JSON)?;

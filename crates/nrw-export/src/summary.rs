@@ -68,7 +68,7 @@ pub struct SplitExport {
 
 impl SplitExport {
     /// A split with nothing written yet.
-    pub(crate) fn new(split: &str) -> SplitExport {
+    pub fn new(split: &str) -> SplitExport {
         SplitExport {
             split: split.into(),
             image_ids: Vec::new(),

@@ -106,3 +106,93 @@ fn the_ray_driver_on_a_real_scene_with_the_dataset_on_s3_gives_the_bytes_of_one_
         "one local process vs Ray on S3",
     );
 }
+
+#[test]
+fn the_corpus_driver_called_from_another_driver_with_a_node_killed_indexes_every_scene() {
+    // pip install -r pipelines/ray/requirements.txt (CI does).
+    if !python_has("import ray") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let ingest = [
+        "--min-dim",
+        "96",
+        "--min-photo-side",
+        "100",
+        "--rows-per-shard",
+        "2",
+    ];
+    let (a, b) = (
+        tmp.path().join("scenes/alpha"),
+        tmp.path().join("scenes/beta"),
+    );
+    small_scene(&a, 13);
+    small_scene(&b, 9);
+    // A broken scene: its camera has too few parameters.
+    let broken = tmp.path().join("scenes/broken");
+    std::fs::create_dir_all(broken.join("sparse/0")).unwrap();
+    std::fs::write(
+        broken.join("sparse/0/cameras.txt"),
+        "1 PINHOLE 640 480 500\n",
+    )
+    .unwrap();
+    std::fs::write(broken.join("sparse/0/images.txt"), "").unwrap();
+    std::fs::write(broken.join("sparse/0/points3D.txt"), "").unwrap();
+    let out = tmp.path().join("corpus");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/ray_corpus.py");
+    let driver_py = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/driver.py");
+    let args = [&ingest[..], &["--pause-after-shard-ms", "800"]].concat();
+    let o = Command::new("python3")
+        .arg(&script)
+        .arg(&driver_py)
+        .arg(&out)
+        .arg(env!("CARGO_BIN_EXE_nrw-etl"))
+        .args([&a, &broken, &b])
+        .arg("--")
+        .args(&args)
+        .env("RAY_USAGE_STATS_ENABLED", "0")
+        // Another driver in another folder: workers cannot import the driver module.
+        .current_dir(tmp.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("node killed mid-run"), "{stdout}");
+    for (scene, name) in [(&a, "alpha"), (&b, "beta")] {
+        let one = tmp.path().join(format!("one-{name}"));
+        one_process(scene.to_str().unwrap(), &one, &ingest);
+        assert_same_files(
+            &without_qa(files(&one)),
+            &without_qa(files(&out.join(name))),
+            &format!("one process vs the corpus driver, scene {name}"),
+        );
+    }
+    let rows = nrw_dataset::corpus::read_corpus(&nrw_dataset::Store::from(out.as_path())).unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, ["alpha", "broken", "beta"]);
+    let status: Vec<&str> = rows.iter().map(|r| r.status.as_str()).collect();
+    assert_eq!(status, ["ok", "failed", "ok"]);
+    let err = rows[1].error.as_deref().unwrap();
+    assert!(
+        err.contains("cameras.txt"),
+        "the error names the file: {err}"
+    );
+    assert_eq!(rows[1].kept, None);
+    assert_eq!(rows[0].registered, Some(13));
+    assert!(
+        rows[0].kept.unwrap() > 0 && rows[2].report.as_deref().unwrap().ends_with("report.html")
+    );
+    if python_has("import pyarrow") {
+        assert!(
+            stdout.contains("pyarrow read 3 rows: ['ok', 'failed', 'ok']"),
+            "{stdout}"
+        );
+    }
+    if python_has("import duckdb") {
+        assert!(stdout.contains("('broken', 'failed')"), "{stdout}");
+    }
+}

@@ -1,7 +1,15 @@
 #!/usr/bin/env python3
-"""Build an nrw-etl dataset on a Ray cluster: ingest and style as work units, fanned out.
+"""Build nrw-etl datasets on a Ray cluster: ingest and style as work units, fanned out.
 
     python3 pipelines/ray/driver.py SCENE --out DATASET --units 32 [--address auto]
+    python3 pipelines/ray/driver.py --scenes LIST --out s3://bucket/corpus/ [--address auto]
+
+With --scenes (a file of scene folders, one a line, or a glob such as '/data/*/'), one
+dataset per scene under OUT/NAME (NAME: the scene folder's name), the scenes' pipelines
+running at once so their units share the cluster; a scene that fails (after the retries) is
+recorded and the others go on. Then OUT/corpus.parquet indexes them, one row per scene:
+where its dataset and report are, counts and verdicts, or its error (schemas/corpus.toml;
+pyarrow.parquet.read_table or DuckDB's read_parquet read it).
 
 Steps: `nrw-etl ingest --shard i/N` on N tasks (retried when a task or its node dies; a
 retried unit resumes where it stopped), `nrw-etl finalize`, `split`, `style --shard i/N`
@@ -12,6 +20,9 @@ shared file system. The result is byte-identical to `nrw-etl ingest` etc. in one
 """
 
 import argparse
+import concurrent.futures
+import glob
+import json
 import os
 import subprocess
 import sys
@@ -30,6 +41,12 @@ def _die_with_parent():
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except OSError:
         pass
+
+
+# Tasks carry this module's code with them (pickled by value), so `run` and `run_corpus`
+# work from any other driver, whose workers cannot import a module named `driver`.
+if __name__ != "__main__":
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
 
 @ray.remote(num_cpus=1, max_retries=3, retry_exceptions=True)
@@ -78,11 +95,71 @@ def run(scene, out, n, binary="nrw-etl", val=100, k=20, tier="vgg16-512", weight
     return report
 
 
+def join(prefix, name):
+    """NAME under a corpus prefix (a folder or an object-store URL)."""
+    return prefix.rstrip("/") + "/" + name
+
+
+def scene_list(spec):
+    """Scene folders from a file (one a line; blank lines and # comments skipped) or a glob."""
+    if os.path.isfile(spec):
+        with open(spec, encoding="utf-8") as f:
+            lines = [ln.strip() for ln in f]
+        return [ln for ln in lines if ln and not ln.startswith("#")]
+    found = sorted(glob.glob(spec))
+    if not found:
+        raise SystemExit(f"--scenes {spec}: neither a file of scene folders nor a glob matching any")
+    return found
+
+
+def names_of(scenes):
+    """A dataset name per scene: its folder's name, -2, -3 … when two share one."""
+    seen, out = {}, []
+    for s in scenes:
+        base = os.path.basename(os.path.normpath(s)) or "scene"
+        seen[base] = seen.get(base, 0) + 1
+        out.append(base if seen[base] == 1 else f"{base}-{seen[base]}")
+    return out
+
+
+def failure(e):
+    """The failing command's own message from a task's exception (Ray wraps it)."""
+    cause = getattr(e, "cause", None)
+    return str(cause if cause is not None else e).strip()
+
+
+def run_corpus(scenes, out, n, binary="nrw-etl", parallel=None, log=print, **kw):
+    """One dataset per scene under OUT, the scenes' pipelines at once (`parallel` at a
+    time, default all), then OUT/corpus.parquet; returns the index's rows as printed."""
+    names = names_of(scenes)
+    env = dict(kw.get("env") or {})
+
+    def one_scene(scene, name):
+        try:
+            run(scene, join(out, name), n, binary=binary, log=lambda m: log(f"[{name}] {m}"), **kw)
+            return None
+        except Exception as e:  # noqa: BLE001 (a scene's failure is data for the index)
+            log(f"[{name}] failed: {failure(e)}")
+            return failure(e)
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=parallel or len(scenes) or 1) as pool:
+        errors = list(pool.map(one_scene, scenes, names))
+    entries = [{"scene": s, "name": m, "dataset": join(out, m), "error": e}
+               for s, m, e in zip(scenes, names, errors)]
+    printed = one(binary, ["corpus", out, "--entries", json.dumps(entries)], env)
+    log(printed)
+    log(f"corpus index: {join(out, 'corpus.parquet')}")
+    return printed
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scene", help="COLMAP scene folder, readable on every node")
-    p.add_argument("--out", required=True, help="dataset: s3://bucket/prefix, gs://, az://, or a shared folder")
+    p.add_argument("scene", nargs="?", help="COLMAP scene folder, readable on every node")
+    p.add_argument("--scenes", help="many scenes: a file of scene folders (one a line) or a glob")
+    p.add_argument("--out", required=True,
+                   help="dataset (with --scenes: the corpus prefix): s3://bucket/prefix, gs://, az://, or a shared folder")
     p.add_argument("--units", type=int, default=None, help="work units per stage [default: the cluster's CPUs]")
+    p.add_argument("--parallel", type=int, default=None, help="with --scenes: scenes at once [default: all]")
     p.add_argument("--address", default=None, help="Ray cluster address [default: a local Ray]")
     p.add_argument("--binary", default="nrw-etl", help="nrw-etl on every node [default: from PATH]")
     p.add_argument("--val", type=int, default=100, help="validation photos (the paper: 100)")
@@ -91,10 +168,16 @@ def main(argv=None):
     p.add_argument("--weights", default=None, help="VGG16 safetensors, readable on every node")
     p.add_argument("--ingest-arg", action="append", default=[], help="extra ingest argument (repeat)")
     a = p.parse_args(argv)
+    if (a.scene is None) == (a.scenes is None):
+        p.error("give one SCENE or --scenes LIST")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     ray.init(address=a.address)
     n = a.units or max(1, int(ray.cluster_resources().get("CPU", 1)))
-    run(a.scene, a.out, n, a.binary, a.val, a.k, a.tier, a.weights, a.ingest_arg)
+    settings = dict(val=a.val, k=a.k, tier=a.tier, weights=a.weights, ingest_args=a.ingest_arg)
+    if a.scenes:
+        run_corpus(scene_list(a.scenes), a.out, n, a.binary, a.parallel, **settings)
+    else:
+        run(a.scene, a.out, n, a.binary, **settings)
     return 0
 
 

@@ -28,7 +28,7 @@ pub use model::{
     Format, Frame, Image, Point2D, Point3D, Reconstruction, Rig, SensorId, TrackElement, Warning,
     NO_POINT3D,
 };
-pub use ply::{read_ply, read_ply_from, write_ply, PointCloud};
+pub use ply::{read_ply, read_ply_file_into, read_ply_from, write_ply, PointCloud, VertexSink};
 pub use pose::{LocalRigid3, Rigid3};
 pub use scene::Scene;
 pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};

@@ -121,10 +121,37 @@ impl VertexRow for XyzNC {
     }
 }
 
-/// Receives rows straight into the cloud's columns, counting them so errors can name the row.
+/// Where a PLY's vertices go as they are read: a whole [`PointCloud`], or a caller's own
+/// compact columns (the renderer keeps f32 positions, so it never holds the f64 ones).
+pub trait VertexSink {
+    /// Before the first vertex: room for `capacity` vertices, and which channels come.
+    fn begin(&mut self, capacity: usize, normals: bool, colors: bool);
+    /// One vertex (position finite, normal finite when present).
+    fn push(&mut self, xyz: DVec3, normal: Option<[f32; 3]>, color: Option<[u8; 3]>);
+}
+
+impl VertexSink for PointCloud {
+    fn begin(&mut self, capacity: usize, normals: bool, colors: bool) {
+        self.positions.reserve(capacity);
+        self.normals = normals.then(|| Vec::with_capacity(capacity));
+        self.colors = colors.then(|| Vec::with_capacity(capacity));
+    }
+    fn push(&mut self, xyz: DVec3, normal: Option<[f32; 3]>, color: Option<[u8; 3]>) {
+        self.positions.push(xyz);
+        if let (Some(c), Some(v)) = (self.colors.as_mut(), color) {
+            c.push(v);
+        }
+        if let (Some(n), Some(v)) = (self.normals.as_mut(), normal) {
+            n.push(v);
+        }
+    }
+}
+
+/// Receives rows straight into the sink's columns, counting them so errors can name the row.
 struct Columns<'a, R> {
-    cloud: &'a mut PointCloud,
+    sink: &'a mut dyn VertexSink,
     capacity: usize,
+    channels: (bool, bool),
     rows: &'a mut u64,
     bad: &'a mut Option<(u64, &'static str, String)>,
     row: std::marker::PhantomData<R>,
@@ -138,14 +165,8 @@ impl<'de, R: VertexRow + Deserialize<'de>> Visitor<'de> for Columns<'_, R> {
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> std::result::Result<(), A::Error> {
-        let cap = self.capacity;
-        self.cloud.positions.reserve(cap);
-        if let Some(c) = self.cloud.colors.as_mut() {
-            c.reserve(cap);
-        }
-        if let Some(n) = self.cloud.normals.as_mut() {
-            n.reserve(cap);
-        }
+        self.sink
+            .begin(self.capacity, self.channels.0, self.channels.1);
         while let Some(r) = seq.next_element::<R>()? {
             let i = *self.rows;
             let p = r.xyz();
@@ -155,17 +176,12 @@ impl<'de, R: VertexRow + Deserialize<'de>> Visitor<'de> for Columns<'_, R> {
                     return Ok(());
                 }
             }
-            self.cloud.positions.push(DVec3::from_array(p));
-            if let (Some(c), Some(v)) = (self.cloud.colors.as_mut(), r.color()) {
-                c.push(v);
+            let normal = r.normal();
+            if let Some(v) = normal.filter(|v| !v.iter().all(|c| c.is_finite())) {
+                *self.bad = Some((i, "nx/ny/nz", format!("normal not finite: {v:?}")));
+                return Ok(());
             }
-            if let (Some(n), Some(v)) = (self.cloud.normals.as_mut(), r.normal()) {
-                if !v.iter().all(|c| c.is_finite()) {
-                    *self.bad = Some((i, "nx/ny/nz", format!("normal not finite: {v:?}")));
-                    return Ok(());
-                }
-                n.push(v);
-            }
+            self.sink.push(DVec3::from_array(p), normal, r.color());
             *self.rows += 1;
         }
         Ok(())
@@ -240,14 +256,37 @@ pub fn read_ply_from<R: std::io::BufRead>(
     byte_len: u64,
     path: &Path,
 ) -> Result<PointCloud> {
-    let file_len = byte_len;
-    let mut reader = PlyReader::from_reader(input)
-        .map_err(|e| ColmapError::invalid(path, Record::File, "header", e.to_string()))?;
-    let header = reader.header().clone();
     let mut cloud = PointCloud {
         path: path.to_path_buf(),
         ..Default::default()
     };
+    read_ply_into(input, byte_len, path, &mut cloud)?;
+    Ok(cloud)
+}
+
+/// Stream the `vertex` element of a PLY file into `sink`, one vertex at a time.
+pub fn read_ply_file_into(path: &Path, sink: &mut dyn VertexSink) -> Result<()> {
+    let file = File::open(path).map_err(|e| ColmapError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| ColmapError::io(path, e))?.len();
+    read_ply_into(
+        BufReader::with_capacity(1 << 20, file),
+        file_len,
+        path,
+        sink,
+    )
+}
+
+/// [`read_ply_from`] into a sink: nothing but the sink's columns grows with the file.
+pub fn read_ply_into<R: std::io::BufRead>(
+    input: R,
+    byte_len: u64,
+    path: &Path,
+    cloud: &mut dyn VertexSink,
+) -> Result<()> {
+    let file_len = byte_len;
+    let mut reader = PlyReader::from_reader(input)
+        .map_err(|e| ColmapError::invalid(path, Record::File, "header", e.to_string()))?;
+    let header = reader.header().clone();
     for (index, elem) in header.elem_defs.iter().enumerate() {
         if elem.name != "vertex" {
             let bad = |problem: String| {
@@ -311,12 +350,6 @@ pub fn read_ply_from<R: std::io::BufRead>(
                 ));
             }
         }
-        if has("nx") {
-            cloud.normals = Some(Vec::new());
-        }
-        if has("red") {
-            cloud.colors = Some(Vec::new());
-        }
         // Never trust the header's count for allocation: a row takes at least one byte a property.
         let min_row = elem.properties.len().max(1) as u64;
         let capacity = (elem.count as u64).min(file_len / min_row) as usize;
@@ -326,8 +359,9 @@ pub fn read_ply_from<R: std::io::BufRead>(
         macro_rules! read_as {
             ($row:ty) => {{
                 let seed = ColumnsSeed(Columns::<$row> {
-                    cloud: &mut cloud,
+                    sink: &mut *cloud,
                     capacity,
+                    channels: (has("nx"), has("red")),
                     rows: &mut rows,
                     bad: &mut bad,
                     row: std::marker::PhantomData,
@@ -365,7 +399,7 @@ pub fn read_ply_from<R: std::io::BufRead>(
                 format!("{e} (header promised {} vertices)", elem.count),
             )
         })?;
-        return Ok(cloud);
+        return Ok(());
     }
     Err(ColmapError::invalid(
         path,

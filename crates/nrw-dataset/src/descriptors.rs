@@ -320,3 +320,128 @@ pub fn read_all(dir: &Store) -> Result<Option<(DescriptorKind, Vec<DescriptorRow
     rows.sort_by_key(|r| r.image_id);
     Ok(kind.map(|k| (k, rows)))
 }
+
+/// One described photo of an [`Index`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Entry {
+    pub image_id: u32,
+    pub name: String,
+}
+
+/// A dataset's descriptors without their values: their kind and the photos they describe,
+/// in image-id order. Whole-collection stages read the values through [`Index::visit`], a
+/// few rows at a time, so memory holds N names, never N descriptors.
+#[derive(Debug, Clone)]
+pub struct Index {
+    pub kind: DescriptorKind,
+    pub entries: Vec<Entry>,
+    parts: Vec<String>,
+}
+
+/// Rows decoded at a time while visiting (a reference-tier descriptor is 1.2 MB).
+const VISIT_ROWS: usize = 16;
+
+impl Index {
+    /// The index of the parts the manifest lists (as [`read_all`] reads them: mixed kinds
+    /// refused); `None` when there are no descriptors. A photo described twice is refused.
+    pub fn read(dir: &Store) -> Result<Option<Index>> {
+        let parts: Vec<String> = crate::Manifest::read(dir)?
+            .tables
+            .into_iter()
+            .map(|t| t.path)
+            .filter(|p| is_part(p))
+            .collect();
+        let mut kind: Option<DescriptorKind> = None;
+        let mut entries = Vec::new();
+        for p in &parts {
+            let path = &dir.name(p);
+            let cols = ["image_id", "name", "tier", "weights_sha256", "preprocess"];
+            for b in read_batches(dir, p, Some(&cols))? {
+                let ids = column::<UInt32Array>(&b, "image_id", path)?;
+                let names = column::<StringArray>(&b, "name", path)?;
+                let (tier, sha, pre) = (
+                    column::<StringArray>(&b, "tier", path)?,
+                    column::<StringArray>(&b, "weights_sha256", path)?,
+                    column::<StringArray>(&b, "preprocess", path)?,
+                );
+                for i in 0..b.num_rows() {
+                    let k = DescriptorKind {
+                        tier: tier.value(i).into(),
+                        weights_sha256: sha.value(i).into(),
+                        preprocess: pre.value(i).into(),
+                    };
+                    if let Some(prev) = kind.as_ref().filter(|prev| **prev != k) {
+                        return Err(DatasetError::Value {
+                            path: path.clone(),
+                            record: format!("image {}", ids.value(i)),
+                            field: "tier/weights_sha256/preprocess".into(),
+                            problem: format!(
+                                "descriptors of another kind ({k:?}) than earlier ones ({prev:?})"
+                            ),
+                        });
+                    }
+                    kind = Some(k);
+                    entries.push(Entry {
+                        image_id: ids.value(i),
+                        name: names.value(i).into(),
+                    });
+                }
+            }
+        }
+        entries.sort_by_key(|e| e.image_id);
+        if let Some(w) = entries.windows(2).find(|w| w[0].image_id == w[1].image_id) {
+            return Err(DatasetError::Value {
+                path: dir.name(DESCRIPTORS_DIR),
+                record: format!("image {}", w[0].image_id),
+                field: "image_id".into(),
+                problem: "described twice".into(),
+            });
+        }
+        Ok(kind.map(|kind| Index {
+            kind,
+            entries,
+            parts,
+        }))
+    }
+
+    /// Keep only the photos `keep` accepts (their order stays).
+    pub fn retain(&mut self, keep: impl Fn(&Entry) -> bool) {
+        self.entries.retain(keep);
+    }
+
+    /// Visit every kept descriptor once, with its position in `entries`, part by part in
+    /// file order (image-id order, as style writes them); every row of the parts read is
+    /// checked against its CRC-32 before `f` sees any later one.
+    pub fn visit(&self, dir: &Store, f: &mut dyn FnMut(usize, &[f32])) -> Result<()> {
+        let pos: std::collections::HashMap<u32, usize> = self
+            .entries
+            .iter()
+            .enumerate()
+            .map(|(i, e)| (e.image_id, i))
+            .collect();
+        for p in &self.parts {
+            let path = &dir.name(p);
+            let cols = ["image_id", "descriptor", "descriptor_crc32"];
+            let mut row = 0;
+            for b in crate::parquet_io::batches(dir, p, Some(&cols), VISIT_ROWS)? {
+                let b = b?;
+                let ids = column::<UInt32Array>(&b, "image_id", path)?;
+                let crcs = column::<UInt32Array>(&b, "descriptor_crc32", path)?;
+                let desc = column::<ListArray>(&b, "descriptor", path)?;
+                for i in 0..b.num_rows() {
+                    // Every row is checked, kept or not: a damaged part is refused whole,
+                    // whichever photos a stage reads from it.
+                    let v = row_values(desc, i, path)?;
+                    if let Some(m) = row_mismatch(ids.value(i), crcs.value(i), &v, row + i) {
+                        return Err(m.error(path));
+                    }
+                    if let Some(&at) = pos.get(&ids.value(i)) {
+                        f(at, v.values());
+                    }
+                }
+                row += b.num_rows();
+            }
+        }
+        Ok(())
+    }
+}

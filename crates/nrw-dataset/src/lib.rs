@@ -5,6 +5,7 @@
 pub mod atomic;
 pub mod checks;
 pub mod codec;
+pub mod corpus;
 pub mod depth;
 pub mod descriptors;
 pub mod error;

@@ -208,7 +208,18 @@ fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {
 /// Write a shard atomically at `dir/rel`; payload columns are stored uncompressed (PNG and
 /// EXR are compressed already), metadata columns with zstd.
 pub fn write_shard(dir: &Store, rel: &str, rows: &[ViewRow]) -> Result<FileEntry> {
-    let b = batch(rows)?;
+    write_shard_batch(dir, rel, batch(rows)?)
+}
+
+/// [`write_shard`] of rows given up to it: they are dropped once in Arrow form, so a group's
+/// payloads are held twice at most (Arrow and the encoded file), not three times.
+pub fn write_shard_owned(dir: &Store, rel: &str, rows: Vec<ViewRow>) -> Result<FileEntry> {
+    let b = batch(&rows)?;
+    drop(rows);
+    write_shard_batch(dir, rel, b)
+}
+
+fn write_shard_batch(dir: &Store, rel: &str, b: RecordBatch) -> Result<FileEntry> {
     let mut props = crate::parquet_io::writer_properties_builder(ROW_GROUP_ROWS);
     for c in PAYLOAD_COLUMNS {
         props = props

@@ -30,6 +30,11 @@ fn written_tables() -> Vec<(&'static str, &'static str, SchemaRef)> {
             nrw_dataset::triplets::triplets_schema(),
         ),
         (
+            "corpus.toml",
+            nrw_dataset::corpus::CORPUS_FILE,
+            nrw_dataset::corpus::corpus_schema(),
+        ),
+        (
             "splits.toml",
             nrw_dataset::split::SPLITS_TABLE,
             nrw_dataset::split::splits_schema(),

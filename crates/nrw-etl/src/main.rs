@@ -61,6 +61,8 @@ enum Command {
     Verify(cmd::verify::VerifyArgs),
     /// Merge the work units (`ingest --shard I/N`, `style --shard I/N`) into the dataset's tables and manifest
     Finalize(cmd::finalize::FinalizeArgs),
+    /// Index a many-scene run: one row per scene (counts, verdicts, report, or its error)
+    Corpus(cmd::corpus::CorpusArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -99,6 +101,7 @@ fn main() -> std::process::ExitCode {
         Command::Segment(a) => done(cmd::segment::run(a)),
         Command::Export(a) => done(cmd::export::run(a)),
         Command::Finalize(a) => done(cmd::finalize::run(a)),
+        Command::Corpus(a) => done(cmd::corpus::run(a)),
         Command::Verify(a) => cmd::verify::run(a).map(|ok| code(ok, cmd::verify::EXIT_MISMATCH)),
         Command::Style(a) => done(cmd::style::run(a)),
         Command::Triplets(a) => done(cmd::triplets::run(a)),

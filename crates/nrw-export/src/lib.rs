@@ -33,10 +33,17 @@ pub use tfrecord::tfrecord_name;
 
 use nrw_dataset::reader::Dataset;
 
-/// The train views' style distance matrix (row-major, f64) for the given image ids in that
-/// order, or None when the dataset has no official descriptors. Given by the caller, which
-/// owns the style stage.
-pub type DistMatrix<'a> = &'a (dyn Fn(&[u32]) -> nrw_dataset::Result<Option<Vec<f64>>> + Sync);
+/// The train views' style distance matrix (f64) for the given image ids in that order, as
+/// rows: `n`, rows per block, and a function giving a block of rows (row-major); None when
+/// the dataset has no official descriptors. Given by the caller, which owns the style stage;
+/// rows come block by block so the n × n matrix is never held whole.
+pub type DistMatrix<'a> = &'a (dyn Fn(&[u32]) -> nrw_dataset::Result<Option<DistRows>> + Sync);
+
+/// Blocks of rows of a distance matrix: (rows per block, the block of rows in a range).
+pub type DistRows = (
+    usize,
+    Box<dyn FnMut(std::ops::Range<usize>) -> nrw_dataset::Result<Vec<f64>>>,
+);
 
 /// What some layouts need beyond the dataset, supplied by the caller (which owns the style
 /// stage and the scene's model).

@@ -39,10 +39,21 @@ impl Format for Official {
             .iter()
             .find(|s| s.split == TRAIN)
             .expect("checked");
-        if let Some(m) = dist(&train.image_ids)? {
+        if let Some((block, mut rows)) = dist(&train.image_ids)? {
             let n = train.image_ids.len();
             let file = format!("dist_{}.pckl", job.cfg.name);
-            staged.write(&file, &crate::pickle::matrix_dict("dist_matrix", n, &m))?;
+            let path = staged.out().join(&file);
+            let io = |e| crate::error::ExportError::io(&path, e);
+            staged.write_with(&file, &mut |w| {
+                crate::pickle::write_matrix_dict(
+                    w,
+                    "dist_matrix",
+                    n,
+                    block,
+                    &mut |r| Ok(rows(r)?),
+                    &io,
+                )
+            })?;
             summary.dist_pickle = Some(file);
         }
         Ok(())

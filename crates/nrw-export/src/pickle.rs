@@ -62,9 +62,34 @@ fn dtype_f8(out: &mut Vec<u8>) {
 /// The pickle of `{key: n × n float64 array}` with `values` row-major (length n²).
 pub fn matrix_dict(key: &str, n: usize, values: &[f64]) -> Vec<u8> {
     assert_eq!(values.len(), n * n, "an n × n matrix has n² values");
-    let data_len = values.len() * 8;
+    let mut out = Vec::with_capacity(n * n * 8 + 512);
+    let mut rows = |r: std::ops::Range<usize>| Ok(values[r.start * n..r.end * n].to_vec());
+    write_matrix_dict(
+        &mut out,
+        key,
+        n,
+        n.max(1),
+        &mut rows,
+        &|e: std::io::Error| e,
+    )
+    .expect("writing into memory cannot fail");
+    out
+}
+
+/// [`matrix_dict`] written to `w` block of `block` rows by block, as `rows` gives them:
+/// memory holds one block, not the n² values.
+/// `io` names the destination in a write error.
+pub fn write_matrix_dict<E>(
+    w: &mut dyn std::io::Write,
+    key: &str,
+    n: usize,
+    block: usize,
+    rows: &mut dyn FnMut(std::ops::Range<usize>) -> Result<Vec<f64>, E>,
+    io: &dyn Fn(std::io::Error) -> E,
+) -> Result<(), E> {
+    let data_len = n * n * 8;
     let big = data_len > u32::MAX as usize;
-    let mut out = Vec::with_capacity(data_len + 512);
+    let mut out = Vec::with_capacity(512);
     out.extend_from_slice(&[PROTO, if big { 4 } else { 3 }, EMPTY_DICT]);
     unicode(key, &mut out);
     // numpy.core.multiarray._reconstruct(numpy.ndarray, (0,), b'b')
@@ -88,11 +113,20 @@ pub fn matrix_dict(key: &str, n: usize, values: &[f64]) -> Vec<u8> {
         out.push(BINBYTES);
         out.extend_from_slice(&(data_len as u32).to_le_bytes());
     }
-    for v in values {
-        out.extend_from_slice(&v.to_le_bytes());
+    w.write_all(&out).map_err(io)?;
+    for start in (0..n).step_by(block.max(1)) {
+        let end = (start + block.max(1)).min(n);
+        let values = rows(start..end)?;
+        assert_eq!(
+            values.len(),
+            (end - start) * n,
+            "a block of rows has n values a row"
+        );
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        w.write_all(&bytes).map_err(io)?;
     }
-    out.extend_from_slice(&[TUPLE, BUILD, SETITEM, STOP]);
-    out
+    w.write_all(&[TUPLE, BUILD, SETITEM, STOP]).map_err(io)?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -98,6 +98,22 @@ impl Staged {
         write_file(&self.claim(rel)?, bytes)
     }
 
+    /// Write a claimed `rel` through a buffered writer, creating its folders.
+    pub fn write_with(
+        &self,
+        rel: &str,
+        body: &mut dyn FnMut(&mut dyn std::io::Write) -> Result<()>,
+    ) -> Result<()> {
+        let path = self.claim(rel)?;
+        if let Some(d) = path.parent() {
+            std::fs::create_dir_all(d).map_err(|e| ExportError::io(d, e))?;
+        }
+        let f = std::fs::File::create(&path).map_err(|e| ExportError::io(&path, e))?;
+        let mut w = std::io::BufWriter::new(f);
+        body(&mut w)?;
+        std::io::Write::flush(&mut w).map_err(|e| ExportError::io(&path, e))
+    }
+
     /// Make the finished export visible at its destination, replacing an earlier one whole.
     pub fn publish(self) -> Result<()> {
         let published = match &self.dest {

@@ -7,7 +7,8 @@ use nalgebra::{DMatrix, SymmetricEigen};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::{distance2_f64, exact, validate, KnnError, Neighbours};
+use crate::spill::{Spilled, KCHUNK};
+use crate::{exact, KnnError, Neighbours};
 
 /// A linear map to `rank` dimensions: x ↦ Vᵀ (x − mean).
 #[derive(Debug, Clone)]
@@ -70,45 +71,109 @@ fn orthonormal_columns(y: &[f32], m: usize, l: usize) -> Vec<f32> {
     out
 }
 
+/// Rows per block of a row-major pass times a matrix of `cols` columns: about 64 MiB of f32,
+/// and never fewer rows than GEMM needs to block a product as it blocks one call over every
+/// row (above 64 rows and above 256 products a row block; it picks its kernel from the
+/// shape), unless that is all of them.
+fn row_blocks(n: usize, dim: usize, cols: usize) -> Vec<std::ops::Range<usize>> {
+    let least = 65.max(256 / cols.max(1) + 1);
+    let size = ((64 << 20) / (4 * dim.max(1))).max(least);
+    let mut out: Vec<std::ops::Range<usize>> =
+        (0..n).step_by(size).map(|s| s..(s + size).min(n)).collect();
+    if out.len() > 1 && out.last().is_some_and(|r| r.len() < least) {
+        let last = out.pop().expect("two blocks");
+        out.last_mut().expect("one block").end = last.end;
+    }
+    out
+}
+
+/// (x − shift) · M for every row x of `s`, M given as `cols` × dim (`tb`) or dim × `cols`,
+/// block of rows by block: n × cols, row-major.
+fn times(s: &Spilled, shift: &[f32], m: &[f32], cols: usize, tb: bool) -> Vec<f32> {
+    let (n, dim) = (s.len(), s.dim());
+    let mut out = Vec::with_capacity(n * cols);
+    let mut x = Vec::new();
+    for rows in row_blocks(n, dim, cols) {
+        x.resize(rows.len() * dim, 0f32);
+        s.rows_into(rows.clone(), shift, &mut x);
+        out.extend(matmul(&x, m, rows.len(), dim, cols, tb));
+    }
+    out
+}
+
+/// Yᵀ (X − shift) for Y (n × l, row-major), chunk of dimensions by chunk: l × dim,
+/// row-major. Each value sums over every row in one GEMM.
+fn transposed_times(s: &Spilled, shift: &[f32], y: &[f32], l: usize) -> Vec<f32> {
+    let (n, dim) = (s.len(), s.dim());
+    let yt: Vec<f32> = (0..l)
+        .flat_map(|j| (0..n).map(move |i| (i, j)))
+        .map(|(i, j)| y[i * l + j])
+        .collect();
+    let mut out = vec![0f32; l * dim];
+    let mut chunk = vec![0f32; n * KCHUNK.min(dim)];
+    for k0 in (0..dim).step_by(KCHUNK) {
+        let kc = KCHUNK.min(dim - k0);
+        let c = &mut chunk[..n * kc];
+        s.chunk(k0, kc, c);
+        c.chunks_exact_mut(kc).for_each(|r| {
+            r.iter_mut()
+                .zip(&shift[k0..k0 + kc])
+                .for_each(|(v, m)| *v -= m)
+        });
+        let part = matmul(&yt, c, l, n, kc, false);
+        for j in 0..l {
+            out[j * dim + k0..j * dim + k0 + kc].copy_from_slice(&part[j * kc..(j + 1) * kc]);
+        }
+    }
+    out
+}
+
+/// Mean of every dimension, summed in f64 over the rows in order.
+fn mean_of(s: &Spilled) -> Vec<f32> {
+    let (n, dim) = (s.len(), s.dim());
+    let mut mean = vec![0f64; dim];
+    let mut chunk = vec![0f32; n * KCHUNK.min(dim)];
+    for k0 in (0..dim).step_by(KCHUNK) {
+        let kc = KCHUNK.min(dim - k0);
+        s.chunk(k0, kc, &mut chunk);
+        for r in chunk[..n * kc].chunks_exact(kc) {
+            mean[k0..k0 + kc]
+                .iter_mut()
+                .zip(r)
+                .for_each(|(m, v)| *m += *v as f64);
+        }
+    }
+    mean.iter().map(|m| (m / n as f64) as f32).collect()
+}
+
 impl Pca {
     /// Fit the top `rank` principal directions of `rows` (deterministic for a seed).
     pub fn fit(rows: &[Vec<f32>], rank: usize, seed: u64) -> Result<Pca, KnnError> {
-        let dim = validate(rows)?;
-        let n = rows.len();
+        Ok(Pca::fit_spilled(&Spilled::from_rows(rows)?, rank, seed))
+    }
+
+    /// [`Pca::fit`] of descriptors read in passes: six passes over the chunks, memory
+    /// O((N + D) · (rank + 10)) beside a block of rows.
+    pub fn fit_spilled(s: &Spilled, rank: usize, seed: u64) -> Pca {
+        let (n, dim) = (s.len(), s.dim());
         let rank = rank.min(dim).min(n.saturating_sub(1)).max(1);
-        let mut mean = vec![0f64; dim];
-        for r in rows {
-            for (m, v) in mean.iter_mut().zip(r) {
-                *m += *v as f64;
-            }
-        }
-        let mean: Vec<f32> = mean.iter().map(|m| (m / n as f64) as f32).collect();
-        let x: Vec<f32> = rows
-            .iter()
-            .flat_map(|r| r.iter().zip(&mean).map(|(v, m)| v - m))
-            .collect();
+        let mean = mean_of(s);
         let l = (rank + 10).min(dim).min(n);
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let omega: Vec<f32> = (0..dim * l).map(|_| gauss(&mut rng)).collect();
         // Range of X: Y = X Ω, one power iteration (X Xᵀ) Y for sharper directions.
-        let mut y = orthonormal_columns(&matmul(&x, &omega, n, dim, l, false), n, l);
-        // Z = Xᵀ Y (dim × l): X is n × dim row-major, so Xᵀ Y = (Yᵀ X)ᵀ.
-        let yt: Vec<f32> = (0..l)
-            .flat_map(|j| (0..n).map(move |i| (i, j)))
-            .map(|(i, j)| y[i * l + j])
-            .collect();
-        let b0 = matmul(&yt, &x, l, n, dim, false); // l × dim
+        let y = orthonormal_columns(&times(s, &mean, &omega, l, false), n, l);
+        // Z = Xᵀ Y (dim × l) = (Yᵀ X)ᵀ.
+        let b0 = transposed_times(s, &mean, &y, l); // l × dim
         let z: Vec<f32> = (0..dim)
             .flat_map(|d| (0..l).map(move |j| (d, j)))
             .map(|(d, j)| b0[j * dim + d])
             .collect();
+        drop(b0);
         let z = orthonormal_columns(&z, dim, l);
-        y = orthonormal_columns(&matmul(&x, &z, n, dim, l, false), n, l);
-        let yt: Vec<f32> = (0..l)
-            .flat_map(|j| (0..n).map(move |i| (i, j)))
-            .map(|(i, j)| y[i * l + j])
-            .collect();
-        let b = matmul(&yt, &x, l, n, dim, false); // l × dim, X ≈ Y B
+        let y = orthonormal_columns(&times(s, &mean, &z, l, false), n, l);
+        drop(z);
+        let b = transposed_times(s, &mean, &y, l); // l × dim, X ≈ Y B
                                                    // B Bᵀ = U Σ² Uᵀ; principal directions V = Bᵀ U Σ⁻¹.
         let bbt = matmul(&b, &b, l, dim, l, true);
         let eig = SymmetricEigen::new(DMatrix::from_fn(l, l, |i, j| bbt[i * l + j] as f64));
@@ -128,21 +193,25 @@ impl Pca {
                 basis[r * dim + d] = (acc / s) as f32;
             }
         }
-        Ok(Pca {
+        Pca {
             mean,
             basis,
             rank,
             dim,
-        })
+        }
     }
 
     /// Reduced coordinates of every row.
     pub fn project(&self, rows: &[Vec<f32>]) -> Vec<Vec<f32>> {
-        let x: Vec<f32> = rows
-            .iter()
-            .flat_map(|r| r.iter().zip(&self.mean).map(|(v, m)| v - m))
-            .collect();
-        let z = matmul(&x, &self.basis, rows.len(), self.dim, self.rank, true);
+        match Spilled::from_rows(rows) {
+            Ok(s) => self.project_spilled(&s),
+            Err(_) => Vec::new(),
+        }
+    }
+
+    /// Reduced coordinates of every row of descriptors read in passes.
+    pub fn project_spilled(&self, s: &Spilled) -> Vec<Vec<f32>> {
+        let z = times(s, &self.mean, &self.basis, self.rank, true);
         z.chunks(self.rank).map(|c| c.to_vec()).collect()
     }
 }
@@ -156,24 +225,51 @@ pub fn approximate(
     oversample: usize,
     seed: u64,
 ) -> Result<Vec<Neighbours>, KnnError> {
-    let n = rows.len();
-    validate(rows)?;
+    approximate_spilled(&Spilled::from_rows(rows)?, k, rank, oversample, seed)
+}
+
+/// [`approximate`] of descriptors read in passes: the same lists, to the bit.
+pub fn approximate_spilled(
+    s: &Spilled,
+    k: usize,
+    rank: usize,
+    oversample: usize,
+    seed: u64,
+) -> Result<Vec<Neighbours>, KnnError> {
+    let n = s.len();
     if k == 0 || k + 1 > n {
         return Err(KnnError::TooFew { k, need: k + 1, n });
     }
-    let pca = Pca::fit(rows, rank, seed)?;
-    let reduced = pca.project(rows);
+    let pca = Pca::fit_spilled(s, rank, seed);
+    let reduced = pca.project_spilled(s);
     let c = (k * oversample.max(1)).min(n - 1);
     let cand = exact(&reduced, c)?;
+    let mut pairs: Vec<(u32, u32)> = cand
+        .iter()
+        .enumerate()
+        .flat_map(|(i, nb)| {
+            nb.nearest
+                .iter()
+                .chain(&nb.furthest)
+                .map(move |p| (i.min(p.0) as u32, i.max(p.0) as u32))
+        })
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    let d = s.pair_distances(&pairs);
+    let exact_d = |i: usize, j: usize| {
+        let key = (i.min(j) as u32, i.max(j) as u32);
+        d[pairs
+            .binary_search(&key)
+            .expect("every candidate pair was measured")]
+    };
     Ok(cand
         .into_iter()
         .enumerate()
         .map(|(i, nb)| {
             let rerank = |ids: Vec<(usize, f64)>, far: bool| {
-                let mut v: Vec<(usize, f64)> = ids
-                    .into_iter()
-                    .map(|(j, _)| (j, distance2_f64(&rows[i], &rows[j])))
-                    .collect();
+                let mut v: Vec<(usize, f64)> =
+                    ids.into_iter().map(|(j, _)| (j, exact_d(i, j))).collect();
                 if far {
                     v.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
                 } else {

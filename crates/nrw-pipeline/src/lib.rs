@@ -7,6 +7,7 @@
 //! does the groups it owns and writes only its own files; [`finalize::finalize`] merges the
 //! units into the same bytes a single process writes.
 
+pub mod corpus;
 pub mod error;
 pub mod export;
 pub mod finalize;

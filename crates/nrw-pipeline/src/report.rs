@@ -376,6 +376,23 @@ fn model(m: &ModelSummary) -> Report {
     r
 }
 
+/// One scene of a corpus index, as `nrw-etl corpus` prints it.
+pub fn corpus_line(r: &nrw_dataset::corpus::CorpusRow) -> String {
+    match &r.error {
+        Some(e) => format!("{}: {} ({}): {e}", r.name, r.status, r.scene),
+        None => format!(
+            "{}: {}, {} registered, {} kept, {} train / {} val; report {}",
+            r.name,
+            r.status,
+            r.registered.unwrap_or(0),
+            r.kept.unwrap_or(0),
+            r.train.unwrap_or(0),
+            r.val.unwrap_or(0),
+            r.report.as_deref().unwrap_or("-")
+        ),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

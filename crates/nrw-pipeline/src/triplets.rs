@@ -5,6 +5,7 @@ use nrw_dataset::split::TRAIN;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
+use nrw_dataset::descriptors::{Entry, Index};
 use nrw_dataset::triplets::{write_triplets, TripletInfo, TripletRow};
 use nrw_dataset::{Manifest, Store};
 
@@ -92,10 +93,51 @@ pub fn triplets(cfg: &TripletsConfig) -> Result<TripletsSummary> {
     crate::timing::timed(store, "triplets", || run(cfg, store))
 }
 
+/// A problem of the descriptors themselves, naming the photo (row `row` of `entries`).
+fn descriptor_error(
+    dataset: &std::path::Path,
+    entries: &[Entry],
+    e: nrw_knn::KnnError,
+) -> PipelineError {
+    let photo = |row: usize| {
+        entries.get(row).map_or(format!("row {row}"), |r| {
+            format!("photo {} (image {})", r.name, r.image_id)
+        })
+    };
+    match e {
+        nrw_knn::KnnError::NotFinite { row, index, value } => PipelineError::dataset(
+            dataset,
+            format!(
+                "descriptor of {} has value {value} at {index}: not finite",
+                photo(row)
+            ),
+        ),
+        nrw_knn::KnnError::Dimension { row, len, dim } => PipelineError::dataset(
+            dataset,
+            format!(
+                "descriptor of {} has {len} values, the others {dim}",
+                photo(row)
+            ),
+        ),
+        other => PipelineError::dataset(dataset, other.to_string()),
+    }
+}
+
+/// The descriptors of `index` copied once into a scratch file (chunk-major, see
+/// `nrw_knn::spill`), read from the dataset a few rows at a time.
+pub(crate) fn spill(dataset: &Store, index: &Index) -> Result<nrw_knn::Spilled> {
+    let n = index.entries.len();
+    nrw_knn::Spilled::from_source(n, |sink| index.visit(dataset, sink)).map_err(|e| match e {
+        nrw_knn::StreamError::Knn(e) => descriptor_error(&dataset.root(), &index.entries, e),
+        nrw_knn::StreamError::Source(e) => e.into(),
+        scratch => PipelineError::dataset(dataset.root(), scratch.to_string()),
+    })
+}
+
 fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
     require_views(store)?;
     let mut manifest = Manifest::read(store)?;
-    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(store)? else {
+    let Some(mut index) = Index::read(store)? else {
         return Err(PipelineError::dataset(
             &cfg.dataset,
             format!(
@@ -104,12 +146,10 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
             ),
         ));
     };
-    let described: BTreeSet<u32> = rows.iter().map(|r| r.image_id).collect();
+    let described: BTreeSet<u32> = index.entries.iter().map(|r| r.image_id).collect();
     let (scope, allowed) = in_scope(cfg, store, &described)?;
-    let rows: Vec<_> = rows
-        .into_iter()
-        .filter(|r| allowed.as_ref().is_none_or(|a| a.contains(&r.image_id)))
-        .collect();
+    index.retain(|r| allowed.as_ref().is_none_or(|a| a.contains(&r.image_id)));
+    let rows = &index.entries;
     if cfg.k + 1 > rows.len() {
         return Err(PipelineError::config(Setting::K, format!(
             "{} needs at least {} photos in scope {scope}, found {}; use --k {} or fewer (dataset {})",
@@ -120,28 +160,22 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
             cfg.dataset.display()
         )));
     }
-    let desc: Vec<Vec<f32>> = rows.iter().map(|r| r.descriptor.clone()).collect();
-    let name_err = |e: nrw_knn::KnnError| match e {
-        nrw_knn::KnnError::NotFinite { row, index, value } => PipelineError::dataset(
-            &cfg.dataset,
-            format!(
-                "descriptor of photo {} (image {}) has value {value} at {index}: not finite",
-                rows[row].name, rows[row].image_id
-            ),
-        ),
-        other => PipelineError::dataset(&cfg.dataset, other.to_string()),
-    };
+    let desc = spill(store, &index)?;
+    let name_err = |e| descriptor_error(&cfg.dataset, rows, e);
     let (found, method, recall) = match cfg.pca {
         None => (
-            nrw_knn::exact(&desc, cfg.k).map_err(name_err)?,
+            nrw_knn::exact_spilled(&desc, cfg.k).map_err(name_err)?,
             "exact".to_string(),
             None,
         ),
         Some(rank) => {
             let approx =
-                nrw_knn::approx::approximate(&desc, cfg.k, rank, 3, 0).map_err(name_err)?;
+                nrw_knn::approx::approximate_spilled(&desc, cfg.k, rank, 3, 0).map_err(name_err)?;
             let recall = (desc.len() <= cfg.check_up_to)
-                .then(|| nrw_knn::exact(&desc, cfg.k).map(|e| nrw_knn::approx::recall(&e, &approx)))
+                .then(|| {
+                    nrw_knn::exact_spilled(&desc, cfg.k)
+                        .map(|e| nrw_knn::approx::recall(&e, &approx))
+                })
                 .transpose()
                 .map_err(name_err)?;
             (approx, format!("pca-{rank}"), recall)
@@ -160,7 +194,7 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
         })
         .collect();
     let info = TripletInfo {
-        tier: kind.tier.clone(),
+        tier: index.kind.tier.clone(),
         method: method.clone(),
         scope: scope.into(),
         recall,
@@ -173,32 +207,38 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
     Ok(TripletsSummary {
         anchors: table.len(),
         k: cfg.k,
-        tier: kind.tier,
+        tier: index.kind.tier,
         scope: scope.into(),
         method,
         recall,
     })
 }
 
+/// Bytes of pair state while a block of distance-matrix rows is summed (80 bytes a value).
+const DIST_BLOCK_BYTES: usize = 256 << 20;
+
 /// The style distance matrix of the given views in that order, from the dataset's `official`
-/// descriptors (`dist_<name>.pckl` of the official export), or None when the dataset holds
-/// descriptors of another tier or none. `crop` is the export's: a crop smaller than the
-/// descriptors' would make the published code crop the exported photos differently.
+/// descriptors (`dist_<name>.pckl` of the official export), as blocks of rows; None when the
+/// dataset holds descriptors of another tier or none (known from the index, before any value
+/// is read). `crop` is the export's: a crop smaller than the descriptors' would make the
+/// published code crop the exported photos differently.
 pub fn official_distance_matrix(
     dataset: &Store,
     ids: &[u32],
     crop: Option<u32>,
-) -> nrw_dataset::Result<Option<Vec<f64>>> {
-    let Some((kind, rows)) = nrw_dataset::descriptors::read_all(dataset)? else {
+) -> nrw_dataset::Result<Option<nrw_export::DistRows>> {
+    let Some(mut index) = Index::read(dataset)? else {
         return Ok(None);
     };
-    let Some(nrw_style::Tier::Official { crop: tier_crop }) = nrw_style::Tier::parse(&kind.tier)
+    let Some(nrw_style::Tier::Official { crop: tier_crop }) =
+        nrw_style::Tier::parse(&index.kind.tier)
     else {
         return Ok(None);
     };
+    let tier = index.kind.tier.clone();
     let field = |problem: String| nrw_dataset::DatasetError::Value {
         path: dataset.name(nrw_dataset::descriptors::DESCRIPTORS_DIR),
-        record: format!("tier {}", kind.tier),
+        record: format!("tier {tier}"),
         field: "descriptor".into(),
         problem,
     };
@@ -207,19 +247,29 @@ pub fn official_distance_matrix(
             "the descriptors are of a {tier_crop}×{tier_crop} crop but the export crops to {c}×{c}; describe with --tier official-{c} or export with a larger --crop"
         )));
     }
-    let by_id: BTreeMap<u32, &[f32]> = rows
-        .iter()
-        .map(|r| (r.image_id, r.descriptor.as_slice()))
-        .collect();
-    let picked: Vec<&[f32]> = ids
-        .iter()
-        .map(|id| {
-            by_id.get(id).copied().ok_or_else(|| {
-                field(format!(
-                    "image {id} has no descriptor; rerun `nrw-etl style` on the dataset"
-                ))
-            })
-        })
-        .collect::<nrw_dataset::Result<_>>()?;
-    Ok(Some(nrw_knn::distance_matrix(&picked)))
+    let want: BTreeMap<u32, usize> = ids.iter().enumerate().map(|(p, id)| (*id, p)).collect();
+    index.retain(|e| want.contains_key(&e.image_id));
+    if let Some(id) = ids.iter().find(|id| {
+        index
+            .entries
+            .binary_search_by_key(*id, |e| e.image_id)
+            .is_err()
+    }) {
+        return Err(field(format!(
+            "image {id} has no descriptor; rerun `nrw-etl style` on the dataset"
+        )));
+    }
+    let order: Vec<usize> = index.entries.iter().map(|e| want[&e.image_id]).collect();
+    let spilled = nrw_knn::Spilled::from_source(ids.len(), |sink| {
+        index.visit(dataset, &mut |p, v| sink(order[p], v))
+    })
+    .map_err(|e| match e {
+        nrw_knn::StreamError::Source(e) => e,
+        other => field(other.to_string()),
+    })?;
+    let block = (DIST_BLOCK_BYTES / (80 * ids.len().max(1))).max(1);
+    Ok(Some((
+        block,
+        Box::new(move |rows| Ok(spilled.distance_rows(rows))),
+    )))
 }

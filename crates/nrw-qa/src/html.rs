@@ -6,7 +6,6 @@ use nrw_dataset::split::{TRAIN, VAL};
 use std::fmt::Write as _;
 use std::path::Path;
 
-use nrw_dataset::descriptors::DescriptorRow;
 use nrw_dataset::reader::Dataset;
 use nrw_dataset::scene::VerdictKind;
 
@@ -22,7 +21,7 @@ pub struct Inputs<'a> {
     pub figures: &'a Figures,
     pub images: &'a [ImageRow],
     pub triplets: Option<&'a Triplets>,
-    pub descriptors: Option<&'a Vec<DescriptorRow>>,
+    pub descriptors: Option<&'a nrw_dataset::descriptors::Index>,
     pub max_empty: f64,
     pub min_side: f64,
 }
@@ -413,25 +412,30 @@ fn split(h: &mut String, inp: &Inputs) -> Result<()> {
 
 /// The first two principal components of the descriptors (the randomised PCA the approximate
 /// k-NN path uses), as plot coordinates; empty when they cannot be fitted.
-fn pca2(rows: &[Vec<f32>]) -> Vec<(f64, f64)> {
-    let Ok(pca) = nrw_knn::approx::Pca::fit(rows, 2, 0) else {
-        return Vec::new();
+fn pca2(
+    dir: &nrw_dataset::Store,
+    index: &nrw_dataset::descriptors::Index,
+) -> Result<Vec<(f64, f64)>> {
+    let n = index.entries.len();
+    let spilled = match nrw_knn::Spilled::from_source(n, |sink| index.visit(dir, sink)) {
+        Ok(s) => s,
+        Err(nrw_knn::StreamError::Source(e)) => return Err(e.into()),
+        // Descriptors the PCA cannot fit (not finite, mixed lengths) get no chart, as before.
+        Err(_) => return Ok(Vec::new()),
     };
-    pca.project(rows)
+    let pca = nrw_knn::approx::Pca::fit_spilled(&spilled, 2, 0);
+    Ok(pca
+        .project_spilled(&spilled)
         .into_iter()
         .map(|p| (p[0] as f64, p.get(1).copied().unwrap_or(0.0) as f64))
-        .collect()
+        .collect())
 }
 
 fn triplets(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<()> {
     h.push_str("<h2>Style neighbours</h2>");
-    if let Some(desc) = inp.descriptors.filter(|d| d.len() >= 2) {
-        let xy = pca2(
-            &desc
-                .iter()
-                .map(|r| r.descriptor.clone())
-                .collect::<Vec<_>>(),
-        );
+    if let Some(index) = inp.descriptors.filter(|d| d.entries.len() >= 2) {
+        let desc = &index.entries;
+        let xy = pca2(inp.dir, index)?;
         let split_of = |id: u32| {
             inp.images
                 .iter()

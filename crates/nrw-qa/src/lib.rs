@@ -127,7 +127,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
     let images = tables::images(dir)?;
     let triplets = tables::triplets(dir, 3)?;
     let shard_rows = tables::shard_rows(&manifest);
-    let descriptors = nrw_dataset::descriptors::read_all(dir)?;
+    let descriptors = nrw_dataset::descriptors::Index::read(dir)?;
     let timings = nrw_dataset::timings::read(dir);
     let kept: Vec<&ImageRow> = images
         .iter()
@@ -157,7 +157,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
             .iter()
             .filter(|r| r.split.as_deref() == Some(VAL))
             .count(),
-        descriptors: descriptors.as_ref().map_or(0, |d| d.1.len()),
+        descriptors: descriptors.as_ref().map_or(0, |d| d.entries.len()),
     };
     let p = &manifest.parameters;
     // Ingest always records its filters; their defaults live in nrw-render alone, so a
@@ -216,7 +216,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         figures: &figures,
         images: &images,
         triplets: triplets.as_ref(),
-        descriptors: descriptors.as_ref().map(|d| &d.1),
+        descriptors: descriptors.as_ref(),
         max_empty,
         min_side: ingest.min_photo_side as f64,
     })?;

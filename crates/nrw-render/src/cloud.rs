@@ -70,6 +70,103 @@ fn spread(mut v: u64) -> u64 {
     v
 }
 
+/// A cloud's points re-centred and cast to f32 as they are read (a [`nrw_colmap::VertexSink`]),
+/// so a PLY becomes a [`RenderCloud`] without ever holding its f64 positions: 12 bytes a
+/// point, 15 with colour, 27 with normals, plus 16 while [`LocalPoints::finish`] sorts.
+#[derive(Debug, Default)]
+pub struct LocalPoints {
+    origin: DVec3,
+    xyz: [Vec<f32>; 3],
+    colors: Option<Vec<[u8; 3]>>,
+    normals: Option<Vec<Vec3>>,
+}
+
+impl LocalPoints {
+    /// No point yet; positions will be relative to `origin`.
+    pub fn new(origin: DVec3) -> LocalPoints {
+        LocalPoints {
+            origin,
+            ..Default::default()
+        }
+    }
+
+    /// Add one world point.
+    pub fn push(&mut self, p: DVec3, color: Option<[u8; 3]>, normal: Option<[f32; 3]>) {
+        // Precision is given up here: positions become f32 only after subtracting the
+        // origin in f64, so georeferenced clouds keep millimetres.
+        let l = (p - self.origin).as_vec3();
+        for a in 0..3 {
+            self.xyz[a].push(l[a]);
+        }
+        if let (Some(c), Some(v)) = (self.colors.as_mut(), color) {
+            c.push(v);
+        }
+        if let (Some(n), Some(v)) = (self.normals.as_mut(), normal) {
+            n.push(Vec3::from_array(v));
+        }
+    }
+
+    /// The cloud in Morton order with its chunks (the arrays are permuted in place).
+    pub fn finish(self) -> RenderCloud {
+        RenderCloud::from_local(self)
+    }
+}
+
+impl nrw_colmap::VertexSink for LocalPoints {
+    fn begin(&mut self, capacity: usize, normals: bool, colors: bool) {
+        self.xyz.iter_mut().for_each(|a| a.reserve_exact(capacity));
+        self.colors = colors.then(|| Vec::with_capacity(capacity));
+        self.normals = normals.then(|| Vec::with_capacity(capacity));
+    }
+    fn push(&mut self, xyz: DVec3, normal: Option<[f32; 3]>, color: Option<[u8; 3]>) {
+        LocalPoints::push(self, xyz, color, normal);
+    }
+}
+
+/// Move element `order[i].1` to position i for every i, in place, cycle by cycle (`order`
+/// is consumed as the visited marks: u64::MAX is never a Morton key of 63 bits).
+fn permute(order: &mut [(u64, u32)], mv: &mut dyn FnMut(Move)) {
+    for start in 0..order.len() {
+        if order[start].0 == u64::MAX {
+            continue;
+        }
+        mv(Move::Save(start));
+        let mut j = start;
+        loop {
+            let src = order[j].1 as usize;
+            order[j].0 = u64::MAX;
+            if src == start {
+                mv(Move::Restore(j));
+                break;
+            }
+            mv(Move::Copy { from: src, to: j });
+            j = src;
+        }
+    }
+}
+
+/// One step of [`permute`]'s cycle walk.
+#[derive(Clone, Copy)]
+enum Move {
+    /// Keep element i aside (the cycle's first).
+    Save(usize),
+    Copy {
+        from: usize,
+        to: usize,
+    },
+    /// Put the kept element at i.
+    Restore(usize),
+}
+
+/// Apply a [`Move`] to one array with its one-element stash.
+fn apply<T: Copy + Default>(v: &mut [T], stash: &mut T, m: Move) {
+    match m {
+        Move::Save(i) => *stash = v[i],
+        Move::Copy { from, to } => v[to] = v[from],
+        Move::Restore(i) => v[i] = *stash,
+    }
+}
+
 impl RenderCloud {
     /// Build from world positions (f64) and optional channels, re-centred on `origin`.
     pub fn new(
@@ -78,14 +175,29 @@ impl RenderCloud {
         colors: Option<&[[u8; 3]]>,
         normals: Option<&[[f32; 3]]>,
     ) -> RenderCloud {
-        let n = world.len();
-        // Precision is given up here: positions become f32 only after subtracting the
-        // origin in f64, so georeferenced clouds keep millimetres.
-        let local: Vec<Vec3> = world.iter().map(|p| (*p - origin).as_vec3()).collect();
+        let mut local = LocalPoints::new(origin);
+        nrw_colmap::VertexSink::begin(&mut local, world.len(), normals.is_some(), colors.is_some());
+        for (i, p) in world.iter().enumerate() {
+            local.push(*p, colors.map(|c| c[i]), normals.map(|n| n[i]));
+        }
+        local.finish()
+    }
+
+    /// Sort local points into Morton order (in place: one 16-byte key a point beside them)
+    /// and cut them into chunks with bounds.
+    fn from_local(points: LocalPoints) -> RenderCloud {
+        let LocalPoints {
+            origin,
+            mut xyz,
+            mut colors,
+            mut normals,
+        } = points;
+        let n = xyz[0].len();
+        let at = |xyz: &[Vec<f32>; 3], i: usize| Vec3::new(xyz[0][i], xyz[1][i], xyz[2][i]);
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for p in &local {
-            lo = lo.min(*p);
-            hi = hi.max(*p);
+        for i in 0..n {
+            lo = lo.min(at(&xyz, i));
+            hi = hi.max(at(&xyz, i));
         }
         let extent = if n > 0 {
             (hi - lo).max_element().max(1e-6)
@@ -94,11 +206,9 @@ impl RenderCloud {
         };
         // Morton order on a 2^21 grid keeps chunks compact; ties keep input order.
         let scale = ((1u64 << 21) - 1) as f32 / extent;
-        let mut order: Vec<(u64, u32)> = local
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let q = ((*p - lo) * scale).max(Vec3::ZERO);
+        let mut order: Vec<(u64, u32)> = (0..n)
+            .map(|i| {
+                let q = ((at(&xyz, i) - lo) * scale).max(Vec3::ZERO);
                 (
                     spread(q.x as u64) | spread(q.y as u64) << 1 | spread(q.z as u64) << 2,
                     i as u32,
@@ -106,28 +216,31 @@ impl RenderCloud {
             })
             .collect();
         order.sort_unstable();
-        let positions: Vec<Vec3> = order.iter().map(|&(_, i)| local[i as usize]).collect();
-        let xyz = [0, 1, 2].map(|a| positions.iter().map(|p| p[a]).collect());
-        let colors = colors.map(|c| order.iter().map(|&(_, i)| c[i as usize]).collect());
-        let normals = normals.map(|v| {
-            order
-                .iter()
-                .map(|&(_, i)| Vec3::from_array(v[i as usize]))
-                .collect()
+        let (mut sx, mut sc, mut sn) = ([0f32; 3], [0u8; 3], Vec3::ZERO);
+        permute(&mut order, &mut |m| {
+            for (a, s) in xyz.iter_mut().zip(sx.iter_mut()) {
+                apply(a, s, m);
+            }
+            if let Some(c) = colors.as_mut() {
+                apply(c, &mut sc, m);
+            }
+            if let Some(v) = normals.as_mut() {
+                apply(v, &mut sn, m);
+            }
         });
-        let chunks = positions
-            .chunks(CHUNK_POINTS)
-            .enumerate()
-            .map(|(k, c)| {
+        drop(order);
+        let chunks = (0..n)
+            .step_by(CHUNK_POINTS)
+            .map(|s| {
+                let e = (s + CHUNK_POINTS).min(n);
                 let (mut mn, mut mx) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-                for p in c {
-                    mn = mn.min(*p);
-                    mx = mx.max(*p);
+                for i in s..e {
+                    mn = mn.min(at(&xyz, i));
+                    mx = mx.max(at(&xyz, i));
                 }
-                let start = (k * CHUNK_POINTS) as u32;
                 Chunk {
-                    start,
-                    end: start + c.len() as u32,
+                    start: s as u32,
+                    end: e as u32,
                     min: mn,
                     max: mx,
                 }

@@ -1,6 +1,7 @@
 //! One module per subcommand: each turns its arguments into a stage's config, calls the
 //! stage in nrw-pipeline, and prints what it did.
 
+pub mod corpus;
 pub mod demo;
 pub mod export;
 pub mod finalize;

@@ -4,17 +4,23 @@
 use super::*;
 use nrw_dataset::provenance::DenoiseRecord;
 
-/// A cloud as read, before clean-up: f64 positions, its channels, and per point where it
-/// is seen from (the mean centre of the cameras that observe a sparse point; the scene's
-/// mean camera centre for a dense cloud, which has no tracks).
-pub(super) struct RawCloud {
-    positions: Vec<glam::DVec3>,
-    colors: Option<Vec<[u8; 3]>>,
-    normals: Option<Vec<[f32; 3]>>,
-    seen_from: Vec<glam::DVec3>,
+/// A cloud as read, before clean-up: straight into f32 columns when no clean-up needs more
+/// (a dense cloud without --denoise or --estimate-normals: 27 bytes a point at most), else
+/// f64 positions, its channels, and per point where it is seen from (the mean centre of the
+/// cameras that observe a sparse point; the scene's mean camera centre for a dense cloud,
+/// which has no tracks).
+pub(super) enum RawCloud {
+    /// Read straight into the renderer's f32 columns: nothing asked for the f64 positions.
+    Local(nrw_render::cloud::LocalPoints),
+    /// World positions in f64, for the cleaning steps that need them.
+    World {
+        positions: Vec<glam::DVec3>,
+        colors: Option<Vec<[u8; 3]>>,
+        normals: Option<Vec<[f32; 3]>>,
+        seen_from: Vec<glam::DVec3>,
+    },
 }
 
-/// Which cloud to render, what it is called, and the file it came from (if any).
 pub(super) fn point_source(
     cfg: &IngestConfig,
     scene: &nrw_colmap::Scene,
@@ -28,9 +34,14 @@ pub(super) fn point_source(
         .collect();
     let mean_centre = centres.values().copied().sum::<glam::DVec3>() / centres.len().max(1) as f64;
     match candidate {
+        Some(p) if cfg.denoise.is_none() && cfg.estimate_normals.is_none() => {
+            let mut local = nrw_render::cloud::LocalPoints::new(rec.scene_origin());
+            nrw_colmap::read_ply_file_into(&p, &mut local)?;
+            Ok((RawCloud::Local(local), "ply".into(), Some(p)))
+        }
         Some(p) => {
             let cloud = read_ply(&p)?;
-            let raw = RawCloud {
+            let raw = RawCloud::World {
                 seen_from: vec![mean_centre; cloud.positions.len()],
                 positions: cloud.positions,
                 colors: cloud.colors,
@@ -39,7 +50,7 @@ pub(super) fn point_source(
             Ok((raw, "ply".into(), Some(p)))
         }
         None if !rec.points.is_empty() => {
-            let raw = RawCloud {
+            let raw = RawCloud::World {
                 positions: rec.points.values().map(|p| p.xyz).collect(),
                 colors: Some(rec.points.values().map(|p| p.rgb).collect()),
                 normals: None,
@@ -86,12 +97,15 @@ pub(super) fn render_cloud(
     warnings: &mut Vec<String>,
 ) -> (RenderCloud, Cleaned) {
     let mut report = Cleaned::default();
-    let RawCloud {
-        mut positions,
-        mut colors,
-        mut normals,
-        mut seen_from,
-    } = raw;
+    let (mut positions, mut colors, mut normals, mut seen_from) = match raw {
+        RawCloud::Local(local) => return (local.finish(), report),
+        RawCloud::World {
+            positions,
+            colors,
+            normals,
+            seen_from,
+        } => (positions, colors, normals, seen_from),
+    };
     if let Some((k, sigma)) = cfg.denoise {
         let (keep, r) = nrw_render::clean::statistical_outliers(&positions, origin, k, sigma);
         keep_where(&mut positions, &keep);

@@ -201,18 +201,24 @@ pub(super) fn run_group(
             r
         })
         .collect::<Result<_>>()?;
-    let rows: Vec<ViewRow> = results.iter().filter_map(|(_, r)| r.clone()).collect();
+    // Rows move into the shard writer (no copy: a group's encoded rows are its largest
+    // state after the cloud).
+    let (outcomes, rows): (Vec<ImageOutcome>, Vec<Option<ViewRow>>) = results.into_iter().unzip();
+    let kept: Vec<bool> = rows.iter().map(Option::is_some).collect();
+    let rows: Vec<ViewRow> = rows.into_iter().flatten().collect();
     let rel = nrw_dataset::views::shard_path(g);
-    let shard = if rows.is_empty() {
-        None
-    } else {
-        Some(nrw_dataset::write_shard(store, &rel, &rows)?)
+    let (written, shard) = match rows.len() {
+        0 => (0, None),
+        n => (
+            n,
+            Some(nrw_dataset::views::write_shard_owned(store, &rel, rows)?),
+        ),
     };
     let images = ids
         .iter()
-        .zip(results)
+        .zip(outcomes.into_iter().zip(kept))
         .map(|(id, (mut o, row))| {
-            if row.is_some() {
+            if row {
                 o.shard = Some(rel.clone());
             }
             GroupImage {
@@ -228,5 +234,5 @@ pub(super) fn run_group(
         images,
     };
     units::write_record(store, &units::group_record_path(units::INGEST, g), &record)?;
-    Ok(rows.len())
+    Ok(written)
 }

@@ -1,0 +1,30 @@
+//! `nrw-etl corpus`: the index of a many-scene run (what the Ray driver's `--scenes` calls).
+
+use clap::Args;
+
+use crate::error::Result;
+
+/// Arguments of `corpus`.
+#[derive(Debug, Args)]
+#[command(
+    after_help = "Writes OUT/corpus.parquet (schemas/corpus.toml), one row per scene.
+Example: nrw-etl corpus s3://b/corpus --entries '[{\"scene\": \"/data/a\", \"name\": \"a\",
+\"dataset\": \"s3://b/corpus/a\"}, {\"scene\": \"/data/b\", \"name\": \"b\",
+\"dataset\": \"s3://b/corpus/b\", \"error\": \"ingest: ...\"}]'"
+)]
+pub struct CorpusArgs {
+    /// Corpus prefix: a folder or an object-store URL (s3://, gs://, az://)
+    pub out: String,
+    /// The scenes as a JSON array of {scene, name, dataset, error (if the scene failed)}
+    #[arg(long)]
+    pub entries: String,
+}
+
+/// Run `corpus`: write the index and print one line per scene.
+pub fn run(args: &CorpusArgs) -> Result<()> {
+    let entries = nrw_pipeline::corpus::parse_entries(&args.entries)?;
+    for r in nrw_pipeline::corpus::index(&args.out, &entries)? {
+        println!("{}", nrw_pipeline::report::corpus_line(&r));
+    }
+    Ok(())
+}

@@ -13,6 +13,16 @@ fn one_process(scene: &str, dir: &Path, ingest: &[&str]) {
     ok(&["triplets", d, "--k", "3"]);
 }
 
+/// Ingest settings for the small synthetic scenes (tiny photos and renders, two rows a shard).
+const SMALL_INGEST: [&str; 6] = [
+    "--min-dim",
+    "96",
+    "--min-photo-side",
+    "100",
+    "--rows-per-shard",
+    "2",
+];
+
 /// Run the driver's test script into `out` (a folder or URL); returns its stdout.
 fn driver(scene: &str, out: &str, args: &[&str], env: &[(&str, String)]) -> String {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
@@ -52,14 +62,7 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
     let scene = tmp.path().join("scene");
     small_scene(&scene, 13);
     let s = scene.to_str().unwrap();
-    let ingest = [
-        "--min-dim",
-        "96",
-        "--min-photo-side",
-        "100",
-        "--rows-per-shard",
-        "2",
-    ];
+    let ingest = SMALL_INGEST;
     // One process.
     let one = tmp.path().join("one");
     one_process(s, &one, &ingest);
@@ -114,14 +117,7 @@ fn the_corpus_driver_called_from_another_driver_with_a_node_killed_indexes_every
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
-    let ingest = [
-        "--min-dim",
-        "96",
-        "--min-photo-side",
-        "100",
-        "--rows-per-shard",
-        "2",
-    ];
+    let ingest = SMALL_INGEST;
     let (a, b) = (
         tmp.path().join("scenes/alpha"),
         tmp.path().join("scenes/beta"),

@@ -106,12 +106,40 @@ pub enum Format {
 }
 
 impl Format {
+    /// Every encoding, for parsers that list them.
+    pub const ALL: [Format; 2] = [Format::Binary, Format::Text];
+
     /// The file extension of this encoding.
     pub fn ext(self) -> &'static str {
         match self {
             Format::Binary => "bin",
             Format::Text => "txt",
         }
+    }
+
+    /// The encoding's name on a command line: its files' extension.
+    pub fn name(self) -> &'static str {
+        self.ext()
+    }
+
+    /// One line on the files of this encoding.
+    pub fn summary(self) -> &'static str {
+        match self {
+            Format::Binary => "cameras.bin, images.bin, points3D.bin (preferred when both exist)",
+            Format::Text => "cameras.txt, images.txt, points3D.txt",
+        }
+    }
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+
+    /// An encoding by its name (`bin`, `txt`); the error lists the names.
+    fn from_str(s: &str) -> std::result::Result<Format, String> {
+        Format::ALL
+            .into_iter()
+            .find(|f| f.name() == s)
+            .ok_or_else(|| format!("{s:?} is not a model encoding: bin, txt"))
     }
 }
 

@@ -290,35 +290,25 @@ pub fn part_in<R: parquet::file::reader::ChunkReader + 'static>(
 }
 
 /// Every descriptor of a dataset, refusing mixed kinds; `None` when there are none.
-/// Only the parts the manifest lists count (parts of unfinished style units do not).
+/// Only the parts the manifest lists count (parts of unfinished style units do not). Holds
+/// N descriptors: the stages read them through [`Index::visit`] instead.
 pub fn read_all(dir: &Store) -> Result<Option<(DescriptorKind, Vec<DescriptorRow>)>> {
-    let parts: Vec<String> = crate::Manifest::read(dir)?
-        .tables
+    let Some(index) = Index::read(dir)? else {
+        return Ok(None);
+    };
+    let mut values: Vec<Vec<f32>> = vec![Vec::new(); index.entries.len()];
+    index.visit(dir, &mut |i, v| values[i] = v.to_vec())?;
+    let rows = index
+        .entries
         .into_iter()
-        .map(|t| t.path)
-        .filter(|p| is_part(p))
+        .zip(values)
+        .map(|(e, descriptor)| DescriptorRow {
+            image_id: e.image_id,
+            name: e.name,
+            descriptor,
+        })
         .collect();
-    let mut kind: Option<DescriptorKind> = None;
-    let mut rows = Vec::new();
-    for p in parts {
-        let (k, r) = read_part(dir, &p)?;
-        if let Some(k) = k {
-            if kind.as_ref().is_some_and(|prev| *prev != k) {
-                return Err(DatasetError::Value {
-                    path: dir.name(&p),
-                    record: "part".into(),
-                    field: "tier".into(),
-                    problem: format!(
-                        "descriptors of another kind ({k:?}) than earlier parts ({kind:?})"
-                    ),
-                });
-            }
-            kind = Some(k);
-        }
-        rows.extend(r);
-    }
-    rows.sort_by_key(|r| r.image_id);
-    Ok(kind.map(|k| (k, rows)))
+    Ok(Some((index.kind, rows)))
 }
 
 /// One described photo of an [`Index`].

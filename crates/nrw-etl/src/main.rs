@@ -118,18 +118,9 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::from(130)
         }
         Err(e) => {
-            let mut shown = e.to_string();
-            eprintln!("error: {shown}");
-            let mut src = std::error::Error::source(&e);
-            while let Some(s) = src {
-                // Messages that already include their cause would print it twice.
-                let text = s.to_string();
-                if !shown.contains(&text) {
-                    eprintln!("  caused by: {text}");
-                    shown = text;
-                }
-                src = s.source();
-            }
+            nrw_pipeline::report::error_lines(&e)
+                .iter()
+                .for_each(|l| eprintln!("{l}"));
             std::process::ExitCode::FAILURE
         }
     }

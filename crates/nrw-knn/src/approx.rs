@@ -270,11 +270,7 @@ pub fn approximate_spilled(
             let rerank = |ids: Vec<(usize, f64)>, far: bool| {
                 let mut v: Vec<(usize, f64)> =
                     ids.into_iter().map(|(j, _)| (j, exact_d(i, j))).collect();
-                if far {
-                    v.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-                } else {
-                    v.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-                }
+                crate::sort_list(&mut v, far);
                 v.truncate(k);
                 v
             };

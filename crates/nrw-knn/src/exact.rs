@@ -320,11 +320,7 @@ fn rank(
             }
         })
         .collect();
-    if furthest {
-        out.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-    } else {
-        out.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-    }
+    crate::sort_list(&mut out, furthest);
     out.truncate(k);
     out
 }

@@ -107,14 +107,7 @@ pub fn validate(rows: &[Vec<f32>]) -> Result<usize, KnnError> {
                 dim,
             });
         }
-        r.iter()
-            .enumerate()
-            .find(|(_, v)| !v.is_finite())
-            .map(|(index, value)| KnnError::NotFinite {
-                row,
-                index,
-                value: *value,
-            })
+        spill::not_finite(row, r)
     });
     match bad {
         Some(e) => Err(e),
@@ -167,6 +160,15 @@ fn exact_spilled_with(
             exact::exact_in::<f32>(s, k, max_bytes)
         },
     )
+}
+
+/// Sort a list of (row, distance) nearest first, or furthest first, ties by the lower row.
+pub(crate) fn sort_list(v: &mut [(usize, f64)], furthest: bool) {
+    if furthest {
+        v.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    } else {
+        v.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    }
 }
 
 /// The naive reference: every pair in f64, sorted; O(N²·D) time, O(N) memory per anchor.

@@ -61,7 +61,7 @@ fn norm2_of(r: &[f32]) -> f64 {
 }
 
 /// The first value of `r` that is not finite, as the error naming row `row`.
-fn not_finite(row: usize, r: &[f32]) -> Option<KnnError> {
+pub(crate) fn not_finite(row: usize, r: &[f32]) -> Option<KnnError> {
     r.iter()
         .enumerate()
         .find(|(_, v)| !v.is_finite())

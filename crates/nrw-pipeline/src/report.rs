@@ -242,6 +242,33 @@ pub fn style(s: &StyleSummary) -> Report {
     r
 }
 
+/// What finalize merged (or that there was nothing to merge).
+pub fn finalize(s: &crate::finalize::FinalizeSummary) -> Report {
+    let mut r = Report::default();
+    if let Some(i) = &s.ingest {
+        i.warnings
+            .iter()
+            .for_each(|w| r.err(format!("warning: {w}")));
+        r.err(format!(
+            "finalized ingest of {} from {} units: {} registered, {} kept, {} too sparse, {} too small, {} unreadable; {} shards",
+            s.dataset, i.units, i.registered, i.kept, i.too_sparse, i.too_small, i.unreadable, i.shards
+        ));
+    }
+    if let Some(st) = &s.style {
+        r.err(format!(
+            "finalized style of {} from {} units: {} parts of {}",
+            s.dataset, st.units, st.parts, st.tier
+        ));
+    }
+    if s.ingest.is_none() && s.style.is_none() {
+        r.err(format!(
+            "{}: nothing to finalize (no unit records; the dataset is final)",
+            s.dataset
+        ));
+    }
+    r
+}
+
 /// The triplet table's summary (and the approximate path's recall).
 pub fn triplets(dataset: &Path, s: &TripletsSummary) -> Report {
     let mut r = Report::default();
@@ -374,6 +401,23 @@ fn model(m: &ModelSummary) -> Report {
         r.out(format!("warning: {w}"));
     }
     r
+}
+
+/// An error as the command line prints it: `error: …`, then each cause not already in the
+/// line before it (messages that include their cause would print it twice).
+pub fn error_lines(e: &dyn std::error::Error) -> Vec<String> {
+    let mut shown = e.to_string();
+    let mut out = vec![format!("error: {shown}")];
+    let mut src = e.source();
+    while let Some(s) = src {
+        let text = s.to_string();
+        if !shown.contains(&text) {
+            out.push(format!("  caused by: {text}"));
+            shown = text;
+        }
+        src = s.source();
+    }
+    out
 }
 
 /// One scene of a corpus index, as `nrw-etl corpus` prints it.

@@ -30,7 +30,7 @@ use serde::Serialize;
 
 pub use error::{Result, SynthError};
 pub use render::Counters;
-pub use spec::{Appearance, SceneSpec};
+pub use spec::{Appearance, SceneSpec, MAX_POINTS};
 
 use crate::cameras::Shot;
 use crate::geometry::{albedo, hash64, to_srgb8, Landmark, SurfacePoint};

@@ -163,6 +163,9 @@ impl Appearance {
     }
 }
 
+/// Most points a synthetic scene may have (its generator holds them all in f64).
+pub const MAX_POINTS: usize = 50_000_000;
+
 impl SceneSpec {
     /// The embedded default demo scene.
     pub fn demo() -> SceneSpec {
@@ -205,10 +208,10 @@ impl SceneSpec {
         if g.bays == 0 || g.floors == 0 || g.bays > 64 || g.floors > 64 {
             return bad("geometry.bays/floors", "must be 1 to 64".into());
         }
-        if g.points > 50_000_000 {
+        if g.points > MAX_POINTS {
             return bad(
                 "geometry.points",
-                format!("{} is more than 5·10⁷", g.points),
+                format!("{} is more than 5·10⁷ (MAX_POINTS)", g.points),
             );
         }
         if !g.origin.iter().all(|v| v.is_finite()) {

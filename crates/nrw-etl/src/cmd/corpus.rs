@@ -7,10 +7,8 @@ use crate::error::Result;
 /// Arguments of `corpus`.
 #[derive(Debug, Args)]
 #[command(
-    after_help = "Writes OUT/corpus.parquet (schemas/corpus.toml), one row per scene.
-Example: nrw-etl corpus s3://b/corpus --entries '[{\"scene\": \"/data/a\", \"name\": \"a\",
-\"dataset\": \"s3://b/corpus/a\"}, {\"scene\": \"/data/b\", \"name\": \"b\",
-\"dataset\": \"s3://b/corpus/b\", \"error\": \"ingest: ...\"}]'"
+    after_help = "Writes OUT/corpus.parquet (schemas/corpus.toml), one row per scene:
+nrw-etl corpus /data/corpus --entries '[{\"scene\": \"/s/a\", \"name\": \"a\", \"dataset\": \"/data/corpus/a\"}]'"
 )]
 pub struct CorpusArgs {
     /// Corpus prefix: a folder or an object-store URL (s3://, gs://, az://)

@@ -24,27 +24,7 @@ pub struct FinalizeArgs {
 /// Run `finalize`.
 pub fn run(args: &FinalizeArgs) -> Result<()> {
     let s = nrw_pipeline::finalize::finalize(&nrw_dataset::Store::open_path(&args.dataset)?)?;
-    if let Some(i) = &s.ingest {
-        for w in &i.warnings {
-            eprintln!("warning: {w}");
-        }
-        eprintln!(
-            "finalized ingest of {} from {} units: {} registered, {} kept, {} too sparse, {} too small, {} unreadable; {} shards",
-            s.dataset, i.units, i.registered, i.kept, i.too_sparse, i.too_small, i.unreadable, i.shards
-        );
-    }
-    if let Some(st) = &s.style {
-        eprintln!(
-            "finalized style of {} from {} units: {} parts of {}",
-            s.dataset, st.units, st.parts, st.tier
-        );
-    }
-    if s.ingest.is_none() && s.style.is_none() {
-        eprintln!(
-            "{}: nothing to finalize (no unit records; the dataset is final)",
-            s.dataset
-        );
-    }
+    nrw_pipeline::report::finalize(&s).print();
     if args.json {
         println!(
             "{}",

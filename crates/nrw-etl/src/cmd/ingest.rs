@@ -6,8 +6,9 @@ use clap::Args;
 use nrw_pipeline::ingest::IngestConfig;
 use nrw_render::Filters;
 
-use super::{Bars, Encoding, ShardArgs};
+use super::{Bars, ShardArgs};
 use crate::error::Result;
+use nrw_colmap::Format;
 
 pub use nrw_pipeline::report::EXIT_NOTHING_KEPT;
 
@@ -31,8 +32,8 @@ pub struct IngestArgs {
     #[arg(long)]
     pub images: Option<PathBuf>,
     /// Read this encoding even if the other exists [default: bin when present, else txt]
-    #[arg(long, value_enum)]
-    pub format: Option<Encoding>,
+    #[arg(long, value_parser = super::names(&Format::ALL, Format::name, Format::summary))]
+    pub format: Option<Format>,
     /// Point cloud to render [default: <scene>/dense/fused.ply if present, else the sparse points]
     #[arg(long)]
     pub points: Option<PathBuf>,
@@ -160,7 +161,7 @@ impl IngestArgs {
             denoise: self.denoise,
             estimate_normals: self.estimate_normals,
             images: self.images.clone(),
-            format: self.format.map(Into::into),
+            format: self.format,
             points: self.points.clone(),
             semantics: self.semantics.clone(),
             min_dim: self.min_dim,

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use clap::Args;
 use nrw_pipeline::inspect::Inspected;
 
-use super::Encoding;
 use crate::error::Result;
+use nrw_colmap::Format;
 
 /// Arguments of `inspect`.
 #[derive(Debug, Args)]
@@ -18,13 +18,13 @@ pub struct InspectArgs {
     #[arg(long)]
     pub json: bool,
     /// Read this encoding even if the other exists [default: bin when present, else txt]
-    #[arg(long, value_enum)]
-    pub format: Option<Encoding>,
+    #[arg(long, value_parser = super::names(&Format::ALL, Format::name, Format::summary))]
+    pub format: Option<Format>,
 }
 
 /// Run `inspect`.
 pub fn run(args: &InspectArgs) -> Result<()> {
-    let found = nrw_pipeline::inspect::inspect(&args.scene, args.format.map(Into::into))?;
+    let found = nrw_pipeline::inspect::inspect(&args.scene, args.format)?;
     if args.json {
         // Through a JSON value, so keys print sorted as they always have.
         let v = match &found {

@@ -18,26 +18,8 @@ pub mod verify;
 
 use std::sync::Mutex;
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use nrw_pipeline::{Progress, Unit};
-
-/// `--format` values: which encoding of the model to read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Encoding {
-    /// cameras.bin, images.bin, points3D.bin (preferred when both exist)
-    Bin,
-    /// cameras.txt, images.txt, points3D.txt
-    Txt,
-}
-
-impl From<Encoding> for nrw_colmap::Format {
-    fn from(e: Encoding) -> Self {
-        match e {
-            Encoding::Bin => nrw_colmap::Format::Binary,
-            Encoding::Txt => nrw_colmap::Format::Text,
-        }
-    }
-}
 
 /// A clap parser over a library enum's names (`ALL`, `name`, `summary`), each value with its
 /// help line: the CLI, pipeline files and the library share one enum.

@@ -7,8 +7,9 @@ use clap::Args;
 use nrw_pipeline::segment::SegmentConfig;
 use nrw_segment::{Mode, ModeKind};
 
-use super::{Bars, Encoding, ShardArgs};
+use super::{Bars, ShardArgs};
 use crate::error::{EtlError, Result};
+use nrw_colmap::Format;
 
 /// The library's mode for `--mode`/`--size` (or ingest's `--segment-mode`/`--segment-size`).
 pub fn mode(kind: ModeKind, size: u32) -> Result<Mode> {
@@ -49,8 +50,8 @@ pub struct SegmentArgs {
     #[arg(long)]
     pub images: Option<PathBuf>,
     /// Read this encoding even if the other exists [default: bin when present, else txt]
-    #[arg(long, value_enum)]
-    pub format: Option<Encoding>,
+    #[arg(long, value_parser = super::names(&Format::ALL, Format::name, Format::summary))]
+    pub format: Option<Format>,
     /// How a photo is fed to the network
     #[arg(long, value_parser = super::names(&ModeKind::ALL, ModeKind::name, ModeKind::summary), default_value = "resize")]
     pub mode: ModeKind,
@@ -81,7 +82,7 @@ pub struct SegmentArgs {
 pub fn run(args: &SegmentArgs) -> Result<()> {
     let cfg = SegmentConfig {
         images: args.images.clone(),
-        format: args.format.map(Into::into),
+        format: args.format,
         mode: mode(args.mode, args.size)?,
         strict: args.strict,
         follow_outside_links: args.follow_outside_links,

@@ -211,23 +211,28 @@ pub fn write_part(
     crate::parquet_io::write_batch(dir, &part_path(k), &batch, props)
 }
 
+/// Every row's kind in a batch holding the kind columns.
+fn kinds_in(b: &RecordBatch, path: &std::path::Path) -> Result<Vec<DescriptorKind>> {
+    let (tier, sha, pre) = (
+        column::<StringArray>(b, "tier", path)?,
+        column::<StringArray>(b, "weights_sha256", path)?,
+        column::<StringArray>(b, "preprocess", path)?,
+    );
+    Ok((0..b.num_rows())
+        .map(|i| DescriptorKind {
+            tier: tier.value(i).into(),
+            weights_sha256: sha.value(i).into(),
+            preprocess: pre.value(i).into(),
+        })
+        .collect())
+}
+
 /// The kinds of a part's rows, read without the descriptors themselves (the kind columns only).
 pub fn read_kinds(dir: &Store, rel: &str) -> Result<Vec<DescriptorKind>> {
     let path = &dir.name(rel);
     let mut out = Vec::new();
     for b in read_batches(dir, rel, Some(&["tier", "weights_sha256", "preprocess"]))? {
-        let (tier, sha, pre) = (
-            column::<StringArray>(&b, "tier", path)?,
-            column::<StringArray>(&b, "weights_sha256", path)?,
-            column::<StringArray>(&b, "preprocess", path)?,
-        );
-        for i in 0..b.num_rows() {
-            out.push(DescriptorKind {
-                tier: tier.value(i).into(),
-                weights_sha256: sha.value(i).into(),
-                preprocess: pre.value(i).into(),
-            });
-        }
+        out.extend(kinds_in(&b, path)?);
     }
     Ok(out)
 }
@@ -250,18 +255,9 @@ pub fn part_in<R: parquet::file::reader::ChunkReader + 'static>(
         let crcs = column::<UInt32Array>(&b, "descriptor_crc32", path)?;
         let ids = column::<UInt32Array>(&b, "image_id", path)?;
         let names = column::<StringArray>(&b, "name", path)?;
-        let (tier, sha, pre) = (
-            column::<StringArray>(&b, "tier", path)?,
-            column::<StringArray>(&b, "weights_sha256", path)?,
-            column::<StringArray>(&b, "preprocess", path)?,
-        );
+        let kinds = kinds_in(&b, path)?;
         let desc = column::<ListArray>(&b, "descriptor", path)?;
-        for i in 0..b.num_rows() {
-            let k = DescriptorKind {
-                tier: tier.value(i).into(),
-                weights_sha256: sha.value(i).into(),
-                preprocess: pre.value(i).into(),
-            };
+        for (i, k) in kinds.into_iter().enumerate() {
             match &kind {
                 None => kind = Some(k),
                 Some(prev) if *prev != k => {
@@ -349,17 +345,7 @@ impl Index {
             for b in read_batches(dir, p, Some(&cols))? {
                 let ids = column::<UInt32Array>(&b, "image_id", path)?;
                 let names = column::<StringArray>(&b, "name", path)?;
-                let (tier, sha, pre) = (
-                    column::<StringArray>(&b, "tier", path)?,
-                    column::<StringArray>(&b, "weights_sha256", path)?,
-                    column::<StringArray>(&b, "preprocess", path)?,
-                );
-                for i in 0..b.num_rows() {
-                    let k = DescriptorKind {
-                        tier: tier.value(i).into(),
-                        weights_sha256: sha.value(i).into(),
-                        preprocess: pre.value(i).into(),
-                    };
+                for (i, k) in kinds_in(&b, path)?.into_iter().enumerate() {
                     if let Some(prev) = kind.as_ref().filter(|prev| **prev != k) {
                         return Err(DatasetError::Value {
                             path: path.clone(),

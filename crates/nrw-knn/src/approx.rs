@@ -7,7 +7,7 @@ use nalgebra::{DMatrix, SymmetricEigen};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::spill::{Spilled, KCHUNK};
+use crate::spill::{PairDistances, Spilled, KCHUNK};
 use crate::{exact, KnnError, Neighbours};
 
 /// A linear map to `rank` dimensions: x ↦ Vᵀ (x − mean).
@@ -244,32 +244,21 @@ pub fn approximate_spilled(
     let reduced = pca.project_spilled(s);
     let c = (k * oversample.max(1)).min(n - 1);
     let cand = exact(&reduced, c)?;
-    let mut pairs: Vec<(u32, u32)> = cand
-        .iter()
-        .enumerate()
-        .flat_map(|(i, nb)| {
-            nb.nearest
-                .iter()
-                .chain(&nb.furthest)
-                .map(move |p| (i.min(p.0) as u32, i.max(p.0) as u32))
-        })
-        .collect();
-    pairs.sort_unstable();
-    pairs.dedup();
-    let d = s.pair_distances(&pairs);
-    let exact_d = |i: usize, j: usize| {
-        let key = (i.min(j) as u32, i.max(j) as u32);
-        d[pairs
-            .binary_search(&key)
-            .expect("every candidate pair was measured")]
-    };
+    let measured = PairDistances::measure(
+        s,
+        cand.iter()
+            .enumerate()
+            .flat_map(|(i, nb)| nb.nearest.iter().chain(&nb.furthest).map(move |p| (i, p.0))),
+    );
     Ok(cand
         .into_iter()
         .enumerate()
         .map(|(i, nb)| {
             let rerank = |ids: Vec<(usize, f64)>, far: bool| {
-                let mut v: Vec<(usize, f64)> =
-                    ids.into_iter().map(|(j, _)| (j, exact_d(i, j))).collect();
+                let mut v: Vec<(usize, f64)> = ids
+                    .into_iter()
+                    .map(|(j, _)| (j, measured.get(i, j)))
+                    .collect();
                 crate::sort_list(&mut v, far);
                 v.truncate(k);
                 v

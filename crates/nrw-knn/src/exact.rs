@@ -7,7 +7,7 @@
 use gemm::Parallelism;
 use rayon::prelude::*;
 
-use crate::spill::{From32, Spilled, KCHUNK};
+use crate::spill::{From32, PairDistances, Spilled, KCHUNK};
 use crate::Neighbours;
 
 /// Anchors per GEMM block: memory is BLOCK × N f64 (+ the element type) for the dot products.
@@ -284,20 +284,15 @@ fn candidates<T: Dot>(s: &Spilled, k: usize, max_bytes: usize) -> Vec<Pending> {
     out
 }
 
-/// The pairs (lower index first, sorted, once each) that phase 3 needs exactly.
-fn uncertain_pairs(pending: &[Pending]) -> Vec<(u32, u32)> {
-    let mut pairs: Vec<(u32, u32)> = Vec::new();
-    for (i, p) in pending.iter().enumerate() {
+/// The pairs phase 3 needs exactly: every candidate of a list its bounds leave uncertain.
+fn uncertain_pairs(pending: &[Pending]) -> impl Iterator<Item = (usize, usize)> + '_ {
+    pending.iter().enumerate().flat_map(|(i, p)| {
         let lists = [(&p.near, p.near_certain), (&p.far, p.far_certain)];
-        for (list, sure) in lists {
-            if !sure {
-                pairs.extend(list.iter().map(|c| (i.min(c.0) as u32, i.max(c.0) as u32)));
-            }
-        }
-    }
-    pairs.par_sort_unstable();
-    pairs.dedup();
-    pairs
+        lists
+            .into_iter()
+            .filter(|(_, sure)| !sure)
+            .flat_map(move |(list, _)| list.iter().map(move |c| (i, c.0)))
+    })
 }
 
 /// Phase 3: one list ranked, by midpoints when certain, else by exact distances (ties by
@@ -328,14 +323,8 @@ fn rank(
 /// Exact k nearest and k furthest of every row of `s` with dot products in `T`.
 pub(crate) fn exact_in<T: Dot>(s: &Spilled, k: usize, max_bytes: usize) -> Vec<Neighbours> {
     let pending = candidates::<T>(s, k, max_bytes);
-    let pairs = uncertain_pairs(&pending);
-    let d = s.pair_distances(&pairs);
-    let exact = |i: usize, j: usize| {
-        let key = (i.min(j) as u32, i.max(j) as u32);
-        d[pairs
-            .binary_search(&key)
-            .expect("every uncertain pair was measured")]
-    };
+    let measured = PairDistances::measure(s, uncertain_pairs(&pending));
+    let exact = |i: usize, j: usize| measured.get(i, j);
     pending
         .par_iter()
         .enumerate()

@@ -311,6 +311,35 @@ impl Spilled {
     }
 }
 
+/// Exact distances of a set of pairs, measured in one pass and looked up by pair.
+pub(crate) struct PairDistances {
+    pairs: Vec<(u32, u32)>,
+    d: Vec<f64>,
+}
+
+impl PairDistances {
+    /// Measure every pair (i, j) of `pairs` (any order, repeats and mirror images allowed).
+    pub(crate) fn measure(s: &Spilled, pairs: impl IntoIterator<Item = (usize, usize)>) -> Self {
+        let mut pairs: Vec<(u32, u32)> = pairs
+            .into_iter()
+            .map(|(i, j)| (i.min(j) as u32, i.max(j) as u32))
+            .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        let d = s.pair_distances(&pairs);
+        PairDistances { pairs, d }
+    }
+
+    /// The distance of i and j (either order); they must have been measured.
+    pub(crate) fn get(&self, i: usize, j: usize) -> f64 {
+        let key = (i.min(j) as u32, i.max(j) as u32);
+        self.d[self
+            .pairs
+            .binary_search(&key)
+            .expect("every asked pair was measured")]
+    }
+}
+
 /// Scratch files made by this process so far (their names must differ).
 static SCRATCH_SEQ: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 

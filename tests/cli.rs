@@ -18,6 +18,8 @@ mod nerfw;
 mod paper_code;
 #[path = "support/python.rs"]
 mod python;
+#[path = "python_pkg.rs"]
+mod python_pkg;
 #[path = "ray.rs"]
 mod ray;
 #[path = "s3.rs"]

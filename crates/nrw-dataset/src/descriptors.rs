@@ -93,6 +93,27 @@ pub fn descriptor_crc32(values: &[f32]) -> u32 {
     h.finalize()
 }
 
+/// Every descriptor row of the parts the manifest lists, as Arrow batches (what a dataframe
+/// library takes without a copy), each row checked against its CRC-32 first.
+pub fn table(dir: &Store) -> Result<Vec<RecordBatch>> {
+    let mut out = Vec::new();
+    for t in crate::Manifest::read(dir)?.tables {
+        if !is_part(&t.path) {
+            continue;
+        }
+        let path = &dir.name(&t.path);
+        let mut row = 0;
+        for b in read_batches(dir, &t.path, None)? {
+            if let Some(m) = descriptor_mismatches(&b, row, path)?.first() {
+                return Err(m.error(path));
+            }
+            row += b.num_rows();
+            out.push(b);
+        }
+    }
+    Ok(out)
+}
+
 /// Rows of a part's bytes whose descriptor does not match its checksum (`path` names the
 /// file).
 pub fn check_part(

@@ -17,6 +17,7 @@ pub mod parquet_io;
 pub mod payload;
 pub mod provenance;
 pub mod reader;
+pub mod sampling;
 pub mod scene;
 pub mod schema;
 pub mod semantics;

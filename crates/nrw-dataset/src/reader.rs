@@ -114,6 +114,15 @@ impl View {
             .transpose()
     }
 
+    /// Camera-space normals mapped from [-1, 1] to 0..=255 (0 where empty), when the cloud
+    /// has normals.
+    pub fn normals(&self) -> Result<Option<RgbImage>> {
+        self.normal_png
+            .as_ref()
+            .map(|b| Ok(self.decode_image(b, "normal_png")?.into_rgb8()))
+            .transpose()
+    }
+
     /// ADE20K class ids (0 = unlabelled), when the dataset has semantics.
     pub fn labels(&self) -> Result<Option<GrayImage>> {
         self.labels_png
@@ -298,6 +307,18 @@ impl Dataset {
         self.index.is_empty()
     }
 
+    /// Whether `image_id` is a kept view of this dataset.
+    pub fn contains(&self, image_id: u32) -> bool {
+        self.index.contains_key(&image_id)
+    }
+
+    /// Every kept view's image id, in shard and row order (the order files hold them).
+    pub fn all_ids(&self) -> Vec<u32> {
+        let mut ids: Vec<(Location, u32)> = self.index.iter().map(|(id, l)| (*l, *id)).collect();
+        ids.sort_unstable_by_key(|(l, _)| (l.shard, l.row));
+        ids.into_iter().map(|(_, id)| id).collect()
+    }
+
     /// Read the given rows of one shard (rows in increasing order).
     fn read_rows(&self, shard: usize, rows: &[usize]) -> Result<Vec<View>> {
         let rel = &self.shards[shard];
@@ -370,22 +391,31 @@ impl Dataset {
     /// Stream the views of any kept image ids, a row group at a time (each row group read
     /// once however many of its rows are wanted), in shard and row order.
     pub fn iter_ids<'a>(&'a self, ids: &[u32]) -> Result<impl Iterator<Item = Result<View>> + 'a> {
-        for id in ids {
-            if !self.index.contains_key(id) {
-                return Err(DatasetError::Schema {
-                    path: self.dir.clone(),
-                    problem: format!("image {id} is not a kept view of this dataset"),
-                });
-            }
-        }
+        Ok(self
+            .reads(ids)?
+            .into_iter()
+            .flat_map(move |read| match self.read(&read) {
+                Ok(v) => v.into_iter().map(Ok).collect::<Vec<_>>(),
+                Err(e) => vec![Err(e)],
+            }))
+    }
+
+    /// The reads that fetch the views of `ids`, one per row group, in shard and row order:
+    /// a consumer that cannot borrow the dataset (another language's iterator) walks these.
+    pub fn reads(&self, ids: &[u32]) -> Result<Vec<GroupRead>> {
         let mut per_shard: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
         for id in ids {
-            let loc = self.index[id];
+            let loc = self.index.get(id).ok_or_else(|| DatasetError::Schema {
+                path: self.dir.clone(),
+                problem: format!("image {id} is not a kept view of this dataset"),
+            })?;
             per_shard.entry(loc.shard).or_default().push(loc.row);
         }
-        let mut plan: Vec<(usize, Vec<usize>)> = Vec::new();
+        let mut plan: Vec<GroupRead> = Vec::new();
         for (shard, mut rows) in per_shard {
             rows.sort_unstable();
+            // An id asked for twice is read once (a row selected twice is not a selection).
+            rows.dedup();
             // One read per row group keeps memory at one row group's payloads.
             let mut group: Vec<usize> = Vec::new();
             for r in rows {
@@ -393,20 +423,41 @@ impl Dataset {
                     .last()
                     .is_some_and(|g| g / ROW_GROUP_ROWS != r / ROW_GROUP_ROWS)
                 {
-                    plan.push((shard, std::mem::take(&mut group)));
+                    plan.push(GroupRead {
+                        shard,
+                        rows: std::mem::take(&mut group),
+                    });
                 }
                 group.push(r);
             }
             if !group.is_empty() {
-                plan.push((shard, group));
+                plan.push(GroupRead { shard, rows: group });
             }
         }
-        Ok(plan
-            .into_iter()
-            .flat_map(move |(shard, rows)| match self.read_rows(shard, &rows) {
-                Ok(v) => v.into_iter().map(Ok).collect::<Vec<_>>(),
-                Err(e) => vec![Err(e)],
-            }))
+        Ok(plan)
+    }
+
+    /// The views of one read, every payload checked against its CRC-32.
+    pub fn read(&self, read: &GroupRead) -> Result<Vec<View>> {
+        self.read_rows(read.shard, &read.rows)
+    }
+}
+
+/// Rows of one row group of one shard: a unit of [`Dataset::reads`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GroupRead {
+    shard: usize,
+    rows: Vec<usize>,
+}
+
+impl GroupRead {
+    /// How many views the read yields.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+    /// Whether the read yields no view.
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
     }
 }
 

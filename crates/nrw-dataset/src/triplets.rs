@@ -126,6 +126,19 @@ pub fn read_triplets(dir: &Store) -> Result<Option<Vec<TripletRow>>> {
     triplets_in(data, &dir.name(TRIPLETS_TABLE)).map(Some)
 }
 
+/// The table as Arrow batches (what a dataframe library takes without a copy), its manifest
+/// hash checked; None before `triplets`.
+pub fn table(dir: &Store) -> Result<Option<Vec<arrow_array::RecordBatch>>> {
+    if !dir.exists(TRIPLETS_TABLE)? {
+        return Ok(None);
+    }
+    let data = crate::Manifest::read(dir)?.read_checked(dir, TRIPLETS_TABLE)?;
+    let path = dir.name(TRIPLETS_TABLE);
+    crate::parquet_io::batches_from(data, path, None, 65_536)?
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
+}
+
 /// The rows of a triplets table's bytes (`path` names them in errors).
 pub fn triplets_in<R: parquet::file::reader::ChunkReader + 'static>(
     data: R,

@@ -38,3 +38,14 @@ pub enum TrainError {
 }
 
 pub type Result<T> = std::result::Result<T, TrainError>;
+
+impl From<nrw_dataset::sampling::SamplingError> for TrainError {
+    /// Keeps the sampler's settings named as this crate's, so the binary maps them to flags.
+    fn from(e: nrw_dataset::sampling::SamplingError) -> Self {
+        use nrw_dataset::sampling::SamplingError as S;
+        match e {
+            S::Setting { setting, problem } => TrainError::Setting { setting, problem },
+            S::NoTriplets { anchors, held_out } => TrainError::NoTriplets { anchors, held_out },
+        }
+    }
+}

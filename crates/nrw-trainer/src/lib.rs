@@ -5,10 +5,9 @@
 pub mod error;
 pub mod loader;
 pub mod model;
-pub mod sampler;
 pub mod train;
 
 pub use error::{Result, TrainError};
 pub use loader::{Batch, Loader, LoaderConfig};
-pub use sampler::TripletSampler;
+pub use nrw_dataset::sampling::TripletSampler;
 pub use train::{train, Report, TrainConfig};

@@ -9,9 +9,6 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
 use nrw_dataset::reader::Dataset;
-use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use crate::error::{Result, TrainError};
@@ -137,11 +134,7 @@ impl<'a> Loader<'a> {
 
     /// The order of an epoch: a permutation of the split drawn from (seed, epoch).
     pub fn epoch_order(&self, epoch: u64) -> Vec<u32> {
-        let mut ids = self.ids.clone();
-        let mut rng =
-            ChaCha8Rng::seed_from_u64(self.cfg.seed ^ epoch.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        ids.shuffle(&mut rng);
-        ids
+        nrw_dataset::sampling::epoch_order(&self.ids, self.cfg.seed, epoch)
     }
 
     /// Decode and crop the given views in parallel into one batch; crop places come from
@@ -182,12 +175,10 @@ impl<'a> Loader<'a> {
         self.peak.fetch_max(n, Ordering::SeqCst);
         let guard = Guard(self.in_flight.clone());
         let view = self.ds.get(id)?;
-        let mut rng = ChaCha8Rng::seed_from_u64(
-            self.cfg.seed
-                ^ epoch.wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                ^ (position as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
-        );
-        let mut pick = |mx: u32, my: u32| (rng.random_range(0..=mx), rng.random_range(0..=my));
+        let seed = self.cfg.seed;
+        let mut pick = |mx: u32, my: u32| {
+            nrw_dataset::sampling::crop_place(seed, epoch, position as u64, mx, my)
+        };
         let c = view.random_crop(self.cfg.crop, &mut pick)?;
         let s = self.cfg.crop as usize;
         let photo = to_chw(c.photo.as_raw(), 3, 3, s);

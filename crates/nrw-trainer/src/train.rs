@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Result, TrainError};
 use crate::loader::{Loader, LoaderConfig};
 use crate::model::{input, triplet_loss, Encoder};
-use crate::sampler::{Triplet, TripletSampler};
+use nrw_dataset::sampling::{Triplet, TripletSampler};
 
 /// Settings of a training run (the paper: α = 0.1, 8-D embedding, 256² crops).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

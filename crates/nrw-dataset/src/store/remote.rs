@@ -12,19 +12,27 @@ use super::Remote;
 use crate::error::{DatasetError, Result};
 
 /// The one async runtime of the process, shared by every object-store location it opens
-/// (made on the first open; a process that stays local never starts it).
+/// (made on the first open; a process that stays local never starts it). A forked child
+/// (a PyTorch DataLoader worker) finds its parent's runtime without threads, so it makes its
+/// own; each lives as long as its process, as a static would.
 pub(super) fn runtime(url: &str) -> Result<&'static tokio::runtime::Runtime> {
-    static RT: std::sync::OnceLock<tokio::runtime::Runtime> = std::sync::OnceLock::new();
-    if let Some(rt) = RT.get() {
-        return Ok(rt);
+    type PerProcess = Option<(u32, &'static tokio::runtime::Runtime)>;
+    static RT: std::sync::Mutex<PerProcess> = std::sync::Mutex::new(None);
+    let pid = std::process::id();
+    let mut rt = RT.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some((owner, made)) = *rt {
+        if owner == pid {
+            return Ok(made);
+        }
     }
-    let rt = tokio::runtime::Builder::new_multi_thread()
+    let made = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .map_err(|e| DatasetError::io(url, e))?;
-    // Two threads racing here each build one; the loser's is dropped unused.
-    Ok(RT.get_or_init(|| rt))
+    let made: &'static tokio::runtime::Runtime = Box::leak(Box::new(made));
+    *rt = Some((pid, made));
+    Ok(made)
 }
 
 /// Whether a location names an object store (`scheme://…` other than `file://`).

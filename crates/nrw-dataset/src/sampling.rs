@@ -1,14 +1,55 @@
-//! Triplets as the paper's published code samples them: for an anchor, a positive drawn
-//! uniformly among its `pos_k` nearest photos in style and a negative among its `neg_k`
-//! furthest (defaults 5 and 13).
+//! How a consumer draws from a dataset, shared by every reader (the Rust trainer's loader,
+//! the Python package) so they draw the same: the seeded epoch order, the seeded crop place
+//! of each position in an epoch, and triplets as the paper's published code samples them
+//! (for an anchor, a positive drawn uniformly among its `pos_k` nearest photos in style and a
+//! negative among its `neg_k` furthest; defaults 5 and 13).
 
 use std::collections::HashSet;
 
-use nrw_dataset::triplets::TripletRow;
+use crate::triplets::TripletRow;
+use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::error::{Result, TrainError};
+/// A sampling setting out of range, or a table that leaves nothing to draw.
+#[derive(Debug, thiserror::Error)]
+pub enum SamplingError {
+    /// A setting out of its range, named as the config field (`pos_k`); a binary names its
+    /// own flag for it.
+    #[error("{setting}: {problem}")]
+    Setting {
+        setting: &'static str,
+        problem: String,
+    },
+    /// Holding photos out left no triplet to train on.
+    #[error("no training triplets: {anchors} anchors, {held_out} held out")]
+    NoTriplets { anchors: usize, held_out: usize },
+}
+
+type Result<T> = std::result::Result<T, SamplingError>;
+
+/// Mixes the epoch into a seed (the golden ratio's 64-bit odd constant).
+const EPOCH_MIX: u64 = 0x9E37_79B9_7F4A_7C15;
+/// Mixes the position in an epoch into a crop seed.
+const POSITION_MIX: u64 = 0xD1B5_4A32_D192_ED03;
+
+/// The order of an epoch: a permutation of `ids` drawn from (seed, epoch).
+pub fn epoch_order(ids: &[u32], seed: u64, epoch: u64) -> Vec<u32> {
+    let mut ids = ids.to_vec();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ epoch.wrapping_mul(EPOCH_MIX));
+    ids.shuffle(&mut rng);
+    ids
+}
+
+/// Where the crop of the view at `position` of `epoch` goes: (x, y) drawn uniformly in
+/// 0..=max_x and 0..=max_y from (seed, epoch, position), so a crop does not depend on which
+/// thread, worker or process takes it.
+pub fn crop_place(seed: u64, epoch: u64, position: u64, max_x: u32, max_y: u32) -> (u32, u32) {
+    let mut rng = ChaCha8Rng::seed_from_u64(
+        seed ^ epoch.wrapping_mul(EPOCH_MIX) ^ position.wrapping_mul(POSITION_MIX),
+    );
+    (rng.random_range(0..=max_x), rng.random_range(0..=max_y))
+}
 
 /// (anchor, positive, negative) image ids.
 pub type Triplet = (u32, u32, u32);
@@ -43,7 +84,7 @@ impl TripletSampler {
             ("neg_k", neg_k, k_far, "furthest"),
         ] {
             if k == 0 || k > held {
-                return Err(TrainError::Setting {
+                return Err(SamplingError::Setting {
                     setting,
                     problem: format!(
                         "{k}: the triplet table holds {held} {which} per anchor, and it must be between 1 and that; rerun `nrw-etl triplets --k` with a larger k or lower it"
@@ -74,7 +115,7 @@ impl TripletSampler {
             }
         }
         if train.is_empty() {
-            return Err(TrainError::NoTriplets {
+            return Err(SamplingError::NoTriplets {
                 anchors: rows.len(),
                 held_out: held.len(),
             });
@@ -84,6 +125,11 @@ impl TripletSampler {
             held_out,
             rng: ChaCha8Rng::seed_from_u64(seed),
         })
+    }
+
+    /// Restart the draws from `seed`, as if the sampler had just been made with it.
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
     }
 
     /// `n` training triplets drawn with replacement.

@@ -15,7 +15,8 @@ use rayon::prelude::*;
 use crate::decode::{decode, Decoded};
 use crate::py_err;
 
-/// An opened nrw-etl dataset (see the stub file for the Python-side documentation).
+/// An nrw-etl dataset opened for reading: a folder or an s3://, gs:// or az:// URL, with the
+/// CLI's credentials. Its views stream as dicts of NumPy arrays, its tables as pyarrow.
 #[pyclass(module = "nrw._nrw", frozen)]
 pub struct Dataset {
     /// The opened dataset and the process that opened it: a forked child (a DataLoader
@@ -56,11 +57,19 @@ impl Dataset {
     /// The dataset as opened in this process (reopened once in a forked child).
     pub(crate) fn current(&self, py: Python<'_>) -> PyResult<Arc<reader::Dataset>> {
         let pid = std::process::id();
-        let mut opened = self.opened.lock().unwrap_or_else(|p| p.into_inner());
+        let lock = || self.opened.lock().unwrap_or_else(|p| p.into_inner());
+        {
+            let opened = lock();
+            if opened.0 == pid {
+                return Ok(opened.1.clone());
+            }
+        }
+        // Opened without the lock held: a thread waiting for it holds the GIL.
+        let again = py
+            .detach(|| open(&self.location, &self.options))
+            .map_err(py_err)?;
+        let mut opened = lock();
         if opened.0 != pid {
-            let again = py
-                .detach(|| open(&self.location, &self.options))
-                .map_err(py_err)?;
             *opened = (pid, Arc::new(again));
         }
         Ok(opened.1.clone())
@@ -93,6 +102,8 @@ impl Dataset {
 
 #[pymethods]
 impl Dataset {
+    /// Open a dataset: a folder or an s3://, gs:// or az:// URL; `options` are provider
+    /// settings named as the environment variables in lower case (aws_endpoint_url, ...).
     #[new]
     #[pyo3(signature = (location, options = None))]
     fn new(
@@ -119,6 +130,7 @@ impl Dataset {
         ))
     }
 
+    /// Number of kept views.
     fn __len__(&self) -> usize {
         self.meta().len()
     }
@@ -142,16 +154,19 @@ impl Dataset {
         self.meta().contains(image_id)
     }
 
+    /// Where the dataset is, as given.
     #[getter]
     fn location(&self) -> &str {
         &self.location
     }
 
+    /// The dataset's schema version (only this package's SCHEMA_VERSION opens).
     #[getter]
     fn schema_version(&self) -> u32 {
         self.meta().manifest.schema_version
     }
 
+    /// The scene's largest depth, which the Rust loader divides depth by; None if unrecorded.
     #[getter]
     fn depth_max(&self, py: Python<'_>) -> PyResult<Option<f64>> {
         let ds = self.current(py)?;
@@ -159,15 +174,20 @@ impl Dataset {
             .map_err(py_err)
     }
 
+    /// Split names with their sizes ({"all": n} before `nrw-etl split`).
     fn splits(&self) -> HashMap<String, usize> {
         self.meta().splits().into_iter().collect()
     }
 
+    /// A split's image ids, sorted; every kept view's in file order when split is None.
     #[pyo3(signature = (split = None))]
     fn ids(&self, split: Option<&str>) -> PyResult<Vec<u32>> {
         self.ids_of(split)
     }
 
+    /// Stream the views of a split, of `ids`, or of every kept view, in file order, as dicts
+    /// of NumPy arrays (photo, render, depth, and normals, semantics, labels, transient when
+    /// present); each payload's CRC-32 is checked first.
     #[pyo3(signature = (split = None, *, ids = None))]
     fn views(
         slf: &Bound<'_, Self>,
@@ -192,6 +212,7 @@ impl Dataset {
         })
     }
 
+    /// One view by image id (KeyError when it is not a kept view).
     fn get<'py>(&self, py: Python<'py>, image_id: u32) -> PyResult<Bound<'py, PyDict>> {
         self.check_ids(&[image_id])?;
         let ds = self.current(py)?;
@@ -201,6 +222,7 @@ impl Dataset {
         view.into_dict(py)
     }
 
+    /// Views in the order of `ids`, each row group read once, decoded in parallel.
     fn get_many<'py>(&self, py: Python<'py>, ids: Vec<u32>) -> PyResult<Bound<'py, PyList>> {
         self.check_ids(&ids)?;
         let (ds, pool) = (self.current(py)?, crate::pool()?);
@@ -224,6 +246,8 @@ impl Dataset {
         PyList::new(py, dicts)
     }
 
+    /// triplets.parquet as a pyarrow.Table (its manifest hash checked), None before
+    /// `nrw-etl triplets`.
     fn triplets<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         let ds = self.current(py)?;
         let batches = py
@@ -234,6 +258,8 @@ impl Dataset {
             .transpose()
     }
 
+    /// The style descriptors the manifest lists as a pyarrow.Table (each row's CRC-32
+    /// checked), None before `nrw-etl style`.
     fn descriptors<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         let ds = self.current(py)?;
         let batches = py
@@ -281,14 +307,17 @@ pub struct ViewIter {
 
 #[pymethods]
 impl ViewIter {
+    /// The iterator itself.
     fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
         slf
     }
 
+    /// Views still to come.
     fn __len__(&self) -> usize {
         self.remaining.load(std::sync::atomic::Ordering::SeqCst)
     }
 
+    /// The next view, decoded (a row group at a time, without the GIL).
     fn __next__<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let (ds, pool) = (self.dataset.get().current(py)?, crate::pool()?);
         let next = py

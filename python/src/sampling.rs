@@ -19,7 +19,9 @@ pub fn crop_place(seed: u64, epoch: u64, position: u64, max_x: u32, max_y: u32) 
     sampling::crop_place(seed, epoch, position, max_x, max_y)
 }
 
-/// Triplets drawn as the paper's published code draws them (see the stub file).
+/// (anchor, positive, negative) image ids drawn as the paper's code draws them: the positive
+/// among an anchor's pos_k nearest in style, the negative among its neg_k furthest; the same
+/// seed draws what the Rust trainer draws.
 #[pyclass(module = "nrw._nrw")]
 pub struct TripletSampler {
     inner: sampling::TripletSampler,
@@ -27,6 +29,8 @@ pub struct TripletSampler {
 
 #[pymethods]
 impl TripletSampler {
+    /// Read the dataset's triplet table and keep `pos_k` nearest and `neg_k` furthest per
+    /// anchor, every `hold_out_every`-th photo held out.
     #[new]
     #[pyo3(signature = (dataset, pos_k = 5, neg_k = 13, hold_out_every = 5, seed = 0))]
     fn new(
@@ -52,18 +56,22 @@ impl TripletSampler {
         Ok(TripletSampler { inner })
     }
 
+    /// Restart the draws from `seed`, as if the sampler had just been made with it.
     fn reseed(&mut self, seed: u64) {
         self.inner.reseed(seed)
     }
 
+    /// `n` training triplets (anchor, positive, negative), drawn with replacement.
     fn sample(&mut self, n: usize) -> Vec<(u32, u32, u32)> {
         self.inner.sample(n)
     }
 
+    /// Every combination of the held-out anchors, for evaluation.
     fn held_out(&self) -> Vec<(u32, u32, u32)> {
         self.inner.held_out_triplets()
     }
 
+    /// Anchors that training draws from.
     #[getter]
     fn train_anchors(&self) -> usize {
         self.inner.train_anchors()

@@ -1,6 +1,7 @@
 """Every array nrw.Dataset gives equals what pyarrow + Pillow + OpenEXR decode from the same
 shards; tables equal pyarrow's reads of the same files."""
 
+import gc
 import os
 
 import numpy as np
@@ -70,12 +71,21 @@ def test_triplets_and_descriptors_are_the_files_tables(dataset):
     triplets = ds.triplets()
     assert isinstance(triplets, pa.Table)
     assert triplets.equals(pq.read_table(os.path.join(dataset, "triplets.parquet")))
-    descriptors = ds.descriptors()
+    # Zero-copy: pyarrow allocates nothing; the buffers are the ones Rust read into. (The
+    # collector is held off, so no earlier table is freed in between.)
+    gc.collect()
+    gc.disable()
+    try:
+        before = pa.total_allocated_bytes()
+        descriptors = ds.descriptors()
+        allocated = pa.total_allocated_bytes() - before
+    finally:
+        gc.enable()
+    assert allocated == 0
     parts = sorted(p for p in os.listdir(os.path.join(dataset, "descriptors")) if p.endswith(".parquet"))
     want = pa.concat_tables(pq.read_table(os.path.join(dataset, "descriptors", p)) for p in parts)
     assert descriptors.num_rows == len(ds) > 0
     assert descriptors.equals(want)
-    # Zero-copy: the values pyarrow holds are the Rust buffers, not a copy into Python objects.
     assert descriptors.column("descriptor").type.value_type == pa.float32()
 
 

@@ -204,11 +204,9 @@ impl Dataset {
         };
         me.check_ids(&ids)?;
         let reads = me.meta().reads(&ids).map_err(py_err)?;
-        let views = reads.iter().map(GroupRead::len).sum();
         Ok(ViewIter {
             dataset: slf.clone().unbind(),
             reads: std::sync::Mutex::new((reads.into_iter().rev().collect(), Vec::new())),
-            remaining: std::sync::atomic::AtomicUsize::new(views),
         })
     }
 
@@ -302,7 +300,6 @@ pub struct ViewIter {
     dataset: Py<Dataset>,
     /// Reads still to do (last first) and decoded views not yet handed out (last first).
     reads: std::sync::Mutex<(Vec<GroupRead>, Vec<Decoded>)>,
-    remaining: std::sync::atomic::AtomicUsize,
 }
 
 #[pymethods]
@@ -312,9 +309,10 @@ impl ViewIter {
         slf
     }
 
-    /// Views still to come.
+    /// Views still to come: those decoded and not handed out, and those of the reads left.
     fn __len__(&self) -> usize {
-        self.remaining.load(std::sync::atomic::Ordering::SeqCst)
+        let state = self.reads.lock().unwrap_or_else(|p| p.into_inner());
+        state.1.len() + state.0.iter().map(GroupRead::len).sum::<usize>()
     }
 
     /// The next view, decoded (a row group at a time, without the GIL).
@@ -334,14 +332,7 @@ impl ViewIter {
                 Ok(state.1.pop())
             })
             .map_err(py_err)?;
-        match next {
-            Some(d) => {
-                self.remaining
-                    .fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
-                d.into_dict(py).map(Some)
-            }
-            None => Ok(None),
-        }
+        next.map(|d| d.into_dict(py)).transpose()
     }
 }
 

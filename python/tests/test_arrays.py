@@ -56,6 +56,9 @@ def test_splits_get_and_get_many_follow_the_split_table(dataset):
         assert ds.ids(split) == sorted(ids)
         it = ds.views(split)
         assert len(it) == len(ids)
+        next(it)
+        assert len(it) == len(ids) - 1
+        it = ds.views(split)
         assert sorted(v["image_id"] for v in it) == sorted(ids)
     some = list(expected)[::-2]
     for view, image_id in zip(ds.get_many(some + some[:1]), some + some[:1]):

@@ -1754,6 +1754,35 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         weights,
     ]);
     assert_eq!(o.status.code(), Some(3));
+    // A table of one setting runs with the paper's others (once refused with "missing field
+    // `min_dim`"): sacre_coeur's sparse renders judged at 99% empty, rendered at the paper's
+    // 600 px and filtered at its 450 px, whatever it then keeps (exit 0, or 3 for none).
+    let one = tmp.path().join("one.toml");
+    std::fs::write(&one, "name = 'one'\n[ingest]\nmax_empty = 0.99\n").unwrap();
+    let out_one = tmp.path().join("one");
+    let o = nrw(&[
+        "run",
+        one.to_str().unwrap(),
+        data().join("sacre_coeur").to_str().unwrap(),
+        "--out",
+        out_one.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{err}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_one.join("manifest.json")).unwrap())
+            .unwrap();
+    let p = &m["parameters"];
+    assert_eq!(
+        (
+            p["max_empty"].as_f64(),
+            p["min_dim"].as_u64(),
+            p["min_photo_side"].as_u64(),
+            p["radius"].as_f64()
+        ),
+        (Some(0.99), Some(600), Some(450), Some(1.0)),
+        "{p}"
+    );
     // A typo in a pipeline is an error, not a silent default.
     std::fs::write(&small, "name = 'x'\n[ingest]\nmin_dimm = 600\n").unwrap();
     let err = fails(&[

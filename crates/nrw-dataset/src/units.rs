@@ -61,6 +61,11 @@ pub struct UnitRecord {
     pub groups: usize,
     /// Wall time of the unit's run.
     pub seconds: f64,
+    /// The vector instructions whose GEMM kernels computed the unit's values, where those
+    /// depend on them (VGG descriptors: AVX-512 and AVX2 kernels sum in other orders); absent
+    /// where no value does, so such records are the same bytes on every machine.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instruction_set: Option<String>,
 }
 
 /// One image's result inside an ingest group record.
@@ -157,6 +162,7 @@ mod tests {
             warnings: vec![],
             groups: 3,
             seconds: 1.0,
+            instruction_set: None,
         };
         for (i, n) in [(2, 3), (0, 3), (1, 2)] {
             write_record(dir, &unit_record_path(STYLE, i, n), &rec(i, n)).unwrap();

@@ -120,8 +120,8 @@ impl Smallest {
 }
 
 /// Whether a list's intervals (sorted by midpoint) are disjoint and narrower than 1e-7 of
-/// their distance: re-ranking could then change nothing beyond the seventh digit, and the
-/// midpoints stand. Only f64 dot products get there.
+/// their distance: the intervals then prove which k come first, and only those k are
+/// measured exactly. Only f64 dot products get there.
 fn certain(v: &mut [(usize, f64, f64)]) -> bool {
     v.sort_by(|a, b| (a.1 + a.2).total_cmp(&(b.1 + b.2)));
     v.iter().all(|p| p.1 > 0.0 && p.2 - p.1 <= 2e-7 * p.1) && v.windows(2).all(|w| w[0].2 < w[1].1)
@@ -284,19 +284,39 @@ fn candidates<T: Dot>(s: &Spilled, k: usize, max_bytes: usize) -> Vec<Pending> {
     out
 }
 
-/// The pairs phase 3 needs exactly: every candidate of a list its bounds leave uncertain.
-fn uncertain_pairs(pending: &[Pending]) -> impl Iterator<Item = (usize, usize)> + '_ {
-    pending.iter().enumerate().flat_map(|(i, p)| {
-        let lists = [(&p.near, p.near_certain), (&p.far, p.far_certain)];
+/// The part of a list phase 3 ranks: all of an uncertain list's candidates, only the k a
+/// certain list's disjoint intervals already put first (`certain` left it sorted by
+/// midpoint, so the nearest are at its start and the furthest at its end).
+fn ranked_part(
+    list: &[(usize, f64, f64)],
+    sure: bool,
+    furthest: bool,
+    k: usize,
+) -> &[(usize, f64, f64)] {
+    match (sure, furthest) {
+        (false, _) => list,
+        (true, false) => &list[..k.min(list.len())],
+        (true, true) => &list[list.len().saturating_sub(k)..],
+    }
+}
+
+/// The pairs phase 3 measures exactly: every candidate it ranks. Even a certain list's
+/// distances are measured, because its midpoints come from GEMM dot products whose
+/// summation order depends on the instruction set: stored distances must not.
+fn pairs_to_measure(pending: &[Pending], k: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
+    pending.iter().enumerate().flat_map(move |(i, p)| {
+        let lists = [
+            ranked_part(&p.near, p.near_certain, false, k),
+            ranked_part(&p.far, p.far_certain, true, k),
+        ];
         lists
             .into_iter()
-            .filter(|(_, sure)| !sure)
-            .flat_map(move |(list, _)| list.iter().map(move |c| (i, c.0)))
+            .flat_map(move |list| list.iter().map(move |c| (i, c.0)))
     })
 }
 
-/// Phase 3: one list ranked, by midpoints when certain, else by exact distances (ties by
-/// the lower index), cut to k.
+/// Phase 3: one list ranked by exact distances (ties by the lower index), cut to k; a
+/// certain list's intervals have already chosen its k.
 fn rank(
     i: usize,
     list: &[(usize, f64, f64)],
@@ -305,15 +325,9 @@ fn rank(
     k: usize,
     exact: &dyn Fn(usize, usize) -> f64,
 ) -> Vec<(usize, f64)> {
-    let mut out: Vec<(usize, f64)> = list
+    let mut out: Vec<(usize, f64)> = ranked_part(list, sure, furthest, k)
         .iter()
-        .map(|p| {
-            if sure {
-                (p.0, 0.5 * (p.1 + p.2))
-            } else {
-                (p.0, exact(i, p.0))
-            }
-        })
+        .map(|p| (p.0, exact(i, p.0)))
         .collect();
     crate::sort_list(&mut out, furthest);
     out.truncate(k);
@@ -323,7 +337,7 @@ fn rank(
 /// Exact k nearest and k furthest of every row of `s` with dot products in `T`.
 pub(crate) fn exact_in<T: Dot>(s: &Spilled, k: usize, max_bytes: usize) -> Vec<Neighbours> {
     let pending = candidates::<T>(s, k, max_bytes);
-    let measured = PairDistances::measure(s, uncertain_pairs(&pending));
+    let measured = PairDistances::measure(s, pairs_to_measure(&pending, k));
     let exact = |i: usize, j: usize| measured.get(i, j);
     pending
         .par_iter()

@@ -9,9 +9,12 @@
 //! 2⁻⁵³; dot products are summed in f64 from GEMMs over K ≤ 4,096 terms, so K is not the full
 //! dimension) every pair gets an interval that must contain its true distance; any point
 //! that could be among the true k nearest (furthest) is kept, and the candidates are
-//! re-ranked with Σ(a−b)² summed in f64 unless their intervals already prove the order and
-//! seven digits. The result equals a naive f64 double loop: same ids, same order, distances
-//! to 1e-7 relative. Ties are broken by the lower index, so tables are deterministic.
+//! re-ranked with Σ(a−b)² summed in f64 (where their intervals already prove the order,
+//! only the k they put first). The result equals a naive f64 double loop: same ids, same
+//! order, distances to 1e-15 relative. Ties are broken by the lower index, so tables are
+//! deterministic; and no stored distance is a GEMM value, whose summation order depends on
+//! the instruction set (AVX-512 or AVX2 kernels), so the tables are the same bits on every
+//! machine.
 //!
 //! Memory does not grow with N × D: descriptors are [`Spilled`] once (chunk-major, into a
 //! scratch file when they come from a dataset), and every pass reads one chunk of every row

@@ -157,3 +157,41 @@ fn nan_and_ragged_rows_name_the_row() {
         }
     );
 }
+
+#[test]
+fn every_stored_distance_is_the_f64_sum_to_the_bit_whatever_the_gemm() {
+    // The GEMM's dot products depend on the instruction set (AVX-512 and AVX2 kernels sum in
+    // other orders), so a stored distance must never be one: each must equal distance2_f64 of
+    // its pair bit for bit, on the f64 path (N < 64k, where lists are often proven certain by
+    // their intervals alone), the f32 path, symmetric and blocked.
+    for (n, dim, k, limit) in [
+        (40, 300, 5, usize::MAX),
+        (40, 300, 5, 0),
+        (400, 64, 3, usize::MAX),
+        (400, 64, 3, 0),
+    ] {
+        // Values over six decades, as colour statistics mix means and covariances: products
+        // of f32 values this spread round in f64 sums, so a GEMM's sum is not the exact one
+        // (values of one magnitude sum exactly in f64 and would hide a stored GEMM value).
+        let mut r = ChaCha8Rng::seed_from_u64(11 + n as u64);
+        let rows: Vec<Vec<f32>> = (0..n)
+            .map(|_| {
+                (0..dim)
+                    .map(|_| r.random_range(-1.0f32..1.0) * 10f32.powi(r.random_range(-3..3)))
+                    .collect()
+            })
+            .collect();
+        let got = nrw_knn::exact_with_matrix_limit(&rows, k, limit).unwrap();
+        for (i, a) in got.iter().enumerate() {
+            for &(j, d) in a.nearest.iter().chain(&a.furthest) {
+                let want = nrw_knn::distance2_f64(&rows[i], &rows[j]);
+                assert_eq!(
+                    d.to_bits(),
+                    want.to_bits(),
+                    "n {n}, limit {limit}: anchor {i}, row {j}: stored {d}, f64 sum {want}"
+                );
+            }
+        }
+        same(&got, &naive(&rows, k));
+    }
+}

@@ -27,9 +27,9 @@ pub struct Pipeline {
     pub qa: Option<QaStage>,
 }
 
-/// `[ingest]`: render and filter.
+/// `[ingest]`: render and filter; a setting left out is the paper's (`IngestConfig::new`).
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct IngestStage {
     pub min_dim: u32,
     pub radius: f32,
@@ -39,53 +39,106 @@ pub struct IngestStage {
     /// Folder of ADE20K label maps, relative to the scene folder.
     pub semantics: Option<PathBuf>,
     /// An unreadable photo or label map stops the run instead of being dropped.
-    #[serde(default)]
     pub strict: bool,
     /// With `run --segment-weights`: how photos are fed to the SegFormer (`resize`,
     /// `whole`, `slide` or `crop`; default resize).
-    #[serde(default)]
     pub segment_mode: Option<String>,
     /// With `run --segment-weights`: the network's input size in pixels (default 512).
-    #[serde(default)]
     pub segment_size: Option<u32>,
 }
 
-/// `[split]`: validation photos (a count, or a fraction of the kept photos) and seed.
+impl Default for IngestStage {
+    /// The paper's settings, as ingest's own configuration holds them.
+    fn default() -> Self {
+        let paper = IngestConfig::new("", "");
+        IngestStage {
+            min_dim: paper.min_dim,
+            radius: paper.radius,
+            max_empty: paper.filters.max_empty_ratio,
+            min_photo_side: paper.filters.min_photo_side,
+            rows_per_shard: paper.rows_per_shard,
+            semantics: None,
+            strict: paper.strict,
+            segment_mode: None,
+            segment_size: None,
+        }
+    }
+}
+
+/// `[split]`: validation photos (a count, or a fraction of the kept photos) and seed; with
+/// neither count nor fraction, the paper's count (`SplitConfig::new`).
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct SplitStage {
     pub val: Option<usize>,
     pub val_fraction: Option<f64>,
     pub seed: u64,
 }
 
-/// `[style]`: the descriptor tier (weights come from the command line).
+impl Default for SplitStage {
+    fn default() -> Self {
+        SplitStage {
+            val: None,
+            val_fraction: None,
+            seed: SplitConfig::new("").seed,
+        }
+    }
+}
+
+/// `[style]`: the descriptor tier (weights come from the command line); the paper's
+/// reference tier when left out.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct StyleStage {
     pub tier: String,
 }
 
-/// `[triplets]`: neighbours per anchor (lowered, with a warning, to what the scope holds).
+impl Default for StyleStage {
+    fn default() -> Self {
+        StyleStage {
+            tier: StyleConfig::new("").tier.name(),
+        }
+    }
+}
+
+/// `[triplets]`: neighbours per anchor (lowered, with a warning, to what the scope holds);
+/// the paper's k when left out.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct TripletsStage {
     pub k: usize,
 }
 
-/// `[export]`: the layout to write into DIR/export.
+impl Default for TripletsStage {
+    fn default() -> Self {
+        TripletsStage {
+            k: TripletsConfig::new("").k,
+        }
+    }
+}
+
+/// `[export]`: the layout to write into DIR/export (the published code's own, `official`,
+/// when left out).
 #[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct ExportStage {
     /// Any layout `export --layout` takes, by the same name.
     pub layout: nrw_export::Layout,
     /// false: export without semantics (train with --use_semantic=False)
-    #[serde(default = "yes")]
     pub semantics: bool,
     /// Centre crop of every channel (official, tfrecord): a side in pixels for
     /// `--train_resolution`, or "none" to keep the stored size; the published 512 when absent.
-    #[serde(default)]
     pub crop: Option<CropSetting>,
+}
+
+impl Default for ExportStage {
+    fn default() -> Self {
+        ExportStage {
+            layout: crate::export::official(Path::new(""), Path::new("")).layout,
+            semantics: true,
+            crop: None,
+        }
+    }
 }
 
 /// `[export] crop`: a side in pixels, or the word "none".
@@ -108,10 +161,6 @@ pub enum NoCrop {
 #[serde(deny_unknown_fields)]
 pub struct QaStage {}
 
-fn yes() -> bool {
-    true
-}
-
 impl Pipeline {
     /// Parse a pipeline file, naming the file in errors.
     pub fn load(path: &Path) -> Result<Pipeline> {
@@ -126,34 +175,25 @@ impl Pipeline {
     /// standing in for a segmentation model, a fifth of the few photos held out, and the
     /// colour-statistics tier unless VGG16 weights are given.
     pub fn demo(weights: bool) -> Pipeline {
-        let paper = IngestConfig::new("", "");
         Pipeline {
             name: "demo".into(),
             ingest: Some(IngestStage {
-                min_dim: paper.min_dim,
-                radius: paper.radius,
-                max_empty: paper.filters.max_empty_ratio,
-                min_photo_side: paper.filters.min_photo_side,
-                rows_per_shard: paper.rows_per_shard,
                 semantics: Some(nrw_synth::truth::SEMANTICS.into()),
-                strict: false,
-                segment_mode: None,
-                segment_size: None,
+                ..IngestStage::default()
             }),
             split: Some(SplitStage {
-                val: None,
                 val_fraction: Some(0.2),
-                seed: 0,
+                ..SplitStage::default()
             }),
-            style: Some(StyleStage {
-                tier: if weights { "vgg16-512" } else { "color-stats" }.into(),
+            style: Some(if weights {
+                StyleStage::default()
+            } else {
+                StyleStage {
+                    tier: nrw_style::Tier::ColorStats.name(),
+                }
             }),
-            triplets: Some(TripletsStage { k: 20 }),
-            export: Some(ExportStage {
-                layout: nrw_export::Layout::Official,
-                semantics: true,
-                crop: None,
-            }),
+            triplets: Some(TripletsStage::default()),
+            export: Some(ExportStage::default()),
             qa: Some(QaStage {}),
         }
     }
@@ -297,6 +337,7 @@ pub fn run(
     if let Some(s) = &p.split {
         let kept = nrw_dataset::reader::Dataset::open(out)?.len();
         let val = match (s.val, s.val_fraction) {
+            (None, None) => SplitConfig::new(out).val,
             (Some(v), None) => v,
             (None, Some(f)) if (0.0..1.0).contains(&f) => ((kept as f64 * f) as usize).max(1),
             _ => {
@@ -414,5 +455,52 @@ mod tests {
             .to_string();
         assert!(e.contains("layout") && e.contains("nerfstudio"), "{e}");
         assert!("nerf".parse::<Layout>().unwrap_err().contains("nerfstudio"));
+    }
+
+    #[test]
+    fn a_table_of_one_setting_takes_the_papers_others() {
+        let p: Pipeline = toml::from_str(
+            "name = \"x\"\n[ingest]\nmax_empty = 0.99\n[split]\nseed = 3\n[style]\n[triplets]\n[export]\nsemantics = false\n",
+        )
+        .unwrap();
+        let (i, paper) = (p.ingest.unwrap(), IngestConfig::new("", ""));
+        assert_eq!(i.max_empty, 0.99);
+        assert_eq!(
+            (i.min_dim, i.radius, i.min_photo_side, i.rows_per_shard),
+            (600, 1.0, 450, paper.rows_per_shard)
+        );
+        let s = p.split.unwrap();
+        assert_eq!((s.val, s.val_fraction, s.seed), (None, None, 3));
+        assert_eq!(p.style.unwrap().tier, "vgg16-512");
+        assert_eq!(p.triplets.unwrap().k, 20);
+        let e = p.export.unwrap();
+        assert_eq!(
+            (e.layout, e.semantics, e.crop),
+            (Layout::Official, false, None)
+        );
+        // The shipped file says what the defaults are: the two agree.
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/paper.toml");
+        let shipped = Pipeline::load(&file).unwrap();
+        let (a, b) = (shipped.ingest.unwrap(), IngestStage::default());
+        assert_eq!(
+            (
+                a.min_dim,
+                a.radius,
+                a.max_empty,
+                a.min_photo_side,
+                a.rows_per_shard
+            ),
+            (
+                b.min_dim,
+                b.radius,
+                b.max_empty,
+                b.min_photo_side,
+                b.rows_per_shard
+            )
+        );
+        assert_eq!(shipped.split.unwrap().val, Some(SplitConfig::new("").val));
+        assert_eq!(shipped.triplets.unwrap().k, TripletsStage::default().k);
+        assert_eq!(shipped.style.unwrap().tier, StyleStage::default().tier);
+        assert!(toml::from_str::<Pipeline>("name = \"x\"\n[ingest]\nmax_emty = 0.9\n").is_err());
     }
 }

@@ -140,6 +140,34 @@ fn kind(cfg: &StyleConfig, net: Option<&Vgg>) -> DescriptorKind {
     }
 }
 
+/// The instruction set a tier's descriptors depend on: the VGG tiers' (their convolutions and
+/// Grams are GEMMs, whose sums the AVX-512 and AVX2 kernels order differently, so values
+/// agree to about 1e-6 relative across machines, not bit for bit); none for colour
+/// statistics, summed in plain f64 the same way everywhere.
+fn gemm_instruction_set(tier: &Tier) -> Option<String> {
+    tier.needs_weights()
+        .then(|| nrw_style::isa::isa().name().to_string())
+}
+
+/// Manifest key listing the instruction sets the descriptors were computed with.
+pub const INSTRUCTION_SETS_KEY: &str = "style_instruction_sets";
+
+/// Record in the manifest which instruction sets the style units ran with (sorted, once
+/// each), or remove the key when no descriptor value depends on them.
+fn record_instruction_sets(manifest: &mut Manifest, records: &[UnitRecord]) {
+    let sets: std::collections::BTreeSet<&str> = records
+        .iter()
+        .filter_map(|r| r.instruction_set.as_deref())
+        .collect();
+    if sets.is_empty() {
+        manifest.parameters.remove(INSTRUCTION_SETS_KEY);
+    } else {
+        manifest
+            .parameters
+            .insert(INSTRUCTION_SETS_KEY.into(), serde_json::json!(sets));
+    }
+}
+
 /// The descriptor kind a style unit record describes (its typed parameters).
 pub(crate) fn kind_of(dataset: &Store, r: &UnitRecord) -> Result<DescriptorKind> {
     let file = dataset.name(&units::unit_record_path(units::STYLE, r.index, r.count));
@@ -362,6 +390,7 @@ fn run_unit(
         warnings: Vec::new(),
         groups: ids.len().div_ceil(cfg.photos_per_part),
         seconds: t0.elapsed().as_secs_f64(),
+        instruction_set: gemm_instruction_set(&cfg.tier),
     };
     crate::stage::record_unit::<StyleStage>(store, unit, &record)?;
     Ok(StyleSummary {
@@ -418,6 +447,7 @@ pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
     }
     let mut manifest = Manifest::read(dataset)?;
     crate::style::list_parts(dataset, &mut manifest, unit.groups)?;
+    record_instruction_sets(&mut manifest, &units::unit_records(dataset, units::STYLE)?);
     manifest.write(dataset)?;
     close_stage(dataset, units::STYLE)?;
     Ok(StyleMerge {

@@ -5,9 +5,9 @@ use std::sync::Arc;
 
 use bytes::Bytes;
 
-use super::Store;
+use super::remote::Remote;
 
-/// A file opened for random access (see [`Store::chunks`]).
+/// A file opened for random access (see [`super::Store::chunks`]).
 pub enum Chunks {
     File(std::fs::File),
     Remote(Arc<RemoteFile>),
@@ -16,7 +16,7 @@ pub enum Chunks {
 /// An object read by ranges through a read-ahead window: the Parquet reader asks for page
 /// headers and column chunks in many small reads, and one GET per window serves them.
 pub struct RemoteFile {
-    pub(super) store: Store,
+    pub(super) remote: Remote,
     pub(super) key: object_store::path::Path,
     pub(super) size: u64,
     pub(super) window: std::sync::Mutex<Option<(u64, Bytes)>>,
@@ -45,7 +45,7 @@ impl RemoteFile {
         } else {
             (start, (start + len.max(READ_AHEAD)).min(self.size))
         };
-        let b = self.store.get_range(&self.key, from..to)?;
+        let b = self.remote.get_range(&self.key, from..to)?;
         *window = Some((from, b.clone()));
         Ok(b.slice((start - from) as usize..(end - from) as usize))
     }
@@ -98,8 +98,7 @@ impl parquet::file::reader::ChunkReader for Chunks {
                 if b.len() < length {
                     return Err(parquet::errors::ParquetError::EOF(format!(
                         "{}: {length} bytes at {start} run past the end ({} bytes)",
-                        r.store.root().display(),
-                        r.size
+                        r.remote.url, r.size
                     )));
                 }
                 Ok(b)

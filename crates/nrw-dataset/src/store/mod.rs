@@ -21,7 +21,7 @@ mod chunks;
 mod remote;
 
 pub use chunks::{Chunks, RemoteFile, RemoteRead};
-use remote::{build_remote, remote_err, runtime, upload_parts, Upload};
+use remote::{build_remote, remote_err, runtime, upload_parts, Remote, Upload};
 pub use remote::{is_url, UPLOAD_PART};
 
 /// A dataset's location and the operations on its files (paths relative to the dataset).
@@ -33,14 +33,6 @@ pub struct Store {
 enum Inner {
     Local(PathBuf),
     Remote(Remote),
-}
-
-struct Remote {
-    /// The URL as given, without a trailing slash (names files in messages).
-    url: String,
-    store: Arc<dyn ObjectStore>,
-    prefix: object_store::path::Path,
-    rt: &'static tokio::runtime::Runtime,
 }
 
 impl std::fmt::Debug for Store {
@@ -390,26 +382,12 @@ impl Store {
                     }
                 };
                 Ok(Chunks::Remote(Arc::new(RemoteFile {
-                    store: self.clone(),
+                    remote: r.clone(),
                     key,
                     size,
                     window: std::sync::Mutex::new(None),
                 })))
             }
-        }
-    }
-
-    fn get_range(
-        &self,
-        key: &object_store::path::Path,
-        range: std::ops::Range<u64>,
-    ) -> std::io::Result<Bytes> {
-        match &*self.inner {
-            Inner::Remote(r) => {
-                r.rt.block_on(r.store.get_range(key, range))
-                    .map_err(|e| std::io::Error::other(format!("{}: {e}", r.url)))
-            }
-            Inner::Local(_) => unreachable!("ranges are read from remote stores only"),
         }
     }
 }

@@ -8,8 +8,30 @@ use std::time::Duration;
 
 use object_store::{ObjectStore, ObjectStoreExt};
 
-use super::Remote;
 use crate::error::{DatasetError, Result};
+
+/// An object-store location a `Store` reads and writes.
+#[derive(Clone)]
+pub(super) struct Remote {
+    /// The URL as given, without a trailing slash (names files in messages).
+    pub(super) url: String,
+    pub(super) store: Arc<dyn ObjectStore>,
+    pub(super) prefix: object_store::path::Path,
+    pub(super) rt: &'static tokio::runtime::Runtime,
+}
+
+impl Remote {
+    /// Bytes `range` of the object `key`, an I/O error naming the location otherwise.
+    pub(super) fn get_range(
+        &self,
+        key: &object_store::path::Path,
+        range: std::ops::Range<u64>,
+    ) -> std::io::Result<bytes::Bytes> {
+        self.rt
+            .block_on(self.store.get_range(key, range))
+            .map_err(|e| std::io::Error::other(format!("{}: {e}", self.url)))
+    }
+}
 
 /// The one async runtime of the process, shared by every object-store location it opens
 /// (made on the first open; a process that stays local never starts it). A forked child

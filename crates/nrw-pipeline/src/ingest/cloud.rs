@@ -1,7 +1,15 @@
 //! The cloud to render: the dense or sparse points, outliers removed and normals estimated
 //! when asked, re-centred on the scene origin.
 
-use super::*;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use nrw_colmap::{read_ply, Reconstruction};
+use nrw_render::RenderCloud;
+
+use crate::error::{PipelineError, Result};
+
+use super::config::IngestConfig;
 use nrw_dataset::provenance::DenoiseRecord;
 
 /// A cloud as read, before clean-up: straight into f32 columns when no clean-up needs more

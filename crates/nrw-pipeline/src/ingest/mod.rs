@@ -11,19 +11,11 @@
 //! skips groups whose record matches its inputs and parameters, so an interrupted run resumes,
 //! and the result is byte-identical on any thread count and any number of units.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use image::RgbImage;
-use nrw_colmap::{read_ply, Format, Reconstruction, UndistortOptions};
-use nrw_dataset::codec::{
-    encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
-};
-use nrw_dataset::units::{self, GroupImage, GroupRecord, UnitRecord};
-use nrw_dataset::{FileEntry, ImageOutcome, SceneSource, Store, ViewRow};
-use nrw_render::{render, render_size, Filters, RenderCloud, Verdict, View};
-use rayon::prelude::*;
+use nrw_dataset::units::{self, UnitRecord};
+use nrw_dataset::{FileEntry, SceneSource, Store};
 
 use crate::error::{PipelineError, Result, Setting};
 use crate::model::{
@@ -35,96 +27,18 @@ use crate::{Progress, Unit};
 use nrw_dataset::provenance::IngestParameters;
 
 mod cloud;
+mod config;
 mod merge;
 mod photos;
 mod view;
 
+use config::Prepared;
+pub use config::{IngestConfig, InlineSegment, MAX_RADIUS};
 pub use merge::{finalize_ingest, IngestMerge};
 
 use cloud::*;
 use photos::*;
 use view::*;
-
-/// Largest splat radius accepted: wider splats smear a render into a few blobs, and each
-/// point would touch thousands of pixels.
-pub const MAX_RADIUS: f32 = 32.0;
-
-/// Ingest's settings; [`IngestConfig::new`] fills in the paper's.
-#[derive(Debug, Clone)]
-pub struct IngestConfig {
-    /// Scene folder (COLMAP layout) or a model folder itself.
-    pub scene: PathBuf,
-    /// Dataset folder to write.
-    pub out: PathBuf,
-    /// Photo folder [default: images/ next to the model].
-    pub images: Option<PathBuf>,
-    /// Model encoding to read [default: bin when present].
-    pub format: Option<Format>,
-    /// Point cloud [default: dense/fused.ply, else the sparse points].
-    pub points: Option<PathBuf>,
-    /// Folder of per-photo ADE20K label maps.
-    pub semantics: Option<PathBuf>,
-    /// Segment each kept photo with this model instead of reading label maps.
-    pub segment: Option<InlineSegment>,
-    /// Store every view as COLMAP's `image_undistorter` would: the PINHOLE camera it computes
-    /// and the photo resampled to it (`ingest --undistort`).
-    pub undistort: Option<UndistortOptions>,
-    /// Statistical outlier removal before rendering: (k neighbours, σ) (`ingest --denoise`).
-    pub denoise: Option<(usize, f64)>,
-    /// Normals by PCA of k neighbours for a cloud without them (`ingest --estimate-normals`).
-    pub estimate_normals: Option<usize>,
-    /// Shorter side of a render in pixels (the paper: 600).
-    pub min_dim: u32,
-    /// Splat radius in render pixels (the paper: 1).
-    pub radius: f32,
-    /// The paper's filters: 85% empty, 450 px.
-    pub filters: Filters,
-    /// Images per shard (the unit of resumption and of work units).
-    pub rows_per_shard: usize,
-    /// Make an unreadable photo or label map an error instead of an `unreadable` verdict.
-    pub strict: bool,
-    /// Read a photo that is a symbolic link out of the images folder (refused by default: a
-    /// model's names cannot make ingest read files the user did not put there).
-    pub follow_outside_links: bool,
-    /// Stop after this many groups, as an interruption would (resume tests).
-    pub stop_after_groups: Option<usize>,
-    /// Sleep this long after each group (so tests can kill a unit mid-way).
-    pub pause_after_group: Option<std::time::Duration>,
-}
-
-impl IngestConfig {
-    /// The paper's settings for a scene and a dataset folder.
-    pub fn new(scene: impl Into<PathBuf>, out: impl Into<PathBuf>) -> IngestConfig {
-        IngestConfig {
-            scene: scene.into(),
-            out: out.into(),
-            images: None,
-            format: None,
-            points: None,
-            semantics: None,
-            segment: None,
-            undistort: None,
-            denoise: None,
-            estimate_normals: None,
-            min_dim: 600,
-            radius: 1.0,
-            filters: Filters::default(),
-            rows_per_shard: 64,
-            strict: false,
-            follow_outside_links: false,
-            stop_after_groups: None,
-            pause_after_group: None,
-        }
-    }
-}
-
-/// `ingest --segment-weights`: the model and mode that label each kept photo.
-#[derive(Debug, Clone)]
-pub struct InlineSegment {
-    /// The SegFormer folder (config.json + model.safetensors).
-    pub weights: PathBuf,
-    pub mode: nrw_segment::Mode,
-}
 
 /// What a unit of ingest did.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -142,23 +56,6 @@ pub struct UnitSummary {
     pub points: usize,
     pub warnings: Vec<String>,
     pub seconds: f64,
-}
-
-/// Everything a unit derives from the inputs before rendering (every unit derives the same).
-struct Prepared {
-    rec: Reconstruction,
-    photos_dir: PathBuf,
-    photos: BTreeMap<u32, (u32, u32)>,
-    /// Photos whose header cannot be read, with the reason (their views are `unreadable`).
-    unreadable: BTreeMap<u32, String>,
-    cloud: RenderCloud,
-    source: String,
-    record: UnitRecord,
-    /// The model of `--segment-weights`, loaded once, and its mode.
-    segmenter: Option<(nrw_segment::Segformer, nrw_segment::Mode)>,
-    /// With `--undistort`: the photos' own (distorted) cameras; `rec` then holds the
-    /// undistorted PINHOLE ones.
-    distorted: Option<BTreeMap<u32, nrw_colmap::Camera>>,
 }
 
 fn check_config(cfg: &IngestConfig) -> Result<()> {
@@ -282,6 +179,8 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
         warnings,
         groups: rec.images.len().div_ceil(cfg.rows_per_shard),
         seconds: 0.0,
+        // Renders go through no GEMM: the same bits on every instruction set.
+        instruction_set: None,
     };
     Ok(Prepared {
         rec,

@@ -1,7 +1,14 @@
 //! The scene's photos before rendering: each one's path through the name check, and its
 //! size read from the header (a photo that cannot be read is a verdict, not an error).
 
-use super::*;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use nrw_colmap::Reconstruction;
+
+use crate::error::{PipelineError, Result};
+
+use super::config::IngestConfig;
 
 /// One photo's size from its header (no pixel decoded), or why it has none.
 pub(super) fn header_size(path: &Path) -> std::result::Result<(u32, u32), String> {

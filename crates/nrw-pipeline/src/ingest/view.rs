@@ -1,7 +1,21 @@
 //! One view: its photo, render, depth, labels and verdict, encoded into a shard row; and
 //! one group of views, written as a shard and recorded.
 
-use super::*;
+use std::path::Path;
+
+use image::RgbImage;
+use nrw_dataset::codec::{
+    encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
+};
+use nrw_dataset::units::{self, GroupImage, GroupRecord};
+use nrw_dataset::{FileEntry, ImageOutcome, Store, ViewRow};
+use nrw_render::{render, render_size, Verdict, View};
+use rayon::prelude::*;
+
+use crate::error::{PipelineError, Result};
+use crate::Progress;
+
+use super::config::{IngestConfig, Prepared};
 
 /// A group's record if it is done with these inputs and parameters and its shard is intact.
 pub(super) fn done_group(out: &Store, g: usize, fingerprint: &str) -> Option<GroupRecord> {

@@ -9,19 +9,11 @@
 
 use std::collections::BTreeMap;
 
+mod array;
 mod pickle;
 
+pub use array::{F32Array, NpyError};
 use pickle::{Obj, Vm};
-
-/// A float32 array read from the file: its shape and its values.
-#[derive(Debug, Clone, PartialEq)]
-pub struct F32Array {
-    pub shape: Vec<usize>,
-    pub data: Vec<f32>,
-}
-
-/// Why a `.npy` weights file could not be read (the caller adds the path).
-pub type NpyError = String;
 
 /// Read a `vgg16.npy`: layer name → (W, b) float32 arrays, in the file's layout.
 pub fn read_layers(bytes: &[u8]) -> Result<BTreeMap<String, Vec<F32Array>>, NpyError> {

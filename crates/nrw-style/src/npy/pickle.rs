@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{F32Array, NpyError};
+use super::array::{F32Array, NpyError};
 
 /// What a pickled value is, once interpreted without calling anything.
 #[derive(Debug, Clone)]

@@ -10,6 +10,8 @@ mod clean;
 mod golden;
 #[path = "jpeg.rs"]
 mod jpeg;
+#[path = "memory.rs"]
+mod memory;
 #[path = "nerfstudio.rs"]
 mod nerfstudio;
 #[path = "nerfw.rs"]
@@ -472,6 +474,12 @@ fn assert_same_files(
 
 /// `ingest` of a small synthetic scene, render size and photo-size filter lowered to fit it.
 fn ingest_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    let args = ingest_small_args(scene, out, extra);
+    nrw(&args.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
+/// The arguments of [`ingest_small`].
+fn ingest_small_args(scene: &Path, out: &Path, extra: &[&str]) -> Vec<String> {
     let mut args = vec![
         "ingest",
         scene.to_str().unwrap(),
@@ -483,7 +491,7 @@ fn ingest_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
         "100",
     ];
     args.extend(extra);
-    nrw(&args)
+    args.into_iter().map(String::from).collect()
 }
 
 /// Copy a scene's photo folder (flat) into `dst`, for tests that rewrite a real scene's model.

@@ -262,7 +262,16 @@ fn export(ds: &Path, layout: &str, out: &Path) -> Option<String> {
     (!o.status.success()).then(|| String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
-pub(crate) const LAYOUTS: [&str; 5] = ["official", "tfrecord", "files", "nerfw", "nerfstudio"];
+/// Every layout the tool has (a new one is tested here the day it is added).
+pub(crate) const LAYOUTS: [&str; nrw_export::Layout::ALL.len()] = {
+    let mut names = [""; nrw_export::Layout::ALL.len()];
+    let mut i = 0;
+    while i < names.len() {
+        names[i] = nrw_export::Layout::ALL[i].name();
+        i += 1;
+    }
+    names
+};
 /// The layouts whose file names come from the photos' names.
 const NAMED_LAYOUTS: [&str; 3] = ["files", "nerfw", "nerfstudio"];
 

@@ -35,7 +35,7 @@ impl Layout {
     ];
 
     /// The layout's name on the command line, in pipeline files and in `export.json`.
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Layout::Official => "official",
             Layout::Tfrecord => "tfrecord",

@@ -1868,7 +1868,14 @@ fn triplets_come_from_the_training_split_in_exact_order() {
             let mut all: Vec<(f64, u32)> = by_id
                 .iter()
                 .filter(|(id, _)| **id != anchor && !val.contains(id))
-                .map(|(id, v)| (nrw_style::distance2(&by_id[&anchor], v), *id))
+                .map(|(id, v)| {
+                    let d: f64 = by_id[&anchor]
+                        .iter()
+                        .zip(v)
+                        .map(|(x, y)| (*x as f64 - *y as f64).powi(2))
+                        .sum();
+                    (d, *id)
+                })
                 .collect();
             all.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
             assert_eq!(n, all.iter().take(6).map(|p| p.1).collect::<Vec<_>>());
@@ -1877,6 +1884,15 @@ fn triplets_come_from_the_training_split_in_exact_order() {
         }
     }
     assert_eq!(anchors, 7);
+    // And numpy's own all-pairs distances over the Parquet files, none of our code.
+    if python::python_has("import numpy, pyarrow") {
+        let oracle = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/triplets_oracle.py");
+        let o = Command::new("python3")
+            .args([oracle.to_str().unwrap(), d, "6"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(ds.join("manifest.json")).unwrap()).unwrap();
     assert!(v["tables"]

@@ -80,6 +80,21 @@ impl Moto {
         assert!(reply.starts_with("HTTP/1.1 200"), "{reply}");
     }
 
+    /// The ETag of object `key` of `bucket` as boto3 (moto's own dependency, not our client)
+    /// reads it: an upload of N parts has S3's multipart form `"HEX-N"`, one PUT plain `"HEX"`.
+    pub(crate) fn etag(&self, bucket: &str, key: &str) -> String {
+        let script = "import sys, boto3\n\
+             s3 = boto3.client('s3', endpoint_url=sys.argv[1])\n\
+             print(s3.head_object(Bucket=sys.argv[2], Key=sys.argv[3])['ETag'])";
+        let o = Command::new("python3")
+            .args(["-c", script, &self.endpoint(), bucket, key])
+            .envs(self.env())
+            .output()
+            .expect("python3 runs");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).trim().to_string()
+    }
+
     /// The variables a user sets for this endpoint.
     pub(crate) fn env(&self) -> Vec<(&'static str, String)> {
         vec![
@@ -294,7 +309,19 @@ fn a_file_larger_than_one_part_uploads_in_parts_and_reads_back_whole() {
     let store = nrw_dataset::Store::open_with("s3://nrw/big", &opts).unwrap();
     store.upload("a/big.bin", &local).unwrap();
     assert_eq!(store.read("a/big.bin").unwrap().as_ref(), bytes.as_slice());
-    assert_eq!(store.list("").unwrap(), vec!["a/big.bin".to_string()]);
+    // It travelled as three parts, not one PUT (which would also read back whole).
+    let etag = m.etag("nrw", "big/a/big.bin");
+    assert!(etag.ends_with("-3\""), "ETag {etag}: not a 3-part upload");
+    // A file under one part goes as one PUT.
+    let small = tmp.path().join("small.bin");
+    std::fs::write(&small, &bytes[..1000]).unwrap();
+    store.upload("a/small.bin", &small).unwrap();
+    let etag = m.etag("nrw", "big/a/small.bin");
+    assert!(
+        !etag.contains('-'),
+        "ETag {etag}: a small file went in parts"
+    );
+    assert_eq!(store.list("").unwrap(), ["a/big.bin", "a/small.bin"]);
 }
 
 #[test]
@@ -447,8 +474,18 @@ fn a_unit_killed_on_s3_leaves_nothing_the_manifest_lists_and_resumes() {
         );
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
+    // Killed mid-run: still running when the signal goes, ended by it, not finished.
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the unit ended before it was killed"
+    );
     child.kill().unwrap();
-    child.wait().unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&status),
+        Some(9),
+        "{status}"
+    );
     let after_kill = m.files(url);
     assert!(
         !after_kill.contains_key(Path::new("manifest.json")),

@@ -24,6 +24,21 @@ fn scene_with(boxdir: &Path, edit: impl Fn(&mut nrw_colmap::Reconstruction, &Pat
 }
 
 /// Every file under `dir`, relative, sorted.
+/// Every file under `dir` with the SHA-256 of its bytes, so "nothing written" compares
+/// contents, not names only (an overwritten manifest keeps its name).
+/// `timings.json`, where stages (export included) add how long they took, is left out.
+fn contents(dir: &Path) -> Vec<(String, String)> {
+    files(dir)
+        .into_iter()
+        .filter(|rel| !rel.ends_with("timings.json"))
+        .map(|rel| {
+            let bytes = std::fs::read(dir.join(&rel)).unwrap();
+            let sha = nrw_dataset::FileEntry::of_bytes(&rel, &bytes).sha256;
+            (rel, sha)
+        })
+        .collect()
+}
+
 fn files(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = walk(dir)
         .iter()
@@ -80,7 +95,7 @@ fn escaping_and_absolute_names_are_refused_naming_the_image_and_nothing_outside_
             std::fs::rename(scene.join("images").join(&img.name), &target).unwrap();
             img.name = hostile.clone();
         });
-        let before = files(tmp.path());
+        let before = contents(tmp.path());
         let out = b.join("out");
         let e = ingest(&scene, &out, &[]).expect("refused");
         assert!(
@@ -92,7 +107,7 @@ fn escaping_and_absolute_names_are_refused_naming_the_image_and_nothing_outside_
             "{case}: {e}"
         );
         assert_eq!(
-            files(tmp.path()),
+            contents(tmp.path()),
             before,
             "{case}: nothing written anywhere"
         );
@@ -286,12 +301,17 @@ fn hostile_names_in_a_dataset_reach_no_path_outside_any_export() {
         "a\\..\\..\\pwn.jpg",
         "a\0b.jpg",
         "x/../../../pwn.jpg",
+        // Aimed at files that exist: the dataset's own manifest, from wherever a layout
+        // puts a photo (`SPLIT/NAME/`, `dense/images/NAME`, `images/NAME`).
+        "../ds/manifest.json",
+        "../../../ds/manifest.json",
+        "../../../../ds/manifest.json",
     ] {
         // Every view but the first keeps its name; the first is hostile.
         let first = names[0].clone();
         let to = hostile.to_string();
         rename_views(&ds, &|n| (n == first).then(|| to.clone()));
-        let before = files(tmp.path());
+        let before = contents(tmp.path());
         for layout in LAYOUTS {
             let out = tmp.path().join("exports").join(layout);
             match export(&ds, layout, &out) {
@@ -307,14 +327,14 @@ fn hostile_names_in_a_dataset_reach_no_path_outside_any_export() {
                             .any(|why| e.contains(why)),
                         "{layout} {hostile:?}: {e}"
                     );
-                    assert_eq!(files(tmp.path()), before, "{layout} {hostile:?}");
+                    assert_eq!(contents(tmp.path()), before, "{layout} {hostile:?}");
                 }
                 None => {
                     // Layouts of index names write the hostile name only as data, inside.
                     assert!(!NAMED_LAYOUTS.contains(&layout), "{layout} {hostile:?}");
-                    let now: Vec<String> = files(tmp.path())
+                    let now: Vec<(String, String)> = contents(tmp.path())
                         .into_iter()
-                        .filter(|f| !f.starts_with(&format!("exports/{layout}/")))
+                        .filter(|(f, _)| !f.starts_with(&format!("exports/{layout}/")))
                         .collect();
                     assert_eq!(now, before, "{layout} {hostile:?}");
                     std::fs::remove_dir_all(&out).unwrap();
@@ -343,7 +363,7 @@ fn names_one_file_apart_only_by_case_or_normalisation_are_refused_naming_both() 
         });
         for layout in LAYOUTS {
             let out = tmp.path().join("exports").join(layout);
-            let before = files(tmp.path());
+            let before = contents(tmp.path());
             match export(&ds, layout, &out) {
                 Some(e) => {
                     assert!(NAMED_LAYOUTS.contains(&layout), "{layout}: {e}");
@@ -362,7 +382,7 @@ fn names_one_file_apart_only_by_case_or_normalisation_are_refused_naming_both() 
                             || e.contains("would both be written as"),
                         "{layout}: {e}"
                     );
-                    assert_eq!(files(tmp.path()), before, "{layout}: nothing written");
+                    assert_eq!(contents(tmp.path()), before, "{layout}: nothing written");
                 }
                 None => {
                     assert!(!NAMED_LAYOUTS.contains(&layout), "{layout} {x:?} {y:?}");
@@ -438,7 +458,7 @@ fn a_name_that_is_not_utf8_is_refused_naming_the_file_and_field() {
         .unwrap();
     bytes[at] = 0xFF;
     std::fs::write(&path, bytes).unwrap();
-    let before = files(tmp.path());
+    let before = contents(tmp.path());
     let e = fails(&["inspect", scene.to_str().unwrap()]);
     assert!(
         e.contains("images.bin") && e.contains("not UTF-8") && e.contains("name"),
@@ -446,5 +466,5 @@ fn a_name_that_is_not_utf8_is_refused_naming_the_file_and_field() {
     );
     let e = ingest(&scene, &tmp.path().join("out"), &[]).expect("refused");
     assert!(e.contains("images.bin") && e.contains("not UTF-8"), "{e}");
-    assert_eq!(files(tmp.path()), before, "nothing written");
+    assert_eq!(contents(tmp.path()), before, "nothing written");
 }

@@ -71,6 +71,9 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
     let args = [&ingest[..], &["--pause-after-shard-ms", "800"]].concat();
     let stdout = driver(s, ray.to_str().unwrap(), &args, &[]);
     assert!(stdout.contains("node killed mid-run"), "{stdout}");
+    // The task log showed a task cut off on the killed node, run again elsewhere, and no
+    // failure of the binary behind a retry (pipelines/ray/test_driver.py check_task_log).
+    assert!(stdout.contains("cut off on the killed node"), "{stdout}");
     assert!(
         stdout.contains("report:"),
         "the driver says where the result is: {stdout}"
@@ -158,6 +161,7 @@ fn the_corpus_driver_called_from_another_driver_with_a_node_killed_indexes_every
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(stdout.contains("node killed mid-run"), "{stdout}");
+    assert!(stdout.contains("cut off on the killed node"), "{stdout}");
     for (scene, name) in [(&a, "alpha"), (&b, "beta")] {
         let one = tmp.path().join(format!("one-{name}"));
         one_process(scene.to_str().unwrap(), &one, &ingest);

@@ -5,16 +5,15 @@
 
 Loads pipelines/ray/driver.py from its path under another module name (so Ray's workers
 could not import it: the tasks must carry its code), starts a cluster of a 0-CPU head and
-two 1-CPU worker nodes, runs the scenes into OUT, and kills one worker node (SIGKILL) once
-any scene's first ingest group is recorded: its tasks must be retried on the other node.
+two 1-CPU worker nodes, runs the scenes into OUT, and kills one worker node (SIGKILL) once an
+ingest unit running on it has recorded a group: the task log must show that unit cut off
+there and run again elsewhere, and only the broken scene's commands failing.
 """
 
-import glob
 import importlib.util
 import os
 import sys
 import threading
-import time
 
 os.environ["RAY_USAGE_STATS_ENABLED"] = "0"
 
@@ -26,6 +25,15 @@ def load_driver(path):
     spec = importlib.util.spec_from_file_location("nrw_corpus_test_driver", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def load_harness(driver_py):
+    """pipelines/ray/test_driver.py (beside the driver): its kill and task-log checks."""
+    spec = importlib.util.spec_from_file_location(
+        "nrw_ray_test_driver", os.path.join(os.path.dirname(driver_py), "test_driver.py"))
+    module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
@@ -44,26 +52,21 @@ def main():
     cluster.wait_for_nodes()
     ray.init(address=cluster.address, logging_level="ERROR", log_to_driver=False)
     killed = threading.Event()
-
-    def kill_when_started():
-        deadline = time.time() + 300
-        while time.time() < deadline:
-            if glob.glob(os.path.join(out, "*", ".units", "ingest", "group-*")):
-                cluster.remove_node(doomed, allow_graceful=False)
-                killed.set()
-                return
-            time.sleep(0.05)
-
-    threading.Thread(target=kill_when_started, daemon=True).start()
+    harness = load_harness(driver_py)
+    task_log = os.path.join(os.path.dirname(os.path.abspath(out)), "ray-corpus-tasks.jsonl")
+    threading.Thread(target=harness.kill_mid_task, args=(cluster, doomed, task_log, killed), daemon=True).start()
     try:
         driver.run_corpus(scenes, out, 4, binary=binary, val=2, k=3, tier="color-stats",
-                          ingest_args=ingest_args, log=lambda m: print(m, flush=True))
+                          ingest_args=ingest_args, log=lambda m: print(m, flush=True), task_log=task_log)
     finally:
         ray.shutdown()
         cluster.shutdown()
     if not killed.is_set():
         print("the worker node was never killed", file=sys.stderr)
         return 1
+    # Only the broken scene's commands may fail (each retried, none succeeding after).
+    broken = [s for s in scenes if "broken" in os.path.basename(os.path.normpath(s))]
+    print(harness.check_task_log(task_log, doomed.node_id, failing=broken), flush=True)
     print("node killed mid-run; every scene ran", flush=True)
     try:
         import pyarrow.parquet as pq

@@ -49,47 +49,63 @@ if __name__ != "__main__":
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
 
+def _record(task_log, **event):
+    """Append one attempt's event to the task log (one JSON line; O_APPEND, so lines of
+    several nodes on a shared file system do not interleave)."""
+    if task_log:
+        with open(task_log, "a", encoding="utf-8") as f:
+            f.write(json.dumps(event) + "\n")
+
+
 @ray.remote(num_cpus=1, max_retries=3, retry_exceptions=True)
-def nrw_task(binary, args, env):
-    """One nrw-etl command on whichever node Ray picks; raises (and Ray retries) on failure."""
+def nrw_task(binary, args, env, task_log=None):
+    """One nrw-etl command on whichever node Ray picks; raises (and Ray retries) on failure.
+    With `task_log`, each attempt records where it started and how it ended, so a run can
+    show which node ran what and that a retry followed a lost node, not a failed command."""
     full_env = dict(os.environ)
     full_env.update(env)
+    node = ray.get_runtime_context().get_node_id()
+    _record(task_log, event="start", node=node, args=args, pid=os.getpid())
     done = subprocess.run([binary, *args], env=full_env, capture_output=True, text=True,
                           preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+    _record(task_log, event="end", node=node, args=args, pid=os.getpid(), code=done.returncode)
     if done.returncode != 0:
         raise RuntimeError(f"nrw-etl {' '.join(args)} exited {done.returncode}: {done.stderr.strip()}")
     return done.stdout.strip()
 
 
-def units(binary, stage_args, n, env):
+def units(binary, stage_args, n, env, task_log=None):
     """Run work units 0..n-1 of a stage and wait for all of them."""
     quiet = [] if "--quiet" in stage_args else ["--quiet"]
-    refs = [nrw_task.remote(binary, [*stage_args, "--shard", f"{i}/{n}", *quiet], env) for i in range(n)]
+    refs = [nrw_task.remote(binary, [*stage_args, "--shard", f"{i}/{n}", *quiet], env, task_log)
+            for i in range(n)]
     return ray.get(refs)
 
 
-def one(binary, args, env):
+def one(binary, args, env, task_log=None):
     """One whole-dataset step (finalize, split, triplets, qa) as a Ray task."""
-    return ray.get(nrw_task.remote(binary, args, env))
+    return ray.get(nrw_task.remote(binary, args, env, task_log))
 
 
 def run(scene, out, n, binary="nrw-etl", val=100, k=20, tier="vgg16-512", weights=None,
-        ingest_args=(), env=None, style=True, log=print):
-    """The whole pipeline on the connected Ray cluster; returns the report's location."""
+        ingest_args=(), env=None, style=True, log=print, task_log=None):
+    """The whole pipeline on the connected Ray cluster; returns the report's location.
+    `task_log`: a file every node can append to (a shared file system) where each task
+    attempt records its node, command and exit code, as JSON lines."""
     env = dict(env or {})
     log(f"ingest: {n} units")
-    units(binary, ["ingest", scene, "--out", out, *ingest_args], n, env)
-    log(one(binary, ["finalize", out], env) or "finalized ingest")
-    log(one(binary, ["split", out, "--val", str(val)], env))
+    units(binary, ["ingest", scene, "--out", out, *ingest_args], n, env, task_log)
+    log(one(binary, ["finalize", out], env, task_log) or "finalized ingest")
+    log(one(binary, ["split", out, "--val", str(val)], env, task_log))
     if style:
         style_args = ["style", out, "--tier", tier]
         if weights:
             style_args += ["--weights", weights]
         log(f"style: {n} units")
-        units(binary, style_args, n, env)
-        log(one(binary, ["finalize", out], env) or "finalized style")
-        log(one(binary, ["triplets", out, "--k", str(k)], env))
-    report = one(binary, ["qa", out], env)
+        units(binary, style_args, n, env, task_log)
+        log(one(binary, ["finalize", out], env, task_log) or "finalized style")
+        log(one(binary, ["triplets", out, "--k", str(k)], env, task_log))
+    report = one(binary, ["qa", out], env, task_log)
     log(f"dataset: {out}")
     log(f"report:  {report}")
     return report
@@ -146,7 +162,7 @@ def run_corpus(scenes, out, n, binary="nrw-etl", parallel=None, log=print, **kw)
         errors = list(pool.map(one_scene, scenes, names))
     entries = [{"scene": s, "name": m, "dataset": join(out, m), "error": e}
                for s, m, e in zip(scenes, names, errors)]
-    printed = one(binary, ["corpus", out, "--entries", json.dumps(entries)], env)
+    printed = one(binary, ["corpus", out, "--entries", json.dumps(entries)], env, kw.get("task_log"))
     log(printed)
     log(f"corpus index: {join(out, 'corpus.parquet')}")
     return printed
@@ -167,13 +183,16 @@ def main(argv=None):
     p.add_argument("--tier", default="vgg16-512", help="style tier (color-stats needs no weights)")
     p.add_argument("--weights", default=None, help="VGG16 safetensors, readable on every node")
     p.add_argument("--ingest-arg", action="append", default=[], help="extra ingest argument (repeat)")
+    p.add_argument("--task-log", default=None,
+                   help="append each task attempt (node, command, exit code) to this file, as JSON lines")
     a = p.parse_args(argv)
     if (a.scene is None) == (a.scenes is None):
         p.error("give one SCENE or --scenes LIST")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     ray.init(address=a.address)
     n = a.units or max(1, int(ray.cluster_resources().get("CPU", 1)))
-    settings = dict(val=a.val, k=a.k, tier=a.tier, weights=a.weights, ingest_args=a.ingest_arg)
+    settings = dict(val=a.val, k=a.k, tier=a.tier, weights=a.weights, ingest_args=a.ingest_arg,
+                    task_log=a.task_log)
     if a.scenes:
         run_corpus(scene_list(a.scenes), a.out, n, a.binary, a.parallel, **settings)
     else:

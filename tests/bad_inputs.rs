@@ -676,7 +676,7 @@ fn stages_killed_with_sigkill_then_rerun_write_the_same_bytes() {
         if kill {
             // Ingest is killed once its first group is recorded (it pauses after each).
             let mut cmd = Command::new(env!("CARGO_BIN_EXE_nrw-etl"));
-            cmd.args(ingest).args(["--pause-after-shard-ms", "1000"]);
+            cmd.args(ingest).args(["--pause-after-group-ms", "1000"]);
             let records = ds.join(".units/ingest");
             kill_when(cmd, &|| {
                 records.read_dir().is_ok_and(|d| {

@@ -523,7 +523,7 @@ fn interrupted_ingest_resumes_to_the_same_bytes_on_any_thread_count() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
     let resumed = tmp.path().join("resumed");
-    let o = run(&resumed, "2", &["--stop-after-shards", "2"]);
+    let o = run(&resumed, "2", &["--stop-after-groups", "2"]);
     assert_eq!(
         o.status.code(),
         Some(130),

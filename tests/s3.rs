@@ -455,7 +455,7 @@ fn a_unit_killed_on_s3_leaves_nothing_the_manifest_lists_and_resumes() {
             url,
             "--shard",
             "0/2",
-            "--pause-after-shard-ms",
+            "--pause-after-group-ms",
             "1500",
         ])
         .args(base)

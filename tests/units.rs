@@ -42,7 +42,7 @@ fn unit_command(scene: &Path, out: &Path, shard: &str) -> Command {
 /// recorded, and check it died mid-way.
 fn kill_mid_way(scene: &Path, out: &Path, shard: &str) {
     let mut child = unit_command(scene, out, shard)
-        .args(["--pause-after-shard-ms", "400"])
+        .args(["--pause-after-group-ms", "400"])
         .spawn()
         .unwrap();
     let records = out.join(".units/ingest");

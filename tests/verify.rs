@@ -38,6 +38,7 @@ fn verify_passes_good_datasets_and_names_every_damaged_file() {
             "--rows-per-shard",
             "2",
             "--quiet",
+            // The flag's old name, kept as an alias (it is now --stop-after-groups).
             "--stop-after-shards",
             "2",
         ],

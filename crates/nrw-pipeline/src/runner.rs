@@ -19,18 +19,18 @@ use crate::Progress;
 #[serde(deny_unknown_fields)]
 pub struct Pipeline {
     pub name: String,
-    pub ingest: Option<IngestStage>,
-    pub split: Option<SplitStage>,
-    pub style: Option<StyleStage>,
-    pub triplets: Option<TripletsStage>,
-    pub export: Option<ExportStage>,
-    pub qa: Option<QaStage>,
+    pub ingest: Option<IngestTable>,
+    pub split: Option<SplitTable>,
+    pub style: Option<StyleTable>,
+    pub triplets: Option<TripletsTable>,
+    pub export: Option<ExportTable>,
+    pub qa: Option<QaTable>,
 }
 
 /// `[ingest]`: render and filter; a setting left out is the paper's (`IngestConfig::new`).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct IngestStage {
+pub struct IngestTable {
     pub min_dim: u32,
     pub radius: f32,
     pub max_empty: f64,
@@ -47,11 +47,11 @@ pub struct IngestStage {
     pub segment_size: Option<u32>,
 }
 
-impl Default for IngestStage {
+impl Default for IngestTable {
     /// The paper's settings, as ingest's own configuration holds them.
     fn default() -> Self {
         let paper = IngestConfig::new("", "");
-        IngestStage {
+        IngestTable {
             min_dim: paper.min_dim,
             radius: paper.radius,
             max_empty: paper.filters.max_empty_ratio,
@@ -69,15 +69,15 @@ impl Default for IngestStage {
 /// neither count nor fraction, the paper's count (`SplitConfig::new`).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct SplitStage {
+pub struct SplitTable {
     pub val: Option<usize>,
     pub val_fraction: Option<f64>,
     pub seed: u64,
 }
 
-impl Default for SplitStage {
+impl Default for SplitTable {
     fn default() -> Self {
-        SplitStage {
+        SplitTable {
             val: None,
             val_fraction: None,
             seed: SplitConfig::new("").seed,
@@ -89,13 +89,13 @@ impl Default for SplitStage {
 /// reference tier when left out.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct StyleStage {
+pub struct StyleTable {
     pub tier: String,
 }
 
-impl Default for StyleStage {
+impl Default for StyleTable {
     fn default() -> Self {
-        StyleStage {
+        StyleTable {
             tier: StyleConfig::new("").tier.name(),
         }
     }
@@ -105,13 +105,13 @@ impl Default for StyleStage {
 /// the paper's k when left out.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct TripletsStage {
+pub struct TripletsTable {
     pub k: usize,
 }
 
-impl Default for TripletsStage {
+impl Default for TripletsTable {
     fn default() -> Self {
-        TripletsStage {
+        TripletsTable {
             k: TripletsConfig::new("").k,
         }
     }
@@ -121,7 +121,7 @@ impl Default for TripletsStage {
 /// when left out).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct ExportStage {
+pub struct ExportTable {
     /// Any layout `export --layout` takes, by the same name.
     pub layout: nrw_export::Layout,
     /// false: export without semantics (train with --use_semantic=False)
@@ -131,9 +131,9 @@ pub struct ExportStage {
     pub crop: Option<CropSetting>,
 }
 
-impl Default for ExportStage {
+impl Default for ExportTable {
     fn default() -> Self {
-        ExportStage {
+        ExportTable {
             layout: crate::export::official(Path::new(""), Path::new("")).layout,
             semantics: true,
             crop: None,
@@ -159,7 +159,7 @@ pub enum NoCrop {
 /// `[qa]`: the report into DIR/qa.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct QaStage {}
+pub struct QaTable {}
 
 impl Pipeline {
     /// Parse a pipeline file, naming the file in errors.
@@ -177,24 +177,24 @@ impl Pipeline {
     pub fn demo(weights: bool) -> Pipeline {
         Pipeline {
             name: "demo".into(),
-            ingest: Some(IngestStage {
+            ingest: Some(IngestTable {
                 semantics: Some(nrw_synth::truth::SEMANTICS.into()),
-                ..IngestStage::default()
+                ..IngestTable::default()
             }),
-            split: Some(SplitStage {
+            split: Some(SplitTable {
                 val_fraction: Some(0.2),
-                ..SplitStage::default()
+                ..SplitTable::default()
             }),
             style: Some(if weights {
-                StyleStage::default()
+                StyleTable::default()
             } else {
-                StyleStage {
+                StyleTable {
                     tier: nrw_style::Tier::ColorStats.name(),
                 }
             }),
-            triplets: Some(TripletsStage::default()),
-            export: Some(ExportStage::default()),
-            qa: Some(QaStage {}),
+            triplets: Some(TripletsTable::default()),
+            export: Some(ExportTable::default()),
+            qa: Some(QaTable {}),
         }
     }
 }
@@ -231,7 +231,7 @@ pub struct Models<'a> {
 
 /// Ingest's settings from `[ingest]` and the models.
 fn ingest_config(
-    i: &IngestStage,
+    i: &IngestTable,
     scene: &Path,
     out: &Path,
     models: Models,
@@ -256,7 +256,7 @@ fn ingest_config(
     Ok(c)
 }
 
-fn export_config(e: &ExportStage, dataset: &Path, out: &Path, segmented: bool) -> ExportConfig {
+fn export_config(e: &ExportTable, dataset: &Path, out: &Path, segmented: bool) -> ExportConfig {
     let layout = e.layout;
     ExportConfig {
         layout,
@@ -272,7 +272,7 @@ fn export_config(e: &ExportStage, dataset: &Path, out: &Path, segmented: bool) -
     }
 }
 
-fn style_config(s: &StyleStage, dataset: &Path, weights: Option<&Path>) -> Result<StyleConfig> {
+fn style_config(s: &StyleTable, dataset: &Path, weights: Option<&Path>) -> Result<StyleConfig> {
     let tier = nrw_style::Tier::parse(&s.tier).ok_or_else(|| {
         PipelineError::config(Setting::Tier, format!("{:?} is not a tier", s.tier))
     })?;
@@ -481,7 +481,7 @@ mod tests {
         // The shipped file says what the defaults are: the two agree.
         let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/paper.toml");
         let shipped = Pipeline::load(&file).unwrap();
-        let (a, b) = (shipped.ingest.unwrap(), IngestStage::default());
+        let (a, b) = (shipped.ingest.unwrap(), IngestTable::default());
         assert_eq!(
             (
                 a.min_dim,
@@ -499,8 +499,8 @@ mod tests {
             )
         );
         assert_eq!(shipped.split.unwrap().val, Some(SplitConfig::new("").val));
-        assert_eq!(shipped.triplets.unwrap().k, TripletsStage::default().k);
-        assert_eq!(shipped.style.unwrap().tier, StyleStage::default().tier);
+        assert_eq!(shipped.triplets.unwrap().k, TripletsTable::default().k);
+        assert_eq!(shipped.style.unwrap().tier, StyleTable::default().tier);
         assert!(toml::from_str::<Pipeline>("name = \"x\"\n[ingest]\nmax_emty = 0.9\n").is_err());
     }
 }

@@ -111,12 +111,14 @@ pub struct IngestArgs {
     /// Print a JSON summary on stdout (for scripts)
     #[arg(long)]
     pub json: bool,
-    /// Stop after writing this many shards, as an interruption would (for resume tests)
-    #[arg(long, hide = true)]
-    pub stop_after_shards: Option<usize>,
-    /// Sleep this many milliseconds after each shard (so tests can kill a unit mid-way)
-    #[arg(long, hide = true)]
-    pub pause_after_shard_ms: Option<u64>,
+    /// Stop after this many groups of photos (a group: one views file and its record), as an
+    /// interruption would (for resume tests; `--stop-after-shards` is its old name)
+    #[arg(long, hide = true, alias = "stop-after-shards")]
+    pub stop_after_groups: Option<usize>,
+    /// Sleep this many milliseconds after each group (so tests can kill a unit mid-way;
+    /// `--pause-after-shard-ms` is its old name)
+    #[arg(long, hide = true, alias = "pause-after-shard-ms")]
+    pub pause_after_group_ms: Option<u64>,
 }
 
 /// `--denoise K,SIGMA`: k ≥ 2 neighbours (the point itself counts), σ > 0.
@@ -173,9 +175,9 @@ impl IngestArgs {
             rows_per_shard: self.rows_per_shard,
             strict: self.strict,
             follow_outside_links: self.follow_outside_links,
-            stop_after_groups: self.stop_after_shards,
+            stop_after_groups: self.stop_after_groups,
             pause_after_group: self
-                .pause_after_shard_ms
+                .pause_after_group_ms
                 .map(std::time::Duration::from_millis),
             ..IngestConfig::new(&self.scene, &self.out)
         })

@@ -4,7 +4,6 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, OnceLock};
 
 use crate::error::{DatasetError, Result};
@@ -75,25 +74,22 @@ fn sweep_stale_temps(dir: &Path) {
     }
 }
 
-/// Milliseconds to wait before each commit (0: none); see [`set_commit_pause`].
-static COMMIT_PAUSE_MS: AtomicU64 = AtomicU64::new(0);
+/// What runs before each commit; see [`set_commit_hook`].
+static COMMIT_HOOK: std::sync::OnceLock<Box<dyn Fn(&Path) + Send + Sync>> =
+    std::sync::OnceLock::new();
 
-/// Fault injection for the kill tests: wait `ms` before every commit (the rename that makes
-/// a file or an export visible), announcing it on stderr, so a test can SIGKILL a stage at a
-/// known point with its temporary output on disk and its target not yet replaced.
-pub fn set_commit_pause(ms: u64) {
-    COMMIT_PAUSE_MS.store(ms, Ordering::Relaxed);
+/// Fault injection for the kill tests: `hook` runs before every commit (the rename that
+/// makes a file or an export visible) with its target, so the binary can announce the
+/// commit and wait, and a test SIGKILL a stage at a known point with its temporary output on
+/// disk and its target not yet replaced. Set once per process; the library never prints.
+pub fn set_commit_hook(hook: Box<dyn Fn(&Path) + Send + Sync>) {
+    let _ = COMMIT_HOOK.set(hook);
 }
 
-/// The pause of [`set_commit_pause`] before committing `target` (nothing when unset).
-pub fn commit_pause(target: &Path) {
-    let ms = COMMIT_PAUSE_MS.load(Ordering::Relaxed);
-    if ms > 0 {
-        eprintln!(
-            "nrw-etl: pausing {ms} ms before committing {}",
-            target.display()
-        );
-        std::thread::sleep(std::time::Duration::from_millis(ms));
+/// Run the hook of [`set_commit_hook`] before committing `target` (nothing when unset).
+pub fn before_commit(target: &Path) {
+    if let Some(hook) = COMMIT_HOOK.get() {
+        hook(target);
     }
 }
 
@@ -112,7 +108,7 @@ where
         fill(&mut f)?;
         f.flush().map_err(|e| DatasetError::io(&tmp, e))?;
         f.sync_all().map_err(|e| DatasetError::io(&tmp, e))?;
-        commit_pause(path);
+        before_commit(path);
         std::fs::rename(&tmp, path).map_err(|e| DatasetError::io(path, e))
     })();
     if result.is_err() {

@@ -68,7 +68,14 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     if let Some(ms) = cli.pause_before_commit_ms {
-        nrw_dataset::atomic::set_commit_pause(ms);
+        // Announced on stderr, so a kill test knows which commit it is at.
+        nrw_dataset::atomic::set_commit_hook(Box::new(move |target| {
+            eprintln!(
+                "nrw-etl: pausing {ms} ms before committing {}",
+                target.display()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(ms));
+        }));
     }
     let threads = match &cli.command {
         Command::Ingest(a) => a.threads,

@@ -202,7 +202,7 @@ fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
             .to_string_lossy()
             .replace(".export-new-", ".export-old-"),
     );
-    nrw_dataset::atomic::commit_pause(out);
+    nrw_dataset::atomic::before_commit(out);
     if out.exists() {
         std::fs::rename(out, &old).map_err(|e| ExportError::io(out, e))?;
     }
@@ -218,7 +218,7 @@ fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
 /// `export.json` last, then the earlier export's files that this one does not have.
 fn upload(staged: &Path, store: &Store, earlier: &[String]) -> Result<()> {
     let files = Store::local(staged).list("")?;
-    nrw_dataset::atomic::commit_pause(&store.root());
+    nrw_dataset::atomic::before_commit(&store.root());
     store.delete(EXPORT_JSON)?;
     for rel in files.iter().filter(|r| *r != EXPORT_JSON) {
         store.upload(rel, &staged.join(rel))?;

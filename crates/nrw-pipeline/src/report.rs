@@ -1,7 +1,8 @@
 //! What each stage says when it is done, as lines for stdout (what a script reads: results,
 //! where they went) and stderr (what a person reads: counts, warnings, advice). The binary
-//! prints them; the judgments in them (a train split too small for the published sampler, a
-//! threshold printed with its own digits) live here with the stages.
+//! prints them (and chooses exit codes); the judgments in them (a train split too small for
+//! the published sampler, a threshold printed with its own digits) live here with the
+//! stages. Nothing here prints.
 
 use nrw_dataset::split::TRAIN;
 use std::path::Path;
@@ -15,10 +16,6 @@ use crate::segment::SegmentSummary;
 use crate::split::{SplitConfig, SplitSummary};
 use crate::style::StyleSummary;
 use crate::triplets::TripletsSummary;
-
-/// Exit code of `ingest` and `run` when the run completed but every view was dropped by the
-/// filters.
-pub const EXIT_NOTHING_KEPT: u8 = 3;
 
 /// Fewest train views the published triplet sampler can index (`randint(1, 5 + 1)`).
 pub const PUBLISHED_MIN_TRAIN: usize = 6;
@@ -43,16 +40,6 @@ impl Report {
 
     fn err(&mut self, s: String) {
         self.0.push(Line::Err(s));
-    }
-
-    /// Print every line on its stream.
-    pub fn print(&self) {
-        for l in &self.0 {
-            match l {
-                Line::Out(s) => println!("{s}"),
-                Line::Err(s) => eprintln!("{s}"),
-            }
-        }
     }
 }
 
@@ -96,7 +83,7 @@ pub fn ingest(s: &IngestSummary) -> Report {
     ));
     if s.kept == 0 {
         r.err(format!(
-            "no view survived the filters{}: the dataset records every verdict but holds no view (exit code {EXIT_NOTHING_KEPT}; `nrw-etl inspect {}` shows each verdict)",
+            "no view survived the filters{}: the dataset records every verdict but holds no view (`nrw-etl inspect {}` shows each verdict)",
             s.least_empty.map_or(String::new(), |m| format!(" (least empty render: {:.1}% empty)", m * 100.0)),
             s.dataset
         ));

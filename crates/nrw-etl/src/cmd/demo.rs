@@ -36,9 +36,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         args.seed,
         args.weights.as_deref(),
         &Bars::new(false),
-        &mut |d| nrw_pipeline::report::stage(&dataset, d).print(),
+        &mut |d| super::print_report(&nrw_pipeline::report::stage(&dataset, d)),
     )?;
-    nrw_pipeline::report::synth(&report).print();
+    super::print_report(&nrw_pipeline::report::synth(&report));
     println!("scene:   {}", args.out.join("scene").display());
     println!("dataset: {}", out.dataset.display());
     println!(

@@ -97,7 +97,11 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     };
     let summary = nrw_pipeline::export::export(&args.dataset, &cfg, &super::Bars::new(args.quiet))?;
     if !args.quiet {
-        nrw_pipeline::report::export(&args.dataset, &args.out, &summary).print();
+        super::print_report(&nrw_pipeline::report::export(
+            &args.dataset,
+            &args.out,
+            &summary,
+        ));
     }
     Ok(())
 }

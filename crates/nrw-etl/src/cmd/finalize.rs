@@ -24,7 +24,7 @@ pub struct FinalizeArgs {
 /// Run `finalize`.
 pub fn run(args: &FinalizeArgs) -> Result<()> {
     let s = nrw_pipeline::finalize::finalize(&nrw_dataset::Store::open_path(&args.dataset)?)?;
-    nrw_pipeline::report::finalize(&s).print();
+    super::print_report(&nrw_pipeline::report::finalize(&s));
     if args.json {
         println!(
             "{}",

@@ -10,7 +10,9 @@ use super::{Bars, ShardArgs};
 use crate::error::Result;
 use nrw_colmap::Format;
 
-pub use nrw_pipeline::report::EXIT_NOTHING_KEPT;
+/// Exit code of `ingest` and `run` when the run completed but every view was dropped by the
+/// filters (README's exit codes).
+pub const EXIT_NOTHING_KEPT: u8 = 3;
 
 /// Arguments of `ingest`.
 #[derive(Debug, Clone, Args)]
@@ -192,7 +194,7 @@ pub fn run(args: &IngestArgs) -> Result<bool> {
         Some(unit) => {
             let s = nrw_pipeline::ingest::ingest_unit(&cfg, unit, &bars)?;
             if !args.quiet {
-                nrw_pipeline::report::ingest_unit(&s).print();
+                super::print_report(&nrw_pipeline::report::ingest_unit(&s));
             }
             if args.json {
                 println!(
@@ -205,7 +207,7 @@ pub fn run(args: &IngestArgs) -> Result<bool> {
         None => {
             let s = nrw_pipeline::ingest::ingest(&cfg, &bars)?;
             if !args.quiet {
-                nrw_pipeline::report::ingest(&s).print();
+                super::print_report(&nrw_pipeline::report::ingest(&s));
             }
             if args.json {
                 println!(

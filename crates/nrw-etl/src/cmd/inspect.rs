@@ -38,6 +38,6 @@ pub fn run(args: &InspectArgs) -> Result<()> {
         );
         return Ok(());
     }
-    nrw_pipeline::report::inspected(&found).print();
+    super::print_report(&nrw_pipeline::report::inspected(&found));
     Ok(())
 }

@@ -21,6 +21,16 @@ use std::sync::Mutex;
 use clap::Args;
 use nrw_pipeline::{Progress, Unit};
 
+/// Print a stage's report: each line on its stream (results on stdout, the rest on stderr).
+pub fn print_report(report: &nrw_pipeline::report::Report) {
+    for line in &report.0 {
+        match line {
+            nrw_pipeline::report::Line::Out(s) => println!("{s}"),
+            nrw_pipeline::report::Line::Err(s) => eprintln!("{s}"),
+        }
+    }
+}
+
 /// A clap parser over a library enum's names (`ALL`, `name`, `summary`), each value with its
 /// help line: the CLI, pipeline files and the library share one enum.
 pub fn names<T>(

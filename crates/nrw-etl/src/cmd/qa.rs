@@ -22,6 +22,6 @@ pub fn run(args: &QaArgs) -> Result<()> {
         dataset: args.dataset.clone(),
         out: args.out.clone(),
     })?;
-    nrw_pipeline::report::qa(&w).print();
+    super::print_report(&nrw_pipeline::report::qa(&w));
     Ok(())
 }

@@ -41,7 +41,7 @@ pub fn run(args: &RunArgs) -> Result<bool> {
             segformer: args.segment_weights.as_deref(),
         },
         &Bars::new(false),
-        &mut |d| nrw_pipeline::report::stage(&args.out, d).print(),
+        &mut |d| super::print_report(&nrw_pipeline::report::stage(&args.out, d)),
     )
     .map_err(file_setting)?;
     Ok(out.kept)

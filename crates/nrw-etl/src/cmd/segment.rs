@@ -93,7 +93,7 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
     let bars = Bars::new(args.quiet);
     let s = nrw_pipeline::segment::segment(&cfg, &bars)?;
     if !args.quiet {
-        nrw_pipeline::report::segment(&s).print();
+        super::print_report(&nrw_pipeline::report::segment(&s));
     }
     if args.json {
         println!(

@@ -34,6 +34,9 @@ pub fn run(args: &SplitArgs) -> Result<()> {
         from_tsv: args.from_tsv.clone(),
         ..SplitConfig::new(&args.dataset)
     };
-    nrw_pipeline::report::split(&cfg, &nrw_pipeline::split::split(&cfg)?).print();
+    super::print_report(&nrw_pipeline::report::split(
+        &cfg,
+        &nrw_pipeline::split::split(&cfg)?,
+    ));
     Ok(())
 }

@@ -100,7 +100,7 @@ pub fn run(args: &StyleArgs) -> Result<()> {
         None => nrw_pipeline::style::style(&cfg, &bars)?,
     };
     if !args.quiet {
-        nrw_pipeline::report::style(&s).print();
+        super::print_report(&nrw_pipeline::report::style(&s));
     }
     Ok(())
 }

@@ -25,7 +25,7 @@ pub fn run(args: &SynthArgs) -> Result<()> {
     let spec = nrw_pipeline::synth::load_spec(args.spec.as_deref(), args.seed)?;
     let t = std::time::Instant::now();
     let report = nrw_pipeline::synth::generate(&spec, &args.out, &Bars::new(false))?;
-    nrw_pipeline::report::synth(&report).print();
+    super::print_report(&nrw_pipeline::report::synth(&report));
     eprintln!("{:?} in {:.1} s", spec.name, t.elapsed().as_secs_f64());
     println!("{}", args.out.display());
     Ok(())

@@ -37,6 +37,9 @@ pub fn run(args: &TripletsArgs) -> Result<()> {
         check_up_to: args.check_up_to,
         ..TripletsConfig::new(&args.dataset)
     };
-    nrw_pipeline::report::triplets(&args.dataset, &nrw_pipeline::triplets::triplets(&cfg)?).print();
+    super::print_report(&nrw_pipeline::report::triplets(
+        &args.dataset,
+        &nrw_pipeline::triplets::triplets(&cfg)?,
+    ));
     Ok(())
 }

@@ -7,13 +7,13 @@ use std::sync::Arc;
 use arrow_pyarrow::IntoPyArrow;
 use nrw_dataset::reader::{self, GroupRead};
 use nrw_dataset::Store;
-use pyo3::exceptions::{PyKeyError, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rayon::prelude::*;
 
 use crate::decode::{decode, Decoded};
-use crate::py_err;
+use crate::{dataset_err, py_err};
 
 /// An nrw-etl dataset opened for reading: a folder or an s3://, gs:// or az:// URL, with the
 /// CLI's credentials. Its views stream as dicts of NumPy arrays, its tables as pyarrow.
@@ -79,23 +79,7 @@ impl Dataset {
     fn ids_of(&self, split: Option<&str>) -> PyResult<Vec<u32>> {
         match split {
             None => Ok(self.meta().all_ids()),
-            Some(s) => self
-                .meta()
-                .ids(s)
-                .map(<[u32]>::to_vec)
-                .map_err(|e| PyKeyError::new_err(e.to_string())),
-        }
-    }
-
-    /// Refuse ids that are not kept views, as a KeyError naming the first.
-    fn check_ids(&self, ids: &[u32]) -> PyResult<()> {
-        let ds = self.meta();
-        match ids.iter().find(|id| !ds.contains(**id)) {
-            Some(id) => Err(PyKeyError::new_err(format!(
-                "{}: image {id} is not a kept view of this dataset",
-                self.location
-            ))),
-            None => Ok(()),
+            Some(s) => self.meta().ids(s).map(<[u32]>::to_vec).map_err(dataset_err),
         }
     }
 }
@@ -202,8 +186,7 @@ impl Dataset {
             (_, Some(ids)) => ids,
             (split, None) => me.ids_of(split)?,
         };
-        me.check_ids(&ids)?;
-        let reads = me.meta().reads(&ids).map_err(py_err)?;
+        let reads = me.meta().reads(&ids).map_err(dataset_err)?;
         Ok(ViewIter {
             dataset: slf.clone().unbind(),
             reads: std::sync::Mutex::new((reads.into_iter().rev().collect(), Vec::new())),
@@ -212,17 +195,15 @@ impl Dataset {
 
     /// One view by image id (KeyError when it is not a kept view).
     fn get<'py>(&self, py: Python<'py>, image_id: u32) -> PyResult<Bound<'py, PyDict>> {
-        self.check_ids(&[image_id])?;
         let ds = self.current(py)?;
         let view = py
             .detach(|| ds.get(image_id).and_then(decode))
-            .map_err(py_err)?;
+            .map_err(dataset_err)?;
         view.into_dict(py)
     }
 
     /// Views in the order of `ids`, each row group read once, decoded in parallel.
     fn get_many<'py>(&self, py: Python<'py>, ids: Vec<u32>) -> PyResult<Bound<'py, PyList>> {
-        self.check_ids(&ids)?;
         let (ds, pool) = (self.current(py)?, crate::pool()?);
         let decoded = py
             .detach(|| -> nrw_dataset::Result<Vec<Decoded>> {
@@ -236,7 +217,7 @@ impl Dataset {
                 let ordered: Vec<reader::View> = ids.iter().map(|id| views[id].clone()).collect();
                 decode_all(&pool, ordered)
             })
-            .map_err(py_err)?;
+            .map_err(dataset_err)?;
         let dicts = decoded
             .into_iter()
             .map(|d| d.into_dict(py))

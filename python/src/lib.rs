@@ -52,6 +52,17 @@ pub(crate) fn py_err(e: impl std::fmt::Display) -> PyErr {
     DatasetError::new_err(e.to_string())
 }
 
+/// A reader error as Python sees it: a split or image id the dataset does not have is a
+/// `KeyError` (by its variant, not by re-checking ids), anything else a `DatasetError`.
+pub(crate) fn dataset_err(e: nrw_dataset::DatasetError) -> PyErr {
+    match e {
+        nrw_dataset::DatasetError::NoSplit { .. } | nrw_dataset::DatasetError::NotKept { .. } => {
+            pyo3::exceptions::PyKeyError::new_err(e.to_string())
+        }
+        other => py_err(other),
+    }
+}
+
 #[pymodule]
 fn _nrw(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DatasetError", m.py().get_type::<DatasetError>())?;

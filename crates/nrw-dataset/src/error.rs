@@ -25,6 +25,19 @@ pub enum DatasetError {
     },
     #[error("{}: {problem}", path.display())]
     Schema { path: PathBuf, problem: String },
+    /// A split the dataset does not have (readers map it to a missing key).
+    #[error("{}: no split {split:?}; the dataset has {have:?}", path.display())]
+    NoSplit {
+        path: PathBuf,
+        split: String,
+        have: Vec<String>,
+    },
+    /// An image id that is not a kept view (never registered, or dropped by the filters).
+    #[error("{}: image {image_id} is not a kept view of this dataset", path.display())]
+    NotKept { path: PathBuf, image_id: u32 },
+    /// An object-store URL that cannot be opened (scheme, bucket, options).
+    #[error("{url}: cannot open this object-store location: {problem}")]
+    Location { url: String, problem: String },
     #[error("{}: record {record}: field `{field}`: {problem}", path.display())]
     Value {
         path: PathBuf,

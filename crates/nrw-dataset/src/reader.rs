@@ -288,12 +288,10 @@ impl Dataset {
         self.splits
             .get(split)
             .map(Vec::as_slice)
-            .ok_or_else(|| DatasetError::Schema {
+            .ok_or_else(|| DatasetError::NoSplit {
                 path: self.dir.clone(),
-                problem: format!(
-                    "no split {split:?}; the dataset has {:?}",
-                    self.splits.keys().collect::<Vec<_>>()
-                ),
+                split: split.to_string(),
+                have: self.splits.keys().cloned().collect(),
             })
     }
 
@@ -367,9 +365,9 @@ impl Dataset {
         let loc = self
             .index
             .get(&image_id)
-            .ok_or_else(|| DatasetError::Schema {
+            .ok_or_else(|| DatasetError::NotKept {
                 path: self.dir.clone(),
-                problem: format!("image {image_id} is not a kept view of this dataset"),
+                image_id,
             })?;
         self.read_rows(loc.shard, &[loc.row])?
             .pop()
@@ -405,9 +403,9 @@ impl Dataset {
     pub fn reads(&self, ids: &[u32]) -> Result<Vec<GroupRead>> {
         let mut per_shard: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
         for id in ids {
-            let loc = self.index.get(id).ok_or_else(|| DatasetError::Schema {
+            let loc = self.index.get(id).ok_or_else(|| DatasetError::NotKept {
                 path: self.dir.clone(),
-                problem: format!("image {id} is not a kept view of this dataset"),
+                image_id: *id,
             })?;
             per_shard.entry(loc.shard).or_default().push(loc.row);
         }

@@ -88,9 +88,9 @@ impl Store {
         }
         let url = location.trim_end_matches('/').to_string();
         let (store, prefix) =
-            build_remote(&url, options).map_err(|problem| DatasetError::Schema {
-                path: url.clone().into(),
-                problem: format!("cannot open this object-store location: {problem}"),
+            build_remote(&url, options).map_err(|problem| DatasetError::Location {
+                url: url.clone(),
+                problem,
             })?;
         let rt = runtime(&url)?;
         Ok(Store {

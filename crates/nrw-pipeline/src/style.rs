@@ -133,7 +133,7 @@ fn kind(cfg: &StyleConfig, net: Option<&Vgg>) -> DescriptorKind {
         weights_sha256: net.map_or(String::new(), |n| n.sha256.clone()),
         // color-stats ignores the network's input scaling, so it never tells descriptors apart
         preprocess: if cfg.tier.needs_weights() {
-            format!("{:?}", cfg.tier.preprocess(cfg.preprocess))
+            cfg.tier.preprocess(cfg.preprocess).name().to_string()
         } else {
             String::new()
         },

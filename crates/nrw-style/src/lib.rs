@@ -71,7 +71,7 @@ pub fn image_grams_safetensors(
         .collect();
     let mut meta = std::collections::HashMap::new();
     meta.insert("weights_sha256".to_string(), net.sha256.clone());
-    meta.insert("preprocess".to_string(), format!("{p:?}"));
+    meta.insert("preprocess".to_string(), p.name().to_string());
     meta.insert(
         "gram".to_string(),
         "G = F F^T / (C*H*W), F = ReLU output as C x (H*W)".to_string(),

@@ -22,6 +22,31 @@ pub enum Preprocess {
     Caffe,
 }
 
+impl Preprocess {
+    /// Every scaling, for parsing stored names back.
+    pub const ALL: [Preprocess; 3] = [
+        Preprocess::Imagenet,
+        Preprocess::MinusOneToOne,
+        Preprocess::Caffe,
+    ];
+
+    /// The name stored with every descriptor (`preprocess` column, unit records, Gram
+    /// files): fixed here, so renaming the variant cannot change what a stored descriptor
+    /// says it is. (They are the names datasets have always stored.)
+    pub const fn name(self) -> &'static str {
+        match self {
+            Preprocess::Imagenet => "Imagenet",
+            Preprocess::MinusOneToOne => "MinusOneToOne",
+            Preprocess::Caffe => "Caffe",
+        }
+    }
+
+    /// The scaling a stored name stands for.
+    pub fn from_name(name: &str) -> Option<Preprocess> {
+        Preprocess::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
 /// The Caffe means tensorflow-vgg subtracts, in RGB order (its VGG_MEAN is B, G, R).
 pub const CAFFE_MEAN_RGB: [f32; 3] = [123.68, 116.779, 103.939];
 
@@ -97,4 +122,20 @@ pub fn to_input(img: &RgbImage, p: Preprocess) -> Vec<f32> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod names {
+    use super::Preprocess;
+
+    #[test]
+    fn stored_names_are_fixed_and_read_back() {
+        // What datasets store: changing one changes what every stored descriptor means.
+        let names: Vec<&str> = Preprocess::ALL.iter().map(|p| p.name()).collect();
+        assert_eq!(names, ["Imagenet", "MinusOneToOne", "Caffe"]);
+        for p in Preprocess::ALL {
+            assert_eq!(Preprocess::from_name(p.name()), Some(p));
+        }
+        assert_eq!(Preprocess::from_name("imagenet"), None);
+    }
 }

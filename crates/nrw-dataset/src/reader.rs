@@ -75,12 +75,14 @@ impl View {
 
     /// The resized photo.
     pub fn photo(&self) -> Result<RgbImage> {
-        Ok(self.decode_image(&self.photo_png, "photo_png")?.into_rgb8())
+        Ok(self
+            .decode_image(&self.photo_png, crate::views::columns::PHOTO_PNG)?
+            .into_rgb8())
     }
     /// The colour render with coverage as alpha.
     pub fn color(&self) -> Result<RgbaImage> {
         Ok(self
-            .decode_image(&self.color_png, "color_png")?
+            .decode_image(&self.color_png, crate::views::columns::COLOR_PNG)?
             .into_rgba8())
     }
     /// The depth render (camera-space z, 0 = empty).
@@ -90,7 +92,7 @@ impl View {
             return Err(DatasetError::Value {
                 path: PathBuf::from(&self.name),
                 record: format!("image {}", self.image_id),
-                field: "depth_exr".into(),
+                field: crate::views::columns::DEPTH_EXR.into(),
                 problem: format!(
                     "the EXR is {}x{} but the view is {}x{}",
                     d.width, d.height, self.width, self.height
@@ -103,14 +105,22 @@ impl View {
     pub fn semantics(&self) -> Result<Option<RgbImage>> {
         self.semantics_png
             .as_ref()
-            .map(|b| Ok(self.decode_image(b, "semantics_png")?.into_rgb8()))
+            .map(|b| {
+                Ok(self
+                    .decode_image(b, crate::views::columns::SEMANTICS_PNG)?
+                    .into_rgb8())
+            })
             .transpose()
     }
     /// Transient mask (255 = transient), when the dataset has semantics.
     pub fn transient(&self) -> Result<Option<GrayImage>> {
         self.transient_png
             .as_ref()
-            .map(|b| Ok(self.decode_image(b, "transient_png")?.into_luma8()))
+            .map(|b| {
+                Ok(self
+                    .decode_image(b, crate::views::columns::TRANSIENT_PNG)?
+                    .into_luma8())
+            })
             .transpose()
     }
 
@@ -119,7 +129,11 @@ impl View {
     pub fn normals(&self) -> Result<Option<RgbImage>> {
         self.normal_png
             .as_ref()
-            .map(|b| Ok(self.decode_image(b, "normal_png")?.into_rgb8()))
+            .map(|b| {
+                Ok(self
+                    .decode_image(b, crate::views::columns::NORMAL_PNG)?
+                    .into_rgb8())
+            })
             .transpose()
     }
 
@@ -127,7 +141,11 @@ impl View {
     pub fn labels(&self) -> Result<Option<GrayImage>> {
         self.labels_png
             .as_ref()
-            .map(|b| Ok(self.decode_image(b, "labels_png")?.into_luma8()))
+            .map(|b| {
+                Ok(self
+                    .decode_image(b, crate::views::columns::LABELS_PNG)?
+                    .into_luma8())
+            })
             .transpose()
     }
 
@@ -227,8 +245,14 @@ impl Dataset {
         for (s, rel) in shards.iter().enumerate() {
             let path = dir.name(rel);
             let f = dir.chunks_sized(rel, Some(sizes[s]))?;
-            let b = crate::parquet_io::checked_builder(f, &path, None, Some(&["image_id"]))?;
-            let mask = ProjectionMask::columns(b.parquet_schema(), ["image_id"]);
+            let b = crate::parquet_io::checked_builder(
+                f,
+                &path,
+                None,
+                Some(&[crate::views::columns::IMAGE_ID]),
+            )?;
+            let mask =
+                ProjectionMask::columns(b.parquet_schema(), [crate::views::columns::IMAGE_ID]);
             let mut row = 0;
             let reader = b
                 .with_projection(mask)
@@ -236,7 +260,7 @@ impl Dataset {
                 .map_err(parquet_err(&path))?;
             for batch in crate::parquet_io::guarded(reader, &path) {
                 let batch = batch?;
-                let ids = column::<UInt32Array>(&batch, "image_id", &path)?;
+                let ids = column::<UInt32Array>(&batch, crate::views::columns::IMAGE_ID, &path)?;
                 for i in 0..ids.len() {
                     index.insert(ids.value(i), Location { shard: s, row });
                     row += 1;
@@ -477,6 +501,7 @@ pub fn views_in<R: parquet::file::reader::ChunkReader + 'static>(
 /// The views of a batch whose row i is row `rows[i]` of the shard at `path`, every payload
 /// checked against its checksum first.
 fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<View>> {
+    use crate::views::columns as col;
     for c in crate::views::PAYLOAD_COLUMNS {
         if let Some(m) = crate::views::payload_mismatches(b, rows, c, path)?.first() {
             return Err(m.error(path));
@@ -487,25 +512,25 @@ fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<View>> {
     let s = |n: &str| column::<StringArray>(b, n, path);
     let bin = |n: &str| column::<BinaryArray>(b, n, path);
     let (ids, names, cams, models, ws, hs) = (
-        u("image_id")?,
-        s("name")?,
-        u("camera_id")?,
-        s("model")?,
-        u("width")?,
-        u("height")?,
+        u(col::IMAGE_ID)?,
+        s(col::NAME)?,
+        u(col::CAMERA_ID)?,
+        s(col::MODEL)?,
+        u(col::WIDTH)?,
+        u(col::HEIGHT)?,
     );
-    let params = column::<ListArray>(b, "params", path)?;
-    let q = [f("qw")?, f("qx")?, f("qy")?, f("qz")?];
-    let t = [f("tx")?, f("ty")?, f("tz")?];
-    let empty = f("empty_ratio")?;
-    let labels = bin("labels_png")?;
+    let params = column::<ListArray>(b, col::PARAMS, path)?;
+    let q = [f(col::QW)?, f(col::QX)?, f(col::QY)?, f(col::QZ)?];
+    let t = [f(col::TX)?, f(col::TY)?, f(col::TZ)?];
+    let empty = f(col::EMPTY_RATIO)?;
+    let labels = bin(col::LABELS_PNG)?;
     let (photo, color, depth, normal, sem, tr) = (
-        bin("photo_png")?,
-        bin("color_png")?,
-        bin("depth_exr")?,
-        bin("normal_png")?,
-        bin("semantics_png")?,
-        bin("transient_png")?,
+        bin(col::PHOTO_PNG)?,
+        bin(col::COLOR_PNG)?,
+        bin(col::DEPTH_EXR)?,
+        bin(col::NORMAL_PNG)?,
+        bin(col::SEMANTICS_PNG)?,
+        bin(col::TRANSIENT_PNG)?,
     );
     let opt = |a: &BinaryArray, i: usize| (!a.is_null(i)).then(|| a.value(i).to_vec());
     let mut out = Vec::with_capacity(b.num_rows());
@@ -525,8 +550,8 @@ fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<View>> {
             model: models.value(i).into(),
             width: ws.value(i),
             height: hs.value(i),
-            scale_x: f("scale_x")?.value(i),
-            scale_y: f("scale_y")?.value(i),
+            scale_x: f(col::SCALE_X)?.value(i),
+            scale_y: f(col::SCALE_Y)?.value(i),
             params: p.values().to_vec(),
             qvec: q.map(|c| c.value(i)),
             tvec: t.map(|c| c.value(i)),

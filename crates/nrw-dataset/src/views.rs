@@ -44,18 +44,47 @@ pub fn stale_shards(dir: &Store, keep: &[FileEntry]) -> Result<Vec<String>> {
         .collect())
 }
 
+/// Every column name of a view shard, spelled once: the schema, the writer and the reader
+/// (and schemas/views.toml, which a test checks against the schema) use these.
+pub mod columns {
+    pub const IMAGE_ID: &str = "image_id";
+    pub const NAME: &str = "name";
+    pub const CAMERA_ID: &str = "camera_id";
+    pub const MODEL: &str = "model";
+    pub const WIDTH: &str = "width";
+    pub const HEIGHT: &str = "height";
+    pub const SCALE_X: &str = "scale_x";
+    pub const SCALE_Y: &str = "scale_y";
+    pub const PARAMS: &str = "params";
+    pub const QW: &str = "qw";
+    pub const QX: &str = "qx";
+    pub const QY: &str = "qy";
+    pub const QZ: &str = "qz";
+    pub const TX: &str = "tx";
+    pub const TY: &str = "ty";
+    pub const TZ: &str = "tz";
+    pub const EMPTY_RATIO: &str = "empty_ratio";
+    pub const PHOTO_PNG: &str = "photo_png";
+    pub const COLOR_PNG: &str = "color_png";
+    pub const DEPTH_EXR: &str = "depth_exr";
+    pub const NORMAL_PNG: &str = "normal_png";
+    pub const SEMANTICS_PNG: &str = "semantics_png";
+    pub const TRANSIENT_PNG: &str = "transient_png";
+    pub const LABELS_PNG: &str = "labels_png";
+}
+
 /// The payload columns of a shard (encoded PNG or EXR bytes). Each has a `<name>_crc32`
 /// column beside it ([`crc_column`]) that every reader checks before decoding, so a byte that
 /// changed on disk or in transit is an error naming file, row and column, never a silently
 /// different image.
 pub const PAYLOAD_COLUMNS: [&str; 7] = [
-    "photo_png",
-    "color_png",
-    "depth_exr",
-    "normal_png",
-    "semantics_png",
-    "transient_png",
-    "labels_png",
+    columns::PHOTO_PNG,
+    columns::COLOR_PNG,
+    columns::DEPTH_EXR,
+    columns::NORMAL_PNG,
+    columns::SEMANTICS_PNG,
+    columns::TRANSIENT_PNG,
+    columns::LABELS_PNG,
 ];
 
 /// One kept view.
@@ -94,42 +123,45 @@ pub struct ViewRow {
 /// Arrow schema of a view shard (documented in schemas/views.toml).
 pub fn views_schema() -> SchemaRef {
     let f = |n: &str, t: DataType| Field::new(n, t, false);
-    Arc::new(Schema::new(vec![
-        f("image_id", DataType::UInt32),
-        f("name", DataType::Utf8),
-        f("camera_id", DataType::UInt32),
-        f("model", DataType::Utf8),
-        f("width", DataType::UInt32),
-        f("height", DataType::UInt32),
-        f("scale_x", DataType::Float64),
-        f("scale_y", DataType::Float64),
+    let mut fields = vec![
+        f(columns::IMAGE_ID, DataType::UInt32),
+        f(columns::NAME, DataType::Utf8),
+        f(columns::CAMERA_ID, DataType::UInt32),
+        f(columns::MODEL, DataType::Utf8),
+        f(columns::WIDTH, DataType::UInt32),
+        f(columns::HEIGHT, DataType::UInt32),
+        f(columns::SCALE_X, DataType::Float64),
+        f(columns::SCALE_Y, DataType::Float64),
         f(
-            "params",
+            columns::PARAMS,
             DataType::List(Arc::new(Field::new("item", DataType::Float64, false))),
         ),
-        f("qw", DataType::Float64),
-        f("qx", DataType::Float64),
-        f("qy", DataType::Float64),
-        f("qz", DataType::Float64),
-        f("tx", DataType::Float64),
-        f("ty", DataType::Float64),
-        f("tz", DataType::Float64),
-        f("empty_ratio", DataType::Float64),
-        f("photo_png", DataType::Binary),
-        f("color_png", DataType::Binary),
-        f("depth_exr", DataType::Binary),
-        Field::new("normal_png", DataType::Binary, true),
-        Field::new("semantics_png", DataType::Binary, true),
-        Field::new("transient_png", DataType::Binary, true),
-        Field::new("labels_png", DataType::Binary, true),
-        Field::new("photo_png_crc32", DataType::UInt32, false),
-        Field::new("color_png_crc32", DataType::UInt32, false),
-        Field::new("depth_exr_crc32", DataType::UInt32, false),
-        Field::new("normal_png_crc32", DataType::UInt32, true),
-        Field::new("semantics_png_crc32", DataType::UInt32, true),
-        Field::new("transient_png_crc32", DataType::UInt32, true),
-        Field::new("labels_png_crc32", DataType::UInt32, true),
-    ]))
+        f(columns::QW, DataType::Float64),
+        f(columns::QX, DataType::Float64),
+        f(columns::QY, DataType::Float64),
+        f(columns::QZ, DataType::Float64),
+        f(columns::TX, DataType::Float64),
+        f(columns::TY, DataType::Float64),
+        f(columns::TZ, DataType::Float64),
+        f(columns::EMPTY_RATIO, DataType::Float64),
+        f(columns::PHOTO_PNG, DataType::Binary),
+        f(columns::COLOR_PNG, DataType::Binary),
+        f(columns::DEPTH_EXR, DataType::Binary),
+        Field::new(columns::NORMAL_PNG, DataType::Binary, true),
+        Field::new(columns::SEMANTICS_PNG, DataType::Binary, true),
+        Field::new(columns::TRANSIENT_PNG, DataType::Binary, true),
+        Field::new(columns::LABELS_PNG, DataType::Binary, true),
+    ];
+    // Each payload's CRC-32 beside it, nullable as the payload is.
+    let crcs: Vec<Field> = PAYLOAD_COLUMNS
+        .iter()
+        .map(|c| {
+            let nullable = fields.iter().any(|f| f.name() == c && f.is_nullable());
+            Field::new(crc_column(c), DataType::UInt32, nullable)
+        })
+        .collect();
+    fields.extend(crcs);
+    Arc::new(Schema::new(fields))
 }
 
 fn batch(rows: &[ViewRow]) -> Result<RecordBatch> {

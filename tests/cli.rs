@@ -1687,28 +1687,19 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
     let weights = weights.to_str().unwrap();
     // The style stage's VGG tier needs weights: refused before any stage runs.
     let out = tmp.path().join("sceaux");
-    let err = fails(&[
-        "run",
-        paper.to_str().unwrap(),
-        data().join("sceaux_castle").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let err = failed(&run_pipeline(&paper, "sceaux_castle", &out, &[]));
     assert!(
         err.contains("--weights") && err.contains("vgg16-512"),
         "{err}"
     );
     assert!(!out.exists(), "nothing ran");
     // sceaux_castle keeps its 11 views, then split asks for the paper's 100: a clear error.
-    let err = fails(&[
-        "run",
-        paper.to_str().unwrap(),
-        data().join("sceaux_castle").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--weights",
-        weights,
-    ]);
+    let err = failed(&run_pipeline(
+        &paper,
+        "sceaux_castle",
+        &out,
+        &["--weights", weights],
+    ));
     assert!(err.contains("--val 100") && err.contains("11"), "{err}");
     assert!(
         out.join("shards").is_dir(),
@@ -1727,13 +1718,7 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
     )
     .unwrap();
     let out = tmp.path().join("sceaux2");
-    let o = nrw(&[
-        "run",
-        small.to_str().unwrap(),
-        data().join("sceaux_castle").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = run_pipeline(&small, "sceaux_castle", &out, &[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(
@@ -1752,15 +1737,12 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
     );
     assert!(out.join("qa/report.html").is_file());
     // sacre_coeur keeps nothing: exit 3, later stages skipped.
-    let o = nrw(&[
-        "run",
-        paper.to_str().unwrap(),
-        data().join("sacre_coeur").to_str().unwrap(),
-        "--out",
-        tmp.path().join("sc").to_str().unwrap(),
-        "--weights",
-        weights,
-    ]);
+    let o = run_pipeline(
+        &paper,
+        "sacre_coeur",
+        &tmp.path().join("sc"),
+        &["--weights", weights],
+    );
     assert_eq!(o.status.code(), Some(3));
     // A table of one setting runs with the paper's others (once refused with "missing field
     // `min_dim`"): sacre_coeur's sparse renders judged at 99% empty, rendered at the paper's
@@ -1768,13 +1750,7 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
     let one = tmp.path().join("one.toml");
     std::fs::write(&one, "name = 'one'\n[ingest]\nmax_empty = 0.99\n").unwrap();
     let out_one = tmp.path().join("one");
-    let o = nrw(&[
-        "run",
-        one.to_str().unwrap(),
-        data().join("sacre_coeur").to_str().unwrap(),
-        "--out",
-        out_one.to_str().unwrap(),
-    ]);
+    let o = run_pipeline(&one, "sacre_coeur", &out_one, &[]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(matches!(o.status.code(), Some(0 | 3)), "{err}");
     let m: serde_json::Value =
@@ -1793,17 +1769,31 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
     );
     // A typo in a pipeline is an error, not a silent default.
     std::fs::write(&small, "name = 'x'\n[ingest]\nmin_dimm = 600\n").unwrap();
-    let err = fails(&[
-        "run",
-        small.to_str().unwrap(),
-        data().join("sceaux_castle").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let err = failed(&run_pipeline(&small, "sceaux_castle", &out, &[]));
     assert!(
         err.contains("small.toml") && err.contains("min_dimm"),
         "{err}"
     );
+}
+
+/// `nrw-etl run FILE SCENE --out OUT EXTRA…` on a scene of ../shared/data.
+fn run_pipeline(file: &Path, scene: &str, out: &Path, extra: &[&str]) -> Output {
+    let (f, sc) = (file.to_str().unwrap(), data().join(scene));
+    let mut args = vec![
+        "run",
+        f,
+        sc.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    nrw(&args)
+}
+
+/// The stderr of a command that must fail with a clean error exit (as [`fails`] checks).
+fn failed(o: &Output) -> String {
+    assert_eq!(o.status.code(), Some(1), "a clean error exit, not a crash");
+    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 #[test]

@@ -127,6 +127,9 @@ const SCEAUX: &str = "tests/golden/sceaux_castle.json";
 /// about 2‖δ‖/‖a − b‖ of itself for a change δ of the descriptors, several 1e-6 here.
 const ACROSS_ISAS: f64 = 1e-4;
 
+/// One anchor's (nearest ids, their d², furthest ids, their d²).
+type Lists = (Vec<u32>, Vec<f64>, Vec<u32>, Vec<f64>);
+
 /// What the sceaux_castle run pins: hashes of the files whose bytes no GEMM touches, and
 /// the values of those it does.
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
@@ -135,7 +138,7 @@ struct Pinned {
     /// image id → (values, Σv, Σv²) of its descriptor, summed in f64.
     descriptors: BTreeMap<u32, (usize, f64, f64)>,
     /// anchor id → (nearest ids, their d², furthest ids, their d²).
-    triplets: BTreeMap<u32, (Vec<u32>, Vec<f64>, Vec<u32>, Vec<f64>)>,
+    triplets: BTreeMap<u32, Lists>,
 }
 
 /// Files whose bytes hold GEMM-computed values (compared by value instead), and the

@@ -74,15 +74,17 @@ fn sweep_stale_temps(dir: &Path) {
     }
 }
 
+/// A function run before each commit with its target.
+pub type CommitHook = Box<dyn Fn(&Path) + Send + Sync>;
+
 /// What runs before each commit; see [`set_commit_hook`].
-static COMMIT_HOOK: std::sync::OnceLock<Box<dyn Fn(&Path) + Send + Sync>> =
-    std::sync::OnceLock::new();
+static COMMIT_HOOK: std::sync::OnceLock<CommitHook> = std::sync::OnceLock::new();
 
 /// Fault injection for the kill tests: `hook` runs before every commit (the rename that
 /// makes a file or an export visible) with its target, so the binary can announce the
 /// commit and wait, and a test SIGKILL a stage at a known point with its temporary output on
 /// disk and its target not yet replaced. Set once per process; the library never prints.
-pub fn set_commit_hook(hook: Box<dyn Fn(&Path) + Send + Sync>) {
+pub fn set_commit_hook(hook: CommitHook) {
     let _ = COMMIT_HOOK.set(hook);
 }
 

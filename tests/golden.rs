@@ -168,8 +168,13 @@ fn pinned(root: &Path) -> Pinned {
         .into_iter()
         .filter(|(rel, _)| !gemm_valued(rel) && !rel.starts_with("dataset/qa/"))
         .collect();
-    let manifest = manifest_without_isa_values(&ds.join("manifest.json"))
+    // The scene's paths are the clone's (../shared/data beside it): written as $DATA, in
+    // the form the manifest holds them and canonical.
+    let mut manifest = manifest_without_isa_values(&ds.join("manifest.json"))
         .replace(&root.display().to_string(), "$OUT");
+    for d in [data(), data().canonicalize().unwrap()] {
+        manifest = manifest.replace(&d.display().to_string(), "$DATA");
+    }
     files.insert(
         "dataset/manifest.json".into(),
         nrw_dataset::FileEntry::of_bytes("m", manifest.as_bytes()).sha256,

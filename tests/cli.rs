@@ -30,6 +30,8 @@ mod s3;
 mod segment;
 #[path = "support/shared.rs"]
 mod shared;
+#[path = "support/timed.rs"]
+mod timed;
 #[path = "undistort.rs"]
 mod undistort;
 #[path = "units.rs"]
@@ -474,8 +476,12 @@ fn assert_same_files(
 
 /// `ingest` of a small synthetic scene, render size and photo-size filter lowered to fit it.
 fn ingest_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
-    let args = ingest_small_args(scene, out, extra);
-    nrw(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    nrw(&strs(&ingest_small_args(scene, out, extra)))
+}
+
+/// Owned arguments as the `&str`s [`nrw`] takes.
+fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
 }
 
 /// The arguments of [`ingest_small`].

@@ -11,7 +11,6 @@
 //!   between two clouds, so the process's fixed cost drops out).
 
 use std::path::Path;
-use std::process::Command;
 
 use super::shared;
 
@@ -27,34 +26,15 @@ const RATIO: f64 = 1.5;
 /// and the Morton sort's keys; docs/scale-out.md has the formula).
 const INGEST_BYTES_PER_POINT: f64 = 48.0;
 
-/// Run `nrw-etl ARGS` to completion under GNU time: its peak resident bytes (fails the test
-/// if it fails). Not `wait4` on a child of this process: Linux carries the parent's
-/// high-water mark into a forked child through `exec`, so a child of a test that has just
-/// built a 300 MB scene reports 300 MB whatever it used; time forks from its own small
-/// image.
+/// Run `nrw-etl ARGS` to completion under GNU time (tests/support/timed.rs, which the
+/// benchmarks use too): its peak resident bytes (fails the test if it fails). Not `wait4` on
+/// a child of this process: Linux carries the parent's high-water mark into a forked child
+/// through `exec`, so a child of a test that has just built a 300 MB scene reports 300 MB
+/// whatever it used; time forks from its own small image.
 fn peak_bytes(args: &[&str]) -> f64 {
-    let o = Command::new(TIME)
-        .args(["-f", "%M", env!("CARGO_BIN_EXE_nrw-etl")])
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("{TIME}: {e} (Debian's package `time`)"));
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{args:?} failed: {err}");
-    let kib: f64 = err
-        .lines()
-        .last()
-        .and_then(|l| l.trim().parse().ok())
-        .unwrap_or_else(|| panic!("{TIME} printed no peak: {err}"));
-    kib * 1024.0
+    let (_, mb) = super::timed::timed(env!("CARGO_BIN_EXE_nrw-etl"), args);
+    mb * 1024.0 * 1024.0
 }
-
-/// `args` as the `&str`s [`peak_bytes`] takes.
-fn strs(args: &[String]) -> Vec<&str> {
-    args.iter().map(String::as_str).collect()
-}
-
-/// GNU time, which reports a command's own peak memory (`%M`, KiB).
-const TIME: &str = "/usr/bin/time";
 
 /// A PINHOLE synthetic scene (so every layout exports it) of `photos` photos, `points` points.
 fn scene(dir: &Path, photos: usize, points: usize) {
@@ -72,7 +52,7 @@ fn steps(root: &Path, photos: usize, weights: &str) -> Vec<(String, f64)> {
     let ds = s(&root.join(format!("ds{photos}")));
     let ingest = |unit: &str| {
         let extra = ["--max-empty", "1.0", "--quiet", "--shard", unit];
-        peak_bytes(&strs(&super::ingest_small_args(
+        peak_bytes(&super::strs(&super::ingest_small_args(
             &sc,
             Path::new(&ds),
             &extra,
@@ -146,7 +126,7 @@ fn ingest_costs_at_most_48_bytes_for_each_added_point() {
         scene(&sc, 3, points);
         let ds = tmp.path().join(format!("cloud-ds{points}"));
         let extra = ["--max-empty", "1.0", "--quiet"];
-        peaks.push(peak_bytes(&strs(&super::ingest_small_args(
+        peaks.push(peak_bytes(&super::strs(&super::ingest_small_args(
             &sc, &ds, &extra,
         ))));
         std::fs::remove_dir_all(&sc).unwrap();

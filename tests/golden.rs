@@ -208,6 +208,22 @@ fn pinned(root: &Path) -> Pinned {
     }
 }
 
+/// Where `NRW_EXPECT_STYLE_ISA` names an instruction set (.ci/run's forced-AVX2 run on an
+/// AVX-512 machine), the descriptors were computed with it and no other.
+fn assert_instruction_set(manifest: &Path) {
+    let Ok(want) = std::env::var("NRW_EXPECT_STYLE_ISA") else {
+        return;
+    };
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(manifest).unwrap()).unwrap();
+    assert_eq!(
+        m["parameters"]["style_instruction_sets"],
+        serde_json::json!([want]),
+        "{}: the instruction sets the descriptors ran on",
+        manifest.display()
+    );
+}
+
 /// `a` within [`ACROSS_ISAS`] of `b`, relative.
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= ACROSS_ISAS * a.abs().max(b.abs())
@@ -256,6 +272,7 @@ fn sceaux_castle_with_vgg_descriptors_and_pca_triplets_keeps_its_bytes_and_value
         out.to_str().unwrap(),
         "--quiet",
     ]);
+    assert_instruction_set(&ds.join("manifest.json"));
     let got = pinned(root);
     let list = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../..")

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use image::RgbImage;
-use nrw_style::{describe, distance2, Parallelism, Preprocess, Tier, Vgg};
+use nrw_style::{describe, distance2, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
 fn knn(desc: &[Vec<f32>], i: usize, k: usize) -> Vec<usize> {
@@ -164,7 +164,7 @@ fn main() {
                     } else {
                         &net
                     };
-                    describe(&tier, Some(n), p, Preprocess::Imagenet, Parallelism::None)
+                    describe(&tier, Some(n), p, Preprocess::Imagenet)
                         .expect("tier photos are at least 16×16")
                 })
                 .collect();

@@ -327,7 +327,6 @@ fn real_scenes(md: &mut String, root: &Path, quick: bool) {
                     Some(&net),
                     &img,
                     nrw_style::Preprocess::Imagenet,
-                    nrw_style::Parallelism::Rayon(0),
                 )
                 .unwrap()
             })

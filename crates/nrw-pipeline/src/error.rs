@@ -64,6 +64,15 @@ pub enum PipelineError {
         #[source]
         source: nrw_style::StyleError,
     },
+    /// The style backend failed on a batch of photos (named by its first and last photo).
+    #[error("descriptor part {part}, photos {first} … {last}: {source}")]
+    StyleBatch {
+        part: usize,
+        first: String,
+        last: String,
+        #[source]
+        source: nrw_style::StyleError,
+    },
     /// The weights file cannot serve the requested tier.
     #[error("{}: {problem}", path.display())]
     Weights { path: PathBuf, problem: String },

@@ -11,7 +11,7 @@ use nrw_dataset::descriptors::{
 use nrw_dataset::reader::Dataset;
 use nrw_dataset::units::{self, UnitRecord};
 use nrw_dataset::{Manifest, Store};
-use nrw_style::{describe, Convention, Parallelism, Preprocess, Tier, Vgg};
+use nrw_style::{Backend, Convention, Preprocess, Tier, Vgg};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result, Setting};
@@ -122,15 +122,15 @@ pub fn image_grams(
     let net = load_weights(weights, &Tier::reference())
         .or_else(|_| load_weights(weights, &Tier::parse("vgg19-512").expect("valid tier")))?
         .expect("VGG tier");
-    let bytes = nrw_style::image_grams_safetensors(&net, image, pre, Parallelism::Rayon(0))?;
+    let bytes = nrw_style::image_grams_safetensors(&net, image, pre)?;
     nrw_dataset::atomic::write_bytes_atomic(out, &bytes)?;
     Ok(())
 }
 
-fn kind(cfg: &StyleConfig, net: Option<&Vgg>) -> DescriptorKind {
+fn kind(cfg: &StyleConfig, net: Option<&dyn Backend>) -> DescriptorKind {
     DescriptorKind {
         tier: cfg.tier.name(),
-        weights_sha256: net.map_or(String::new(), |n| n.sha256.clone()),
+        weights_sha256: net.map_or(String::new(), |n| n.weights_sha256().to_string()),
         // color-stats ignores the network's input scaling, so it never tells descriptors apart
         preprocess: if cfg.tier.needs_weights() {
             cfg.tier.preprocess(cfg.preprocess).name().to_string()
@@ -140,13 +140,12 @@ fn kind(cfg: &StyleConfig, net: Option<&Vgg>) -> DescriptorKind {
     }
 }
 
-/// The instruction set a tier's descriptors depend on: the VGG tiers' (their convolutions and
-/// Grams are GEMMs, whose sums the AVX-512 and AVX2 kernels order differently, so values
-/// agree to about 1e-6 relative across machines, not bit for bit); none for colour
-/// statistics, summed in plain f64 the same way everywhere.
-fn gemm_instruction_set(tier: &Tier) -> Option<String> {
-    tier.needs_weights()
-        .then(|| nrw_style::isa::isa().name().to_string())
+/// What a tier's descriptors depend on: the backend's device for the VGG tiers (on the CPU
+/// their convolutions and Grams are GEMMs, whose sums the AVX-512 and AVX2 kernels order
+/// differently, so values agree to about 1e-6 relative across machines, not bit for bit);
+/// none for colour statistics, summed in plain f64 the same way everywhere.
+fn device_of(tier: &Tier, net: Option<&dyn Backend>) -> Option<String> {
+    net.filter(|_| tier.needs_weights()).map(|n| n.device())
 }
 
 /// Manifest key listing the instruction sets the descriptors were computed with.
@@ -234,56 +233,107 @@ fn part_done(dataset: &Store, k: usize, kind: &DescriptorKind, ids: &[u32]) -> R
     Ok(pk.as_ref() == Some(kind) && rows.iter().map(|r| r.image_id).eq(ids.iter().copied()))
 }
 
-/// Describe one group of photos into part `k`.
+/// Describe one group of photos into part `k`: colour statistics photo by photo in parallel;
+/// VGG tiers in the backend's batches, each batch's photos decoded and prepared in parallel.
 #[allow(clippy::too_many_arguments)]
 fn describe_part(
     cfg: &StyleConfig,
     ds: &Dataset,
-    net: Option<&Vgg>,
+    net: Option<&dyn Backend>,
     kind: &DescriptorKind,
     k: usize,
     ids: &[u32],
     progress: &dyn Progress,
 ) -> Result<()> {
-    let pre = cfg.tier.preprocess(cfg.preprocess);
-    // Read the group's photos a row group at a time (sequential I/O), then describe them in
-    // parallel.
+    // Read the group's photos a row group at a time (sequential I/O).
     let views: Vec<_> = ds.iter_ids(ids)?.collect::<std::result::Result<_, _>>()?;
-    let mut rows: Vec<DescriptorRow> = views
-        .par_iter()
-        .map(|v| {
-            let d = describe(&cfg.tier, net, &v.photo()?, pre, Parallelism::None).map_err(|e| {
-                PipelineError::Style {
-                    name: v.name.clone(),
-                    image_id: v.image_id,
-                    source: e,
-                }
-            })?;
-            progress.inc(1);
-            Ok(DescriptorRow {
-                image_id: v.image_id,
-                name: v.name.clone(),
-                descriptor: d,
+    let mut rows: Vec<DescriptorRow> = match net.filter(|_| cfg.tier.needs_weights()) {
+        None => views
+            .par_iter()
+            .map(|v| {
+                let d = nrw_style::color_stats(&v.photo()?);
+                progress.inc(1);
+                Ok(row(v, d))
             })
-        })
-        .collect::<Result<_>>()?;
+            .collect::<Result<_>>()?,
+        Some(net) => {
+            let mut rows = Vec::with_capacity(views.len());
+            for batch in views.chunks(net.batch_size().max(1)) {
+                rows.extend(describe_batch(cfg, net, k, batch)?);
+                progress.inc(batch.len() as u64);
+            }
+            rows
+        }
+    };
     rows.sort_by_key(|r| r.image_id);
     write_part(&ds.store, k, kind, &rows)?;
     Ok(())
+}
+
+/// The descriptor row of a view.
+fn row(v: &nrw_dataset::ViewRow, descriptor: Vec<f32>) -> DescriptorRow {
+    DescriptorRow {
+        image_id: v.image_id,
+        name: v.name.clone(),
+        descriptor,
+    }
+}
+
+/// One backend call: the batch's photos prepared (each error names its photo), their Grams,
+/// their descriptors.
+fn describe_batch(
+    cfg: &StyleConfig,
+    net: &dyn Backend,
+    k: usize,
+    batch: &[nrw_dataset::ViewRow],
+) -> Result<Vec<DescriptorRow>> {
+    let pre = cfg.tier.preprocess(cfg.preprocess);
+    let inputs: Vec<nrw_style::NetInput> = batch
+        .par_iter()
+        .map(|v| {
+            let named = |source| PipelineError::Style {
+                name: v.name.clone(),
+                image_id: v.image_id,
+                source,
+            };
+            let input = nrw_style::network_input(&cfg.tier, &v.photo()?, pre).map_err(named)?;
+            Ok(input.expect("a tier with weights feeds its network"))
+        })
+        .collect::<Result<_>>()?;
+    let named_batch = |source| PipelineError::StyleBatch {
+        part: k,
+        first: batch[0].name.clone(),
+        last: batch[batch.len() - 1].name.clone(),
+        source,
+    };
+    let grams = net
+        .style_grams(&inputs, &cfg.tier.taps())
+        .map_err(named_batch)?;
+    if grams.len() != batch.len() {
+        return Err(named_batch(nrw_style::StyleError::Backend {
+            device: net.device(),
+            problem: format!("{} Grams for {} inputs", grams.len(), batch.len()),
+        }));
+    }
+    Ok(batch
+        .iter()
+        .zip(&grams)
+        .map(|(v, g)| row(v, nrw_style::from_grams(&cfg.tier, g)))
+        .collect())
 }
 
 /// Run one unit of style: describe the parts `unit` owns (skipping those done) and record
 /// the unit. Writes only its own parts; with `overwrite` removes only its own stale parts.
 pub fn style_unit(cfg: &StyleConfig, unit: Unit, progress: &dyn Progress) -> Result<StyleSummary> {
     let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
-    run_unit(cfg, unit, net.as_ref(), progress)
+    style_unit_on(cfg, unit, net.as_ref().map(|n| n as &dyn Backend), progress)
 }
 
 /// Style as a sharded stage: one descriptor part per group of `photos_per_part` photos.
 struct StyleStage<'a> {
     cfg: &'a StyleConfig,
     ds: &'a Dataset,
-    net: Option<&'a Vgg>,
+    net: Option<&'a dyn Backend>,
     kind: &'a DescriptorKind,
 }
 
@@ -316,13 +366,37 @@ pub fn started_unfinished(dataset: &Store) -> Result<bool> {
     crate::stage::started_unfinished::<StyleStage>(dataset)
 }
 
-fn run_unit(
+/// A tier with a network needs a backend of its architecture.
+fn check_backend(tier: &Tier, net: Option<&dyn Backend>) -> Result<()> {
+    match (tier.arch(), net) {
+        (None, _) => Ok(()),
+        (Some(_), None) => Err(PipelineError::config(
+            Setting::Weights,
+            format!("tier {} runs a network and none was given", tier.name()),
+        )),
+        (Some(want), Some(n)) if n.arch() != want => Err(PipelineError::config(
+            Setting::Weights,
+            format!(
+                "tier {} runs {} and the backend holds {}",
+                tier.name(),
+                want.name(),
+                n.arch().name()
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// [`style_unit`] on a backend the caller holds (`None` for `color-stats`): the seam another
+/// backend (a GPU's) plugs into; `cfg.weights` is not read.
+pub fn style_unit_on(
     cfg: &StyleConfig,
     unit: Unit,
-    net: Option<&Vgg>,
+    net: Option<&dyn Backend>,
     progress: &dyn Progress,
 ) -> Result<StyleSummary> {
     let t0 = Instant::now();
+    check_backend(&cfg.tier, net)?;
     if cfg.photos_per_part == 0 {
         return Err(PipelineError::config(
             Setting::PhotosPerPart,
@@ -390,7 +464,7 @@ fn run_unit(
         warnings: Vec::new(),
         groups: ids.len().div_ceil(cfg.photos_per_part),
         seconds: t0.elapsed().as_secs_f64(),
-        instruction_set: gemm_instruction_set(&cfg.tier),
+        instruction_set: device_of(&cfg.tier, net),
     };
     crate::stage::record_unit::<StyleStage>(store, unit, &record)?;
     Ok(StyleSummary {
@@ -410,7 +484,12 @@ pub fn style(cfg: &StyleConfig, progress: &dyn Progress) -> Result<StyleSummary>
     let store = &Store::open_path(&cfg.dataset)?;
     let (s, _) = crate::stage::whole::<StyleStage, _>(store, || {
         let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
-        run_unit(cfg, Unit::WHOLE, net.as_ref(), progress)
+        style_unit_on(
+            cfg,
+            Unit::WHOLE,
+            net.as_ref().map(|n| n as &dyn Backend),
+            progress,
+        )
     })?;
     Ok(s)
 }
@@ -455,4 +534,125 @@ pub fn finalize_style(dataset: &Store) -> Result<StyleMerge> {
         parts: unit.groups,
         tier: kind.tier,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nrw_style::{Arch, Grams, NetInput, StyleError};
+    use std::sync::Mutex;
+
+    /// A backend that is not the CPU VGG: its Grams record each input's size and mean, and
+    /// it remembers the batch sizes it was called with.
+    struct Fake {
+        fail: bool,
+        batches: Mutex<Vec<usize>>,
+    }
+
+    impl Backend for Fake {
+        fn arch(&self) -> Arch {
+            Arch::Vgg16
+        }
+        fn weights_sha256(&self) -> &str {
+            "fake-weights"
+        }
+        fn device(&self) -> String {
+            "fake-device".into()
+        }
+        fn batch_size(&self) -> usize {
+            3
+        }
+        fn style_grams(&self, batch: &[NetInput], taps: &[usize]) -> nrw_style::Result<Vec<Grams>> {
+            self.batches.lock().unwrap().push(batch.len());
+            if self.fail {
+                return Err(StyleError::Backend {
+                    device: self.device(),
+                    problem: "out of device memory".into(),
+                });
+            }
+            Ok(batch.iter().map(|x| fake_grams(x, taps)).collect())
+        }
+    }
+
+    fn fake_grams(x: &NetInput, taps: &[usize]) -> Grams {
+        let mean = x.chw.iter().map(|v| *v as f64).sum::<f64>() / x.chw.len() as f64;
+        taps.iter()
+            .map(|&t| (1, vec![t as f64 + mean + (x.height * x.width) as f64]))
+            .collect()
+    }
+
+    fn demo_dataset(dir: &Path) -> PathBuf {
+        crate::runner::demo(dir, None, None, None, &crate::Silent, &mut |_| {}).unwrap();
+        dir.join("dataset")
+    }
+
+    fn cfg(dataset: &Path) -> StyleConfig {
+        StyleConfig {
+            tier: Tier::parse("vgg16-64-l1").unwrap(),
+            overwrite: true,
+            photos_per_part: 5,
+            ..StyleConfig::new(dataset)
+        }
+    }
+
+    #[test]
+    fn the_stage_describes_through_any_backend_in_its_batches() {
+        let tmp = tempfile::tempdir().unwrap();
+        let ds = demo_dataset(tmp.path());
+        let fake = Fake {
+            fail: false,
+            batches: Mutex::new(Vec::new()),
+        };
+        let s = style_unit_on(&cfg(&ds), Unit::WHOLE, Some(&fake), &crate::Silent).unwrap();
+        let batches = fake.batches.into_inner().unwrap();
+        assert!(batches.iter().all(|b| (1..=3).contains(b)), "{batches:?}");
+        assert_eq!(batches.iter().sum::<usize>(), s.photos);
+        let store = Store::open_path(&ds).unwrap();
+        let (kind, rows) = nrw_dataset::descriptors::read_all(&store).unwrap().unwrap();
+        assert_eq!(kind.weights_sha256, "fake-weights");
+        let data = Dataset::open(store.clone()).unwrap();
+        let tier = cfg(&ds).tier;
+        for r in &rows {
+            let v = data
+                .iter_ids(&[r.image_id])
+                .unwrap()
+                .next()
+                .unwrap()
+                .unwrap();
+            let x = nrw_style::network_input(&tier, &v.photo().unwrap(), Preprocess::Imagenet)
+                .unwrap()
+                .unwrap();
+            assert_eq!(
+                r.descriptor,
+                nrw_style::from_grams(&tier, &fake_grams(&x, &[0]))
+            );
+        }
+        let records = units::unit_records(&store, units::STYLE).unwrap();
+        assert!(records
+            .iter()
+            .all(|r| r.instruction_set.as_deref() == Some("fake-device")));
+    }
+
+    #[test]
+    fn a_failing_backend_names_the_part_and_its_photos() {
+        let tmp = tempfile::tempdir().unwrap();
+        let ds = demo_dataset(tmp.path());
+        let fake = Fake {
+            fail: true,
+            batches: Mutex::new(Vec::new()),
+        };
+        let e = style_unit_on(&cfg(&ds), Unit::WHOLE, Some(&fake), &crate::Silent)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("descriptor part 0, photos ")
+                && e.ends_with("style backend on fake-device: out of device memory"),
+            "{e}"
+        );
+        let e = style_unit_on(&cfg(&ds), Unit::WHOLE, None, &crate::Silent).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "style.weights tier vgg16-64-l1 runs a network and none was given"
+        );
+    }
 }

@@ -8,11 +8,10 @@
 
 use image::RgbImage;
 
-use crate::backend::Backend;
+use crate::backend::{Backend, Grams, NetInput};
 use crate::error::{Result, StyleError};
 use crate::preprocess::{to_input, Preprocess, MIN_SIDE};
 use crate::vgg::{Arch, STYLE_LAYERS};
-use crate::Parallelism;
 
 /// A way of describing a photo's style, from the reference (VGG16, 512², five layers) down
 /// to a cheap colour statistic.
@@ -150,6 +149,22 @@ impl Tier {
         }
     }
 
+    /// The style layers (indices into [`STYLE_LAYERS`], ascending, once each) whose Grams
+    /// the descriptor packs: all five for the official tier, the tier's own for VGG tiers.
+    pub fn taps(&self) -> Vec<usize> {
+        match self {
+            Tier::Official { .. } => (0..STYLE_LAYERS.len()).collect(),
+            Tier::Vgg { layers, .. } => {
+                let mut taps = layers.clone();
+                taps.sort_unstable();
+                taps.dedup();
+                debug_assert!(taps.iter().all(|t| *t < STYLE_LAYERS.len()));
+                taps
+            }
+            Tier::ColorStats => Vec::new(),
+        }
+    }
+
     /// The weights convention the tier needs: the official tier reproduces the published
     /// code, which runs tensorflow-vgg's Caffe weights; the others run torchvision's.
     pub fn convention(&self) -> Option<crate::Convention> {
@@ -201,94 +216,112 @@ pub fn prepare(photo: &RgbImage, size: Option<u32>) -> RgbImage {
 }
 
 /// The descriptor of a photo under a tier (`net` is required for VGG tiers; `pre` is the
-/// network's input scaling and does not affect `color-stats`). A `-full` tier refuses photos
-/// under 16 × 16: pooling would leave no pixel for the deep Grams, whose normalisation would
-/// then divide by zero.
+/// network's input scaling and does not affect `color-stats`): [`network_input`], the
+/// backend, [`from_grams`], for one photo. The style stage batches the same three steps.
 pub fn describe<B: Backend + ?Sized>(
     tier: &Tier,
     net: Option<&B>,
     photo: &RgbImage,
     pre: Preprocess,
-    par: Parallelism,
 ) -> Result<Vec<f32>> {
-    if let Tier::Vgg { size: None, .. } = tier {
-        if photo.width().min(photo.height()) < MIN_SIDE {
+    let Some(input) = network_input(tier, photo, pre)? else {
+        return Ok(color_stats(photo));
+    };
+    let net = net.expect("VGG tiers need weights (checked by the caller)");
+    check_arch(tier, net);
+    let grams = net.style_grams(std::slice::from_ref(&input), &tier.taps())?;
+    let grams = grams
+        .into_iter()
+        .next()
+        .ok_or_else(|| StyleError::Backend {
+            device: net.device(),
+            problem: "no Grams returned for the one input given".into(),
+        })?;
+    Ok(from_grams(tier, &grams))
+}
+
+/// The architecture a tier runs is the one the weights hold (the caller checked it when it
+/// loaded them; a mismatch here is a bug).
+pub fn check_arch<B: Backend + ?Sized>(tier: &Tier, net: &B) {
+    let Some(want) = tier.arch() else {
+        return;
+    };
+    assert_eq!(
+        net.arch(),
+        want,
+        "weights and tier architecture (checked by the caller)"
+    );
+}
+
+/// What a tier feeds its network for a photo: the crop or resize and the input scaling; None
+/// for `color-stats`, which has no network. A `-full` tier refuses photos under 16 × 16:
+/// pooling would leave no pixel for the deep Grams, whose normalisation would then divide by
+/// zero.
+pub fn network_input(tier: &Tier, photo: &RgbImage, pre: Preprocess) -> Result<Option<NetInput>> {
+    let img = match tier {
+        Tier::ColorStats => return Ok(None),
+        Tier::Official { crop } => {
+            central_crop(photo, *crop).ok_or_else(|| StyleError::SmallerThanCrop {
+                width: photo.width(),
+                height: photo.height(),
+                crop: *crop,
+            })?
+        }
+        Tier::Vgg { size: None, .. } if photo.width().min(photo.height()) < MIN_SIDE => {
             return Err(StyleError::TooSmall {
                 width: photo.width(),
                 height: photo.height(),
                 tier: tier.name(),
             });
         }
+        Tier::Vgg { size, .. } => prepare(photo, *size),
+    };
+    Ok(Some(NetInput {
+        chw: to_input(&img, tier.preprocess(pre)),
+        height: img.height() as usize,
+        width: img.width() as usize,
+    }))
+}
+
+/// The descriptor from a photo's Grams at [`Tier::taps`] (VGG and official tiers).
+pub fn from_grams(tier: &Tier, grams: &Grams) -> Vec<f32> {
+    let mut out = Vec::new();
+    for (c, g) in grams {
+        match tier {
+            // mean over the C × C entries = ‖·‖²_F / C², so each Gram is scaled by 1/C.
+            Tier::Official { .. } => pack_symmetric_scaled(*c, g, 1.0 / *c as f64, &mut out),
+            _ => pack_symmetric(*c, g, &mut out),
+        }
     }
-    Ok(match tier {
-        Tier::Official { crop } => {
-            let net = net.expect("the official tier needs weights (checked by the caller)");
-            assert_eq!(
-                net.arch(),
-                Arch::Vgg16,
-                "official tier runs VGG16 (checked by the caller)"
-            );
-            let img = central_crop(photo, *crop).ok_or_else(|| StyleError::SmallerThanCrop {
-                width: photo.width(),
-                height: photo.height(),
-                crop: *crop,
-            })?;
-            let n = *crop as usize;
-            let all: Vec<usize> = (0..STYLE_LAYERS.len()).collect();
-            let grams = net.style_grams(&to_input(&img, Preprocess::Caffe), n, n, &all, par);
-            let mut out = Vec::new();
-            for (c, g) in &grams {
-                // mean over the C × C entries = ‖·‖²_F / C², so each Gram is scaled by 1/C.
-                pack_symmetric_scaled(*c, g, 1.0 / *c as f64, &mut out);
-            }
-            out
+    out
+}
+
+/// Mean and covariance of a photo's RGB in [0, 1], summed in f64: the `color-stats` descriptor.
+pub fn color_stats(photo: &RgbImage) -> Vec<f32> {
+    let n = (photo.width() * photo.height()) as f64;
+    let mut mean = [0f64; 3];
+    for p in photo.pixels() {
+        for c in 0..3 {
+            mean[c] += p[c] as f64 / 255.0;
         }
-        Tier::ColorStats => {
-            let n = (photo.width() * photo.height()) as f64;
-            let mut mean = [0f64; 3];
-            for p in photo.pixels() {
-                for c in 0..3 {
-                    mean[c] += p[c] as f64 / 255.0;
-                }
+    }
+    mean.iter_mut().for_each(|m| *m /= n);
+    let mut cov = [0f64; 9];
+    for p in photo.pixels() {
+        let d = [
+            p[0] as f64 / 255.0 - mean[0],
+            p[1] as f64 / 255.0 - mean[1],
+            p[2] as f64 / 255.0 - mean[2],
+        ];
+        for i in 0..3 {
+            for j in 0..3 {
+                cov[i * 3 + j] += d[i] * d[j] / n;
             }
-            mean.iter_mut().for_each(|m| *m /= n);
-            let mut cov = [0f64; 9];
-            for p in photo.pixels() {
-                let d = [
-                    p[0] as f64 / 255.0 - mean[0],
-                    p[1] as f64 / 255.0 - mean[1],
-                    p[2] as f64 / 255.0 - mean[2],
-                ];
-                for i in 0..3 {
-                    for j in 0..3 {
-                        cov[i * 3 + j] += d[i] * d[j] / n;
-                    }
-                }
-            }
-            let mut out: Vec<f32> = mean.iter().map(|v| *v as f32).collect();
-            pack_symmetric(3, &cov, &mut out);
-            out
         }
-        Tier::Vgg { arch, size, layers } => {
-            let net = net.expect("VGG tiers need weights (checked by the caller)");
-            assert_eq!(
-                net.arch(),
-                *arch,
-                "weights and tier architecture (checked by the caller)"
-            );
-            let img = prepare(photo, *size);
-            let (w, h) = (img.width() as usize, img.height() as usize);
-            let mut taps = layers.clone();
-            taps.sort_unstable();
-            taps.dedup();
-            debug_assert!(taps.iter().all(|t| *t < STYLE_LAYERS.len()));
-            let mut out = Vec::new();
-            for (c, g) in net.style_grams(&to_input(&img, pre), h, w, &taps, par) {
-                pack_symmetric(c, &g, &mut out);
-            }
-            out
-        }
-    })
+    }
+    let mut out: Vec<f32> = mean.iter().map(|v| *v as f32).collect();
+    pack_symmetric(3, &cov, &mut out);
+    out
 }
 
 /// Squared L2 distance, accumulated in f64.
@@ -314,18 +347,22 @@ mod tests {
         fn weights_sha256(&self) -> &str {
             "fake"
         }
-        fn style_grams(
-            &self,
-            _: &[f32],
-            h: usize,
-            w: usize,
-            taps: &[usize],
-            _: Parallelism,
-        ) -> Vec<(usize, Vec<f64>)> {
+        fn device(&self) -> String {
+            "fake".into()
+        }
+        fn batch_size(&self) -> usize {
+            1
+        }
+        fn style_grams(&self, batch: &[NetInput], taps: &[usize]) -> Result<Vec<Grams>> {
             // Grams of 2 channels whose entries record the tap and the input size.
-            taps.iter()
-                .map(|&t| (2, vec![t as f64, 1.0, 1.0, (h * w) as f64]))
-                .collect()
+            Ok(batch
+                .iter()
+                .map(|x| {
+                    taps.iter()
+                        .map(|&t| (2, vec![t as f64, 1.0, 1.0, (x.height * x.width) as f64]))
+                        .collect()
+                })
+                .collect())
         }
     }
 
@@ -333,13 +370,7 @@ mod tests {
     fn descriptors_come_through_any_backend() {
         let tier = Tier::parse("vgg16-128-l25").unwrap();
         let photo = RgbImage::new(300, 200);
-        let d = describe(
-            &tier,
-            Some(&Fake),
-            &photo,
-            Preprocess::Imagenet,
-            Parallelism::None,
-        );
+        let d = describe(&tier, Some(&Fake), &photo, Preprocess::Imagenet);
         // Taps relu2_2 and relu5_2 (indices 1 and 4), the photo resized to 128²; each packed
         // as the upper triangle with the off-diagonal × √2.
         let s2 = std::f32::consts::SQRT_2;
@@ -407,14 +438,7 @@ mod tests {
     #[test]
     fn color_stats_of_a_constant_photo_have_zero_covariance() {
         let img = RgbImage::from_pixel(10, 10, image::Rgb([255, 0, 51]));
-        let d = describe(
-            &Tier::ColorStats,
-            None::<&Vgg>,
-            &img,
-            Preprocess::Imagenet,
-            Parallelism::None,
-        )
-        .unwrap();
+        let d = describe(&Tier::ColorStats, None::<&Vgg>, &img, Preprocess::Imagenet).unwrap();
         assert_eq!(d.len(), 9);
         assert!((d[0] - 1.0).abs() < 1e-6 && d[1].abs() < 1e-6 && (d[2] - 0.2).abs() < 1e-6);
         assert!(d[3..].iter().all(|v| v.abs() < 1e-9));

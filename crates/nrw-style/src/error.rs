@@ -23,6 +23,10 @@ pub enum StyleError {
     },
     #[error("a {width}×{height} photo is smaller than the {crop}×{crop} centre crop of the official tier (the published code asserts the same); use --tier official-N with N ≤ {}", width.min(height))]
     SmallerThanCrop { width: u32, height: u32, crop: u32 },
+    #[error("network input {index} of the batch: {problem}")]
+    Input { index: usize, problem: String },
+    #[error("style backend on {device}: {problem}")]
+    Backend { device: String, problem: String },
 }
 
 /// Result alias for this crate.

@@ -16,9 +16,11 @@ pub mod tensor;
 pub mod vgg;
 pub mod winograd;
 
-pub use backend::Backend;
+pub use backend::{Backend, Grams, NetInput};
 pub use conv::ConvAlgo;
-pub use descriptor::{central_crop, describe, distance2, Tier};
+pub use descriptor::{
+    central_crop, check_arch, color_stats, describe, distance2, from_grams, network_input, Tier,
+};
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
 pub use matmul::gram;
@@ -34,20 +36,30 @@ pub fn grams(
     w: usize,
     par: Parallelism,
 ) -> Vec<(usize, Vec<f64>)> {
-    net.style_grams(input, h, w, &[0, 1, 2, 3, 4], par)
+    net.grams_of_taps(input, h, w, &[0, 1, 2, 3, 4], par)
 }
 
 /// The five Gram matrices of one image file exactly as given (no resize or crop), as
 /// safetensors bytes with f32 tensors `gram_relu1_2` … `gram_relu5_2`.
 pub fn image_grams_safetensors(
-    net: &Vgg,
+    net: &dyn Backend,
     path: &std::path::Path,
     p: Preprocess,
-    par: Parallelism,
 ) -> Result<Vec<u8>> {
     let img = load_rgb01(path)?;
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let g = grams(net, &to_input_01(&img, p), h, w, par);
+    let input = NetInput {
+        chw: to_input_01(&img, p),
+        height: img.height() as usize,
+        width: img.width() as usize,
+    };
+    let all: Vec<usize> = (0..STYLE_LAYERS.len()).collect();
+    let g = net
+        .style_grams(std::slice::from_ref(&input), &all)?
+        .pop()
+        .ok_or_else(|| StyleError::Backend {
+            device: net.device(),
+            problem: "no Grams returned for the one input given".into(),
+        })?;
     let data: Vec<(String, usize, Vec<u8>)> = g
         .iter()
         .zip(STYLE_LAYERS)
@@ -70,7 +82,10 @@ pub fn image_grams_safetensors(
         })
         .collect();
     let mut meta = std::collections::HashMap::new();
-    meta.insert("weights_sha256".to_string(), net.sha256.clone());
+    meta.insert(
+        "weights_sha256".to_string(),
+        net.weights_sha256().to_string(),
+    );
     meta.insert("preprocess".to_string(), p.name().to_string());
     meta.insert(
         "gram".to_string(),

@@ -193,7 +193,7 @@ impl Vgg {
     /// The Gram matrices (channels, f64 row-major; see [`gram`]) of the style layers listed in
     /// `taps` (indices into [`STYLE_LAYERS`], ascending), each computed while its activation
     /// is fresh in memory; the trunk stops after the last tap.
-    pub fn style_grams(
+    pub fn grams_of_taps(
         &self,
         input: &[f32],
         h: usize,

@@ -136,9 +136,7 @@ fn strips_are_described_through_tiers_or_refused_by_name() {
     let strip = RgbImage::from_fn(1, 300, |_, y| Rgb([(y % 200) as u8, 90, 30]));
     let middle = *strip.get_pixel(0, 149);
     let tier = Tier::parse("vgg16-128").unwrap();
-    let d = |img: &RgbImage, t: &Tier| {
-        describe(t, Some(&net), img, Preprocess::Imagenet, Parallelism::None)
-    };
+    let d = |img: &RgbImage, t: &Tier| describe(t, Some(&net), img, Preprocess::Imagenet);
     let got = d(&strip, &tier).unwrap();
     assert!(got.iter().all(|v| v.is_finite()));
     assert_eq!(
@@ -152,5 +150,43 @@ fn strips_are_described_through_tiers_or_refused_by_name() {
     assert!(
         e.contains("1×300") && e.contains("vgg16-full") && e.contains("16×16"),
         "{e}"
+    );
+}
+
+#[test]
+fn a_batch_gives_the_bits_of_its_inputs_one_by_one_and_refuses_a_short_input() {
+    let Some(_) = shared::shared("data") else {
+        return;
+    };
+    use nrw_style::{Backend, NetInput, StyleError};
+    let net = net();
+    let inputs: Vec<NetInput> = (0..3)
+        .map(|k| {
+            let img = RgbImage::from_fn(40 + 8 * k, 48, |x, y| {
+                Rgb([(x * 5 + k) as u8, (y * 3) as u8, ((x ^ y) * 7) as u8])
+            });
+            NetInput {
+                chw: nrw_style::to_input(&img, Preprocess::Imagenet),
+                height: 48,
+                width: 40 + 8 * k as usize,
+            }
+        })
+        .collect();
+    let taps = [0, 2, 4];
+    // One input runs with threads inside its kernels, a batch one input per thread.
+    let batch = net.style_grams(&inputs, &taps).unwrap();
+    for (x, got) in inputs.iter().zip(&batch) {
+        let alone = net.style_grams(std::slice::from_ref(x), &taps).unwrap();
+        assert_eq!(&alone[0], got, "{}×{}", x.width, x.height);
+    }
+    let mut short = inputs[1].clone();
+    short.chw.pop();
+    let e = net
+        .style_grams(&[inputs[0].clone(), short], &taps)
+        .unwrap_err();
+    assert!(matches!(e, StyleError::Input { index: 1, .. }), "{e}");
+    assert_eq!(
+        e.to_string(),
+        "network input 1 of the batch: 6911 values for a 3 × 48 × 48 input"
     );
 }

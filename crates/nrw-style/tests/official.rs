@@ -12,7 +12,7 @@ mod shared;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use nrw_style::{describe, Parallelism, Preprocess, Tier, Vgg};
+use nrw_style::{describe, Preprocess, Tier, Vgg};
 
 fn shared() -> PathBuf {
     shared::shared_dir()
@@ -46,14 +46,7 @@ fn official_grams_match_a_float64_vgg16_that_matches_pytorch() {
         let png = shared().join(format!("fixtures/vgg16/{stem}.png"));
         let photo = image::open(&png).unwrap().to_rgb8();
         let tier = Tier::Official { crop };
-        let d = describe(
-            &tier,
-            Some(&net),
-            &photo,
-            Preprocess::Imagenet,
-            Parallelism::Rayon(0),
-        )
-        .unwrap();
+        let d = describe(&tier, Some(&net), &photo, Preprocess::Imagenet).unwrap();
         let ours = tmp.path().join(format!("{stem}.f32"));
         std::fs::write(
             &ours,
@@ -94,7 +87,6 @@ fn official_grams_match_a_float64_vgg16_that_matches_pytorch() {
         Some(&net),
         &small,
         Preprocess::Imagenet,
-        Parallelism::None,
     )
     .unwrap_err()
     .to_string();

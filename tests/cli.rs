@@ -1145,7 +1145,7 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
         d,
         "--layout",
         "tfrecord",
-        "--shards",
+        "--shards", // the old name of --tfrecord-files, still taken
         "2",
         "--out",
         tfr.to_str().unwrap(),

@@ -51,7 +51,7 @@ fn steps(root: &Path, photos: usize, weights: &str) -> Vec<(String, f64)> {
     scene(&sc, photos, 60_000);
     let ds = s(&root.join(format!("ds{photos}")));
     let ingest = |unit: &str| {
-        let extra = ["--max-empty", "1.0", "--quiet", "--shard", unit];
+        let extra = ["--max-empty", "1.0", "--quiet", "--unit", unit];
         peak_bytes(&super::strs(&super::ingest_small_args(
             &sc,
             Path::new(&ds),

@@ -453,7 +453,7 @@ fn a_unit_killed_on_s3_leaves_nothing_the_manifest_lists_and_resumes() {
             s,
             "--out",
             url,
-            "--shard",
+            "--unit",
             "0/2",
             "--pause-after-group-ms",
             "1500",
@@ -494,7 +494,7 @@ fn a_unit_killed_on_s3_leaves_nothing_the_manifest_lists_and_resumes() {
     let err = assert_fails(&m.nrw(&["finalize", url]));
     assert!(err.contains("none has finished"), "{err}");
     for shard in ["0/2", "1/2"] {
-        let mut a = vec!["ingest", s, "--out", url, "--shard", shard];
+        let mut a = vec!["ingest", s, "--out", url, "--unit", shard];
         a.extend(base);
         assert_ok(&m.nrw(&a));
     }

@@ -118,10 +118,11 @@ fn label_maps_are_the_librarys_in_the_format_ingest_reads_and_resume_to_the_same
         (Some(1), Some(3))
     );
     assert!(before == files(&labels), "the resumed folder differs");
-    // Two work units into one folder: the whole run's files, each photo done once.
+    // Two work units into one folder (one named by the old flag --shard, still taken): the
+    // whole run's files, each photo done once.
     let units = labels.with_file_name("labels_units");
     let a = segment(&scene, &units, &["--shard", "0/2"]);
-    let b = segment(&scene, &units, &["--shard", "1/2"]);
+    let b = segment(&scene, &units, &["--unit", "1/2"]);
     assert_eq!(
         (
             a["segmented"].as_u64(),

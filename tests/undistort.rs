@@ -161,7 +161,7 @@ fn undistorted_units_and_finalize_write_the_bytes_of_one_process() {
             "--quiet",
         ];
         if let Some(s) = shard {
-            a.extend(["--shard", s]);
+            a.extend(["--unit", s]);
         }
         ok(&a);
     };

@@ -1,4 +1,4 @@
-//! Work units (`--shard I/N`) and `finalize`: any number of units, in any order, killed and
+//! Work units (`--unit I/N`) and `finalize`: any number of units, in any order, killed and
 //! rerun or running at once, give the bytes of one process.
 
 use super::*;
@@ -9,7 +9,7 @@ const COMMON: [&str; 3] = ["--rows-per-shard", "2", "--quiet"];
 fn ingest_unit(scene: &Path, out: &Path, shard: Option<&str>, extra: &[&str]) -> Output {
     let mut args: Vec<&str> = COMMON.to_vec();
     if let Some(s) = shard {
-        args.extend(["--shard", s]);
+        args.extend(["--unit", s]);
     }
     args.extend(extra);
     ingest_small(scene, out, &args)
@@ -34,7 +34,7 @@ fn unit_command(scene: &Path, out: &Path, shard: &str) -> Command {
     ])
     .args(["--min-dim", "96", "--min-photo-side", "100"])
     .args(COMMON)
-    .args(["--shard", shard]);
+    .args(["--unit", shard]);
     c
 }
 
@@ -230,7 +230,7 @@ fn style_in_units_plus_finalize_equals_style_in_one_run() {
             "--quiet",
         ];
         if let Some(s) = shard {
-            a.extend(["--shard", s]);
+            a.extend(["--unit", s]);
         }
         ok(&a);
     };

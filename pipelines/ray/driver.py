@@ -11,8 +11,8 @@ recorded and the others go on. Then OUT/corpus.parquet indexes them, one row per
 where its dataset and report are, counts and verdicts, or its error (schemas/corpus.toml;
 pyarrow.parquet.read_table or DuckDB's read_parquet read it).
 
-Steps: `nrw-etl ingest --shard i/N` on N tasks (retried when a task or its node dies; a
-retried unit resumes where it stopped), `nrw-etl finalize`, `split`, `style --shard i/N`
+Steps: `nrw-etl ingest --unit i/N` on N tasks (retried when a task or its node dies; a
+retried unit resumes where it stopped), `nrw-etl finalize`, `split`, `style --unit i/N`
 on N tasks, `finalize`, `triplets`, `qa`. Every task calls the `nrw-etl` binary, which
 must be on each node (same version); the dataset must be where every node can reach it:
 an object-store URL (s3://, gs://, az://, credentials from the usual variables) or a
@@ -77,7 +77,7 @@ def nrw_task(binary, args, env, task_log=None):
 def units(binary, stage_args, n, env, task_log=None):
     """Run work units 0..n-1 of a stage and wait for all of them."""
     quiet = [] if "--quiet" in stage_args else ["--quiet"]
-    refs = [nrw_task.remote(binary, [*stage_args, "--shard", f"{i}/{n}", *quiet], env, task_log)
+    refs = [nrw_task.remote(binary, [*stage_args, "--unit", f"{i}/{n}", *quiet], env, task_log)
             for i in range(n)]
     return ray.get(refs)
 

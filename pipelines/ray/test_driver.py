@@ -38,7 +38,7 @@ def _doomed_unit_mid_way(task_log, node_id):
         args = e["args"]
         if e["event"] != "start" or e["node"] != node_id or args[0] != "ingest":
             continue
-        i, n = map(int, args[args.index("--shard") + 1].split("/"))
+        i, n = map(int, args[args.index("--unit") + 1].split("/"))
         records = os.path.join(args[args.index("--out") + 1], ".units", "ingest")
         names = os.listdir(records) if os.path.isdir(records) else []
         groups = [int(m[len("group-"):-len(".json")]) for m in names if m.startswith("group-") and m.endswith(".json")]

@@ -33,7 +33,7 @@ type Reopen = (String, HashMap<String, String>);
 /// Decode views on this process's decoding threads; the caller has released the GIL.
 fn decode_all(
     pool: &rayon::ThreadPool,
-    views: Vec<reader::View>,
+    views: Vec<nrw_dataset::ViewRow>,
 ) -> nrw_dataset::Result<Vec<Decoded>> {
     pool.install(|| views.into_par_iter().map(decode).collect())
 }
@@ -207,14 +207,15 @@ impl Dataset {
         let (ds, pool) = (self.current(py)?, crate::pool()?);
         let decoded = py
             .detach(|| -> nrw_dataset::Result<Vec<Decoded>> {
-                let mut views: HashMap<u32, reader::View> = HashMap::new();
+                let mut views: HashMap<u32, nrw_dataset::ViewRow> = HashMap::new();
                 for read in ds.reads(&ids)? {
                     for v in ds.read(&read)? {
                         views.insert(v.image_id, v);
                     }
                 }
                 // A repeated id decodes again (its row was read once).
-                let ordered: Vec<reader::View> = ids.iter().map(|id| views[id].clone()).collect();
+                let ordered: Vec<nrw_dataset::ViewRow> =
+                    ids.iter().map(|id| views[id].clone()).collect();
                 decode_all(&pool, ordered)
             })
             .map_err(dataset_err)?;

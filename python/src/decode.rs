@@ -1,7 +1,7 @@
 //! One view's payloads decoded into plain buffers (no Python object), so it runs with the GIL
 //! released, and those buffers moved into NumPy arrays without a copy.
 
-use nrw_dataset::reader::View;
+use nrw_dataset::ViewRow;
 use numpy::ndarray::{Array2, Array3};
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
@@ -28,7 +28,7 @@ pub struct Decoded {
 }
 
 /// Decode every payload of a view (their CRCs were checked when the row was read).
-pub fn decode(v: View) -> nrw_dataset::Result<Decoded> {
+pub fn decode(v: ViewRow) -> nrw_dataset::Result<Decoded> {
     Ok(Decoded {
         photo: v.photo()?.into_raw(),
         render: v.color()?.into_raw(),

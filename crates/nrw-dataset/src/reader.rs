@@ -24,7 +24,7 @@ use crate::manifest::Manifest;
 use crate::views::ROW_GROUP_ROWS;
 
 /// A kept view with its metadata and (still encoded) payloads: a shard row.
-pub use crate::views::ViewRow as View;
+use crate::views::ViewRow;
 
 /// The channels of a view decoded at one place: what a training step consumes.
 #[derive(Debug, Clone, PartialEq)]
@@ -44,7 +44,7 @@ pub struct Crop {
 /// is refused before any payload is decoded.
 pub const MAX_VIEW_PIXELS: u64 = 1 << 26;
 
-impl View {
+impl ViewRow {
     /// Decode one PNG payload after checking its header against the view's size, so damaged
     /// bytes can neither allocate more than the view needs nor give an image of another size.
     fn decode_image(&self, bytes: &[u8], what: &str) -> Result<image::DynamicImage> {
@@ -342,7 +342,7 @@ impl Dataset {
     }
 
     /// Read the given rows of one shard (rows in increasing order).
-    fn read_rows(&self, shard: usize, rows: &[usize]) -> Result<Vec<View>> {
+    fn read_rows(&self, shard: usize, rows: &[usize]) -> Result<Vec<ViewRow>> {
         let rel = &self.shards[shard];
         let path = self.store.name(rel);
         let f = self.store.chunks_sized(rel, Some(self.sizes[shard]))?;
@@ -375,7 +375,7 @@ impl Dataset {
             .with_batch_size(ROW_GROUP_ROWS)
             .build()
             .map_err(parquet_err(&path))?;
-        let mut out: Vec<View> = Vec::with_capacity(rows.len());
+        let mut out: Vec<ViewRow> = Vec::with_capacity(rows.len());
         for batch in crate::parquet_io::guarded(reader, &path) {
             let b = batch?;
             let at = out.len().min(rows.len());
@@ -385,7 +385,7 @@ impl Dataset {
     }
 
     /// One view by image id (reads one row of one row group).
-    pub fn get(&self, image_id: u32) -> Result<View> {
+    pub fn get(&self, image_id: u32) -> Result<ViewRow> {
         let loc = self
             .index
             .get(&image_id)
@@ -405,14 +405,17 @@ impl Dataset {
     pub fn iter_split<'a>(
         &'a self,
         split: &str,
-    ) -> Result<impl Iterator<Item = Result<View>> + 'a> {
+    ) -> Result<impl Iterator<Item = Result<ViewRow>> + 'a> {
         let ids = self.ids(split)?;
         self.iter_ids(ids)
     }
 
     /// Stream the views of any kept image ids, a row group at a time (each row group read
     /// once however many of its rows are wanted), in shard and row order.
-    pub fn iter_ids<'a>(&'a self, ids: &[u32]) -> Result<impl Iterator<Item = Result<View>> + 'a> {
+    pub fn iter_ids<'a>(
+        &'a self,
+        ids: &[u32],
+    ) -> Result<impl Iterator<Item = Result<ViewRow>> + 'a> {
         Ok(self
             .reads(ids)?
             .into_iter()
@@ -460,7 +463,7 @@ impl Dataset {
     }
 
     /// The views of one read, every payload checked against its CRC-32.
-    pub fn read(&self, read: &GroupRead) -> Result<Vec<View>> {
+    pub fn read(&self, read: &GroupRead) -> Result<Vec<ViewRow>> {
         self.read_rows(read.shard, &read.rows)
     }
 }
@@ -488,8 +491,8 @@ impl GroupRead {
 pub fn views_in<R: parquet::file::reader::ChunkReader + 'static>(
     data: R,
     path: &Path,
-) -> Result<Vec<View>> {
-    let mut out: Vec<View> = Vec::new();
+) -> Result<Vec<ViewRow>> {
+    let mut out: Vec<ViewRow> = Vec::new();
     for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, ROW_GROUP_ROWS)? {
         let b = b?;
         let rows: Vec<usize> = (out.len()..out.len() + b.num_rows()).collect();
@@ -500,7 +503,7 @@ pub fn views_in<R: parquet::file::reader::ChunkReader + 'static>(
 
 /// The views of a batch whose row i is row `rows[i]` of the shard at `path`, every payload
 /// checked against its checksum first.
-fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<View>> {
+fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<ViewRow>> {
     use crate::views::columns as col;
     for c in crate::views::PAYLOAD_COLUMNS {
         if let Some(m) = crate::views::payload_mismatches(b, rows, c, path)?.first() {
@@ -543,7 +546,7 @@ fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<View>> {
                 path: path.to_path_buf(),
                 problem: "params are not float64".into(),
             })?;
-        out.push(View {
+        out.push(ViewRow {
             image_id: ids.value(i),
             name: names.value(i).into(),
             camera_id: cams.value(i),

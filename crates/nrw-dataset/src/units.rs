@@ -1,4 +1,4 @@
-//! Work-unit records: what each independent unit of a stage (`--shard I/N`) has done, so
+//! Work-unit records: what each independent unit of a stage (`--unit I/N`) has done, so
 //! `finalize` can merge the units into the scene tables and manifest without the units ever
 //! talking to each other.
 //!

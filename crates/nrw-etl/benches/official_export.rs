@@ -42,7 +42,7 @@ fn run(args: &[&str], threads: Option<usize>) -> f64 {
 fn levels(
     ds: &Dataset,
     scale: &DepthScale,
-    landmark: &dyn Fn(&nrw_dataset::reader::View) -> Vec<bool>,
+    landmark: &dyn Fn(&nrw_dataset::ViewRow) -> Vec<bool>,
 ) -> (Vec<usize>, Vec<f64>) {
     let (mut counts, mut errs) = (Vec::new(), Vec::new());
     for (split, _) in ds.splits() {
@@ -79,7 +79,7 @@ fn depth_table(
     md: &mut String,
     title: &str,
     ds: &Dataset,
-    landmark: &dyn Fn(&nrw_dataset::reader::View) -> Vec<bool>,
+    landmark: &dyn Fn(&nrw_dataset::ViewRow) -> Vec<bool>,
 ) -> String {
     let (near, far) = nrw_dataset::scene::read_depth_range(&ds.store)
         .unwrap()

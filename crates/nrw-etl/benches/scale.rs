@@ -80,7 +80,7 @@ fn stages(work: &Path, photos: usize, style: &[String]) -> Vec<(String, (f64, f6
     // Style as two work units, so finalize has units to merge (each unit's cost is what a
     // machine of a cluster pays).
     for u in ["0/2", "1/2"] {
-        let mut a: Vec<&str> = vec!["style", d, "--quiet", "--shard", u];
+        let mut a: Vec<&str> = vec!["style", d, "--quiet", "--unit", u];
         a.extend(style.iter().map(String::as_str));
         out.push((format!("style unit {u}"), timed(&a)));
     }
@@ -176,7 +176,7 @@ fn report(by_n: &Runs, clouds: &[(usize, (f64, f64))], tier: &str, asked: &[usiz
         "# Scale: memory and time of every stage against photos and points\n"
     );
     let _ = writeln!(md, "Regenerate: `cargo bench -p nrw-etl --bench scale [-- --photos 150,600,250,1000,4000 --points 1e6,1e7,1e8]`.\n\nMachine: {}.\n", cpu::describe());
-    let _ = writeln!(md, "Scenes: synthetic (demo façade), PINHOLE cameras, photos of 600–900 px, {SCENE_POINTS} points; paper settings (600 px renders, r = 1, 64 rows per shard, --k 20, val = N/10 up to 100), style tier {tier}{}. Each stage is one `nrw-etl` process timed whole by `/usr/bin/time` (wall seconds / peak resident MB); style runs as two units (`--shard 0/2`, `1/2`) and `finalize` merges them.\n",
+    let _ = writeln!(md, "Scenes: synthetic (demo façade), PINHOLE cameras, photos of 600–900 px, {SCENE_POINTS} points; paper settings (600 px renders, r = 1, 64 rows per shard, --k 20, val = N/10 up to 100), style tier {tier}{}. Each stage is one `nrw-etl` process timed whole by `/usr/bin/time` (wall seconds / peak resident MB); style runs as two units (`--unit 0/2`, `1/2`) and `finalize` merges them.\n",
         if tier == "vgg16-512" { " (305,888 values a descriptor)" } else { " (../shared/weights missing: colour statistics, not the paper's descriptors)" });
     let ns: Vec<usize> = by_n.keys().copied().collect();
     let _ = write!(md, "| stage |");

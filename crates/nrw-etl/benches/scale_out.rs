@@ -72,7 +72,7 @@ fn main() {
                 "--out",
                 units.to_str().unwrap(),
                 "--quiet",
-                "--shard",
+                "--unit",
                 &shard,
             ]);
             *slot = Some(slot.map_or(r, |p| best(p, r)));
@@ -88,7 +88,7 @@ fn main() {
             "--out",
             work.join("idle").to_str().unwrap(),
             "--quiet",
-            "--shard",
+            "--unit",
             &idle,
         ]);
         idle_run = Some(idle_run.map_or(r, |p| best(p, r)));
@@ -115,7 +115,7 @@ fn main() {
         let g = (0..groups).filter(|g| g % n == i).count();
         let _ = writeln!(
             md,
-            "| unit {i}/{n} (`ingest --shard {i}/{n}`) | {g} | {t:.1} | {m:.0} |"
+            "| unit {i}/{n} (`ingest --unit {i}/{n}`) | {g} | {t:.1} | {m:.0} |"
         );
     }
     let _ = writeln!(

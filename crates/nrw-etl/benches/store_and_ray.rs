@@ -103,7 +103,7 @@ fn main() {
             let _ = writeln!(md, "## Local disk vs S3 (moto on loopback)\n\nmoto is a Python server: its own per-request cost is included, so these ratios bound the store's overhead from above; a real S3 adds network latency and gives more bandwidth.\n\n| stage | local s | S3 s | S3 / local |\n|---|---|---|---|");
             let stages: Vec<Stage> = vec![
                 (
-                    "one ingest unit (`--shard 0/2`)",
+                    "one ingest unit (`--unit 0/2`)",
                     Box::new(|d: &str| {
                         [
                             vec![
@@ -111,7 +111,7 @@ fn main() {
                                 s.into(),
                                 "--out".into(),
                                 d.into(),
-                                "--shard".into(),
+                                "--unit".into(),
                                 "0/2".into(),
                             ],
                             ingest.iter().map(|x| x.to_string()).collect(),
@@ -204,7 +204,7 @@ fn main() {
                             s,
                             "--out",
                             out.to_str().unwrap(),
-                            "--shard",
+                            "--unit",
                             &format!("{i}/{n}"),
                         ])
                         .args(ingest)

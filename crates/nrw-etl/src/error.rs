@@ -42,7 +42,8 @@ pub fn flag(s: nrw_pipeline::Setting) -> &'static str {
         S::Tier => "--tier",
         S::Weights => "--weights",
         S::K => "--k",
-        S::Unit => "--shard",
+        S::Unit => "--unit",
+        S::UnitCount => "--unit-count",
         S::Photos => "SCENE",
         // Only a pipeline file has a [split] table.
         S::Split => "[split]",

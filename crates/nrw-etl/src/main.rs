@@ -59,7 +59,7 @@ enum Command {
     Run(cmd::run::RunArgs),
     /// Check a dataset against its manifest: every file's size, SHA-256 and rows (exit 4 on a mismatch)
     Verify(cmd::verify::VerifyArgs),
-    /// Merge the work units (`ingest --shard I/N`, `style --shard I/N`) into the dataset's tables and manifest
+    /// Merge the work units (`ingest --unit I/N`, `style --unit I/N`) into the dataset's tables and manifest
     Finalize(cmd::finalize::FinalizeArgs),
     /// Index a many-scene run: one row per scene (counts, verdicts, report, or its error)
     Corpus(cmd::corpus::CorpusArgs),

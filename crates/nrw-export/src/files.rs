@@ -3,18 +3,18 @@
 
 use std::path::Path;
 
-use nrw_dataset::reader::View;
+use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
-use crate::format::{Format, Job};
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
+use crate::writer::{Job, LayoutWriter};
 use crate::ExportSummary;
 
 /// The `files` layout.
 pub struct Files;
 
-impl Format for Files {
+impl LayoutWriter for Files {
     fn check(&self, job: &Job) -> Result<()> {
         crate::paper::check_counts(job.cfg)?;
         if job.cfg.crop.is_some() {
@@ -34,7 +34,7 @@ impl Format for Files {
 }
 
 impl ViewEncoder for Files {
-    fn encode(&self, v: &View, split: &str, _index: &str) -> Result<Encoded> {
+    fn encode(&self, v: &ViewRow, split: &str, _index: &str) -> Result<Encoded> {
         let stem = format!(
             "{split}/{}",
             Path::new(&v.name).with_extension("").display()

@@ -2,14 +2,13 @@
 //! PNG folders and `tfrecord`), one folder per photo (`files`), NeRF-W's Phototourism layout
 //! (`nerfw`) and nerfstudio's `transforms.json` (`nerfstudio`).
 //!
-//! One entry point, [`export`]; one seam per layout, [`format::Format`] (the layouts of one
+//! One entry point, [`export`]; one seam per layout, [`writer::LayoutWriter`] (the layouts of one
 //! file set per view share [`stream`]). Every file is claimed in a hidden staging folder
 //! ([`staging::Staged`]: the name check and the collision check) and the export is published
 //! whole, to a local folder or under an object-store URL.
 
 pub mod error;
 pub mod files;
-pub mod format;
 pub mod layout;
 pub mod nerfstudio;
 pub mod nerfw;
@@ -22,14 +21,15 @@ pub mod staging;
 pub mod stream;
 pub mod summary;
 pub mod tfrecord;
+pub mod writer;
 
 pub use error::{ExportError, Result};
-pub use format::ScenePoint;
 pub use layout::Layout;
 pub use staging::{join_under, EXPORT_JSON};
 pub use stream::index_width;
 pub use summary::{DepthRecord, ExportConfig, ExportSummary, Skipped, SplitExport};
 pub use tfrecord::tfrecord_name;
+pub use writer::ScenePoint;
 
 use nrw_dataset::reader::Dataset;
 
@@ -63,14 +63,14 @@ pub fn export(
     inputs: &Inputs,
     tick: &(dyn Fn() + Sync),
 ) -> Result<ExportSummary> {
-    let job = format::Job {
+    let job = writer::Job {
         ds,
         cfg,
         splits: ds.splits(),
         inputs,
         tick,
     };
-    let layout = format_of(cfg.layout);
+    let layout = writer_of(cfg.layout);
     layout.check(&job)?;
     let staged = staging::Staged::new(&cfg.out)?;
     let mut summary = ExportSummary::begin(&ds.dir.display().to_string(), cfg);
@@ -93,7 +93,7 @@ pub fn export(
 }
 
 /// The format that writes `layout`.
-fn format_of(layout: Layout) -> &'static dyn format::Format {
+fn writer_of(layout: Layout) -> &'static dyn writer::LayoutWriter {
     match layout {
         Layout::Official => &official::Official,
         Layout::Tfrecord => &tfrecord::Tfrecord,

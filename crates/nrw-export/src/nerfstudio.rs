@@ -24,11 +24,11 @@ use glam::{DMat3, DVec3};
 use nrw_colmap::{CameraModel, PointCloud, Rigid3};
 use serde_json::{json, Map, Value};
 
-use nrw_dataset::reader::View;
+use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
-use crate::format::{Job, ScenePoint, WithPoints};
 use crate::staging::Staged;
+use crate::writer::{Job, ScenePoint, WithPoints};
 use crate::SplitExport;
 
 /// nerfstudio's `applied_transform` (rows of a 3 × 4 matrix): world (x, y, z) → (x, z, −y).
@@ -43,7 +43,7 @@ pub const APPLIED_TRANSFORM: [[f64; 4]; 3] = [
 pub const DEPTH_SCALE: f32 = 1000.0;
 
 /// The per-frame camera keys nerfstudio reads for a view's camera, or a refusal naming it.
-pub fn camera_keys(v: &View) -> Result<Map<String, Value>> {
+pub fn camera_keys(v: &ViewRow) -> Result<Map<String, Value>> {
     let p = &v.params;
     let model = CameraModel::from_name(&v.model);
     let refused = |why: &str| ExportError::Value {
@@ -154,7 +154,7 @@ fn npy_f32(h: u32, w: u32, data: &[f32]) -> Vec<u8> {
 }
 
 /// One view's files and frame.
-fn frame(v: &View, staged: &Staged) -> Result<(String, Value)> {
+fn frame(v: &ViewRow, staged: &Staged) -> Result<(String, Value)> {
     let s = stem(&v.name);
     let image = format!("images/{s}.png");
     staged.write(&image, &v.photo_png)?;

@@ -2,14 +2,14 @@
 //! the published `dataset_utils.AlignedRenderedDataset` and `pretrain_appearance` read them,
 //! and `dist_NAME.pckl`.
 
-use nrw_dataset::reader::View;
 use nrw_dataset::split::TRAIN;
+use nrw_dataset::ViewRow;
 
 use crate::error::Result;
-use crate::format::{Format, Job};
 use crate::paper::Paper;
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
+use crate::writer::{Job, LayoutWriter};
 use crate::ExportSummary;
 
 pub use crate::published::{
@@ -21,7 +21,7 @@ pub use crate::published::{
 /// and `dist_NAME.pckl` when the dataset has official style descriptors.
 pub struct Official;
 
-impl Format for Official {
+impl LayoutWriter for Official {
     fn check(&self, job: &Job) -> Result<()> {
         crate::paper::check(job)
     }
@@ -64,15 +64,15 @@ impl Format for Official {
 struct OfficialFiles<'a>(&'a Paper);
 
 impl ViewEncoder for OfficialFiles<'_> {
-    fn check_view(&self, v: &View) -> Result<()> {
+    fn check_view(&self, v: &ViewRow) -> Result<()> {
         self.0.check_view(v)
     }
 
-    fn skip(&self, v: &View) -> Option<String> {
+    fn skip(&self, v: &ViewRow) -> Option<String> {
         self.0.skip(v)
     }
 
-    fn encode(&self, v: &View, split: &str, index: &str) -> Result<Encoded> {
+    fn encode(&self, v: &ViewRow, split: &str, index: &str) -> Result<Encoded> {
         use nrw_dataset::codec::{encode_gray, encode_rgb, encode_rgba};
         let paper = self.0;
         let stem = format!("{split}/{index}");

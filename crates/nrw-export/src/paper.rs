@@ -7,11 +7,11 @@ use std::path::PathBuf;
 
 use image::imageops::crop_imm;
 use image::{GrayImage, RgbImage, RgbaImage};
-use nrw_dataset::reader::View;
+use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
-use crate::format::Job;
 use crate::published::{crop_start, official_seg_rgb, DepthScale};
+use crate::writer::Job;
 use crate::{DepthRecord, ExportConfig, ExportSummary};
 
 /// The settings of a paper layout's views: depth levels, crop, semantics.
@@ -37,10 +37,10 @@ pub fn check(job: &Job) -> Result<()> {
 
 /// Refuse a crop or a shard count of 0.
 pub fn check_counts(cfg: &ExportConfig) -> Result<()> {
-    if cfg.crop.is_some_and(|c| c == 0) || cfg.shards == 0 {
+    if cfg.crop.is_some_and(|c| c == 0) || cfg.tfrecord_files == 0 {
         return Err(ExportError::refused(
             &cfg.out,
-            "--crop and --shards must be at least 1",
+            "the crop and the TFRecord files per split must be at least 1",
         ));
     }
     Ok(())
@@ -92,7 +92,7 @@ impl Paper {
     }
 
     /// A view without labels is refused when semantics are asked for.
-    pub fn check_view(&self, v: &View) -> Result<()> {
+    pub fn check_view(&self, v: &ViewRow) -> Result<()> {
         if self.semantics && v.labels_png.is_none() {
             return Err(no_semantics(v));
         }
@@ -100,13 +100,13 @@ impl Paper {
     }
 
     /// Why a view smaller than the crop is left out.
-    pub fn skip(&self, v: &View) -> Option<String> {
+    pub fn skip(&self, v: &ViewRow) -> Option<String> {
         let c = self.crop?;
         (v.width < c || v.height < c).then(|| format!("smaller than the {c}×{c} crop"))
     }
 
     /// The published colour coding of a view's labels, or None without semantics.
-    pub fn seg(&self, v: &View) -> Result<Option<RgbImage>> {
+    pub fn seg(&self, v: &ViewRow) -> Result<Option<RgbImage>> {
         if !self.semantics {
             return Ok(None);
         }
@@ -115,7 +115,7 @@ impl Paper {
     }
 
     /// The view's channels decoded, depth as levels, cropped if asked.
-    pub fn view(&self, v: &View) -> Result<OfficialView> {
+    pub fn view(&self, v: &ViewRow) -> Result<OfficialView> {
         let depth = v.depth()?;
         let mut out = OfficialView {
             reference: v.photo()?,
@@ -135,7 +135,7 @@ impl Paper {
 }
 
 /// A view without labels, with the two ways forward.
-fn no_semantics(v: &View) -> ExportError {
+fn no_semantics(v: &ViewRow) -> ExportError {
     ExportError::Value {
         path: PathBuf::from(&v.name),
         record: format!("image {}", v.image_id),

@@ -4,11 +4,11 @@
 
 use rayon::prelude::*;
 
-use nrw_dataset::reader::View;
+use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
-use crate::format::Job;
 use crate::staging::Staged;
+use crate::writer::Job;
 use crate::{ExportSummary, Skipped, SplitExport};
 
 /// Encoded files of one view (path relative to the export, bytes), in the order they are
@@ -18,17 +18,17 @@ pub type Encoded = Vec<(String, Vec<u8>)>;
 /// How one layout turns a view into files.
 pub trait ViewEncoder: Sync {
     /// Refuse a view the layout cannot write at all (checked before any size check).
-    fn check_view(&self, _v: &View) -> Result<()> {
+    fn check_view(&self, _v: &ViewRow) -> Result<()> {
         Ok(())
     }
 
     /// Why `v` is left out (listed in `export.json`), or None to write it.
-    fn skip(&self, _v: &View) -> Option<String> {
+    fn skip(&self, _v: &ViewRow) -> Option<String> {
         None
     }
 
     /// The files of view `v`, the `stem`-th of `split` (zero-padded to sort in order).
-    fn encode(&self, v: &View, split: &str, stem: &str) -> Result<Encoded>;
+    fn encode(&self, v: &ViewRow, split: &str, stem: &str) -> Result<Encoded>;
 
     /// The record files a split is appended to, in shard order (TFRecords); empty when each
     /// encoded entry is a file of its own.
@@ -162,7 +162,7 @@ fn write_split(
                 if batch.is_empty() {
                     return Ok(());
                 }
-                let mut jobs: Vec<(usize, usize, &View)> = Vec::new(); // (index, position, view)
+                let mut jobs: Vec<(usize, usize, &ViewRow)> = Vec::new(); // (index, position, view)
                 for v in &batch {
                     enc.check_view(v)?;
                     match enc.skip(v) {
@@ -213,8 +213,8 @@ fn read_batches<'scope>(
     scope: &'scope std::thread::Scope<'scope, '_>,
     job: &'scope Job,
     split: &'scope str,
-) -> std::sync::mpsc::Receiver<Result<Vec<View>>> {
-    let (rtx, rrx) = std::sync::mpsc::sync_channel::<Result<Vec<View>>>(2);
+) -> std::sync::mpsc::Receiver<Result<Vec<ViewRow>>> {
+    let (rtx, rrx) = std::sync::mpsc::sync_channel::<Result<Vec<ViewRow>>>(2);
     let ds = job.ds;
     scope.spawn(move || {
         let mut iter = match ds.iter_split(split) {
@@ -225,7 +225,7 @@ fn read_batches<'scope>(
             }
         };
         loop {
-            let batch: Result<Vec<View>> = iter
+            let batch: Result<Vec<ViewRow>> = iter
                 .by_ref()
                 .take(BATCH)
                 .map(|r| r.map_err(ExportError::from))

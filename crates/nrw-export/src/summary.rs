@@ -26,7 +26,7 @@ pub struct ExportConfig {
     pub semantics: bool,
     pub depth: DepthMapping,
     /// TFRecord files per split (1: `<name>_<split>.tfrecord`).
-    pub shards: usize,
+    pub tfrecord_files: usize,
 }
 
 impl ExportConfig {
@@ -39,7 +39,7 @@ impl ExportConfig {
             crop: Some(crate::published::PUBLISHED_CROP),
             semantics: true,
             depth: DepthMapping::Linear,
-            shards: 1,
+            tfrecord_files: 1,
         }
     }
 }

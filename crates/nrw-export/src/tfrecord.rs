@@ -1,21 +1,21 @@
-//! The tfrecord layout: `<name>_<split>.tfrecord` (or `--shards` of them) of the Examples
+//! The tfrecord layout: `<name>_<split>.tfrecord` (or `--tfrecord-files` of them) of the Examples
 //! `dataset_utils._generate_tfrecord_dataset` writes and `data._parser_rendered_dataset`
 //! parses. The wire encoding is in [`crate::record`].
 
-use nrw_dataset::reader::View;
+use nrw_dataset::ViewRow;
 
 use crate::error::Result;
-use crate::format::{Format, Job};
 use crate::paper::Paper;
 use crate::record::{encode_record, Feature};
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
+use crate::writer::{Job, LayoutWriter};
 use crate::ExportSummary;
 
 /// The tfrecord layout.
 pub struct Tfrecord;
 
-impl Format for Tfrecord {
+impl LayoutWriter for Tfrecord {
     fn check(&self, job: &Job) -> Result<()> {
         crate::paper::check(job)
     }
@@ -26,26 +26,26 @@ impl Format for Tfrecord {
         let records = Records {
             paper: &paper,
             name: &job.cfg.name,
-            shards: job.cfg.shards,
+            files: job.cfg.tfrecord_files,
         };
         write_views(job, staged, &records, summary)?;
         paper.require_written_train(job, summary)
     }
 }
 
-/// One view as one Example, appended to its split's shard.
+/// One view as one Example, appended to its split's file.
 struct Records<'a> {
     paper: &'a Paper,
     name: &'a str,
-    shards: usize,
+    files: usize,
 }
 
 impl ViewEncoder for Records<'_> {
-    fn check_view(&self, v: &View) -> Result<()> {
+    fn check_view(&self, v: &ViewRow) -> Result<()> {
         self.paper.check_view(v)
     }
 
-    fn skip(&self, v: &View) -> Option<String> {
+    fn skip(&self, v: &ViewRow) -> Option<String> {
         self.paper.skip(v)
     }
 
@@ -53,7 +53,7 @@ impl ViewEncoder for Records<'_> {
     /// view: `height`, `width`, `rendered` (RGBA u8), `depth` (u16, little-endian), `real` (RGB
     /// u8), `seg` (RGB u8; empty with --no-semantics, which the published parser reads only
     /// with --use_semantic).
-    fn encode(&self, v: &View, _split: &str, _index: &str) -> Result<Encoded> {
+    fn encode(&self, v: &ViewRow, _split: &str, _index: &str) -> Result<Encoded> {
         let o = self.paper.view(v)?;
         let depth16: Vec<u8> = o
             .depth
@@ -77,13 +77,13 @@ impl ViewEncoder for Records<'_> {
     }
 
     fn records(&self, split: &str) -> Vec<String> {
-        (0..self.shards)
-            .map(|i| tfrecord_name(self.name, split, i, self.shards))
+        (0..self.files)
+            .map(|i| tfrecord_name(self.name, split, i, self.files))
             .collect()
     }
 }
 
-/// TFRecord file name of shard `i` of `n` of a split, matched by the published glob
+/// TFRecord file name of file `i` of `n` of a split, matched by the published glob
 /// `<name>*_<split>.tfrecord`.
 pub fn tfrecord_name(name: &str, split: &str, i: usize, n: usize) -> String {
     if n <= 1 {

@@ -97,6 +97,8 @@ pub enum Setting {
     Weights,
     K,
     Unit,
+    /// How many units a `Unit::parse("auto")` run has, where the scheduler does not say.
+    UnitCount,
     /// The photos a segment run reads: a scene's model, or a folder of images.
     Photos,
     /// A pipeline file's `[split]` table.
@@ -119,6 +121,7 @@ impl Setting {
             Setting::Weights => "style.weights",
             Setting::K => "triplets.k",
             Setting::Unit => "unit",
+            Setting::UnitCount => "unit_count",
             Setting::Photos => "segment.scene",
             Setting::Split => "split",
         }

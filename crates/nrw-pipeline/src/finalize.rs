@@ -39,7 +39,7 @@ pub fn finalize(dataset: &Store) -> Result<FinalizeSummary> {
     if ingest.is_none() && style.is_none() && !dataset.exists(Manifest::FILE)? {
         return Err(PipelineError::Units {
             dataset: dataset.root(),
-            problem: "no unit has run here (no .units/ records and no manifest.json): run `nrw-etl ingest SCENE --out DATASET --shard I/N` first".into(),
+            problem: "no unit has run here (no .units/ records and no manifest.json): run ingest's work units into it first".into(),
         });
     }
     Ok(FinalizeSummary {

@@ -3,7 +3,7 @@
 //! config's `Default` (or `new`) is the paper's settings; each stage returns a typed summary
 //! or a typed error and reports progress through [`Progress`], so the library never prints.
 //!
-//! Ingest and style also run as independent work units (`Unit`, `--shard I/N`): each unit
+//! Ingest and style also run as independent work units (`Unit`, `--unit I/N`): each unit
 //! does the groups it owns and writes only its own files; [`finalize::finalize`] merges the
 //! units into the same bytes a single process writes.
 

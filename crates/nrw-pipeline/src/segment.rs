@@ -2,7 +2,7 @@
 //! PNG of ADE20K class ids in a label folder (the format `ingest --semantics` reads), from a
 //! SegFormer the user gives. Photos run in parallel, one per core; a photo whose label map
 //! exists is skipped, so an interrupted run resumes; a record in the folder ties the maps to
-//! the model and mode that made them. As a work unit (`--shard I/N`) it does the photos at
+//! the model and mode that made them. As a work unit (`--unit I/N`) it does the photos at
 //! positions `p ≡ I (mod N)` in image-id order; units write disjoint files and need no
 //! `finalize`.
 
@@ -95,7 +95,7 @@ pub struct SegmentSummary {
 }
 
 /// Load the model named by a user, as a pipeline error.
-pub fn load_model(weights: &Path) -> Result<Segformer> {
+pub fn load_segformer(weights: &Path) -> Result<Segformer> {
     Ok(Segformer::load(weights)?)
 }
 
@@ -103,7 +103,7 @@ pub fn load_model(weights: &Path) -> Result<Segformer> {
 pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSummary> {
     let start = Instant::now();
     let (photos_dir, all) = photo_list(cfg)?;
-    let model = load_model(&cfg.weights)?;
+    let model = load_segformer(&cfg.weights)?;
     let record = SegmentRecord {
         model_sha256: model.sha256.clone(),
         mode: cfg.mode.to_string(),

@@ -76,8 +76,9 @@ impl Unit {
                     (Some(n), _) => n,
                     (None, Some(c)) => num("SLURM_ARRAY_TASK_COUNT", &c)?,
                     (None, None) => {
-                        return Err(bad(
-                            "auto: SLURM_ARRAY_TASK_COUNT is not set; pass --shard-count N".into(),
+                        return Err(PipelineError::config(
+                            Setting::UnitCount,
+                            "is needed: the unit is auto and SLURM_ARRAY_TASK_COUNT is not set",
                         ))
                     }
                 };
@@ -91,7 +92,10 @@ impl Unit {
                 }
             } else if let Some(idx) = env("JOB_COMPLETION_INDEX") {
                 let n = count.ok_or_else(|| {
-                    bad("auto: JOB_COMPLETION_INDEX is set but Kubernetes does not export the Job's completions; pass --shard-count N".into())
+                    PipelineError::config(
+                        Setting::UnitCount,
+                        "is needed: the unit is auto and JOB_COMPLETION_INDEX is set, but Kubernetes does not export the Job's completions",
+                    )
                 })?;
                 Unit {
                     index: num("JOB_COMPLETION_INDEX", &idx)?,
@@ -183,7 +187,7 @@ pub(crate) fn check_units(dataset: &Store, stage: &str) -> Result<UnitRecord> {
         let by = |n: usize| names(&records.iter().filter(|r| r.count == n).collect::<Vec<_>>());
         let shown: Vec<String> = counts.iter().map(|n| by(*n)).collect();
         return Err(units_error(dataset, format!(
-            "{stage} units were run with different unit counts ({}); run every unit with the same --shard I/N count",
+            "{stage} units were run with different unit counts ({}); run every unit with the same unit count N of I/N",
             shown.join("; ")
         )));
     }
@@ -213,7 +217,7 @@ pub(crate) fn check_units(dataset: &Store, stage: &str) -> Result<UnitRecord> {
         .collect();
     if !missing.is_empty() {
         return Err(units_error(dataset, format!(
-            "{stage} unit{} {} {} not run (or not finished): run {} with --shard, then finalize again",
+            "{stage} unit{} {} {} not run (or not finished): run {} as that unit, then finalize again",
             if missing.len() > 1 { "s" } else { "" },
             missing.join(", "),
             if missing.len() > 1 { "have" } else { "has" },
@@ -276,7 +280,7 @@ mod tests {
             Unit { index: 3, count: 4 }
         );
         let e = Unit::parse("auto", None, &k8s).unwrap_err().to_string();
-        assert!(e.contains("--shard-count"), "{e}");
+        assert!(e.starts_with("unit_count is needed"), "{e}");
         let e = Unit::parse("auto", None, &env(&[]))
             .unwrap_err()
             .to_string();

@@ -34,6 +34,13 @@ pub enum Tier {
     Official { crop: u32 },
 }
 
+/// A tier shows as its name (what `--tier` and pipeline files take).
+impl std::fmt::Display for Tier {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name())
+    }
+}
+
 impl std::str::FromStr for Tier {
     type Err = String;
 

@@ -32,7 +32,7 @@ fn parse_crop(s: &str) -> std::result::Result<Crop, String> {
 #[derive(Debug, Args)]
 #[command(after_help = "Examples:
   nrw-etl export DATASET --out trevi_official --name trevi
-  nrw-etl export DATASET --layout tfrecord --shards 8 --out tfrecords --name trevi
+  nrw-etl export DATASET --layout tfrecord --tfrecord-files 8 --out tfrecords --name trevi
   nrw-etl export DATASET --crop 256 --out trevi256   # for --train_resolution=256
   nrw-etl export DATASET --no-semantics --out official   # then train with --use_semantic=False
   nrw-etl export DATASET --layout nerfw --out trevi_nerfw --name trevi   # nerf_pl / Ha-NeRF (ingest with --undistort)
@@ -68,9 +68,10 @@ pub struct ExportArgs {
     /// How depth becomes the levels 1-255 the published loaders expect
     #[arg(long, value_parser = super::names(&DepthMapping::ALL, DepthMapping::name, DepthMapping::summary), default_value = "linear")]
     pub depth: DepthMapping,
-    /// TFRecord files per split
-    #[arg(long, default_value_t = 1)]
-    pub shards: usize,
+    /// TFRecord files per split (`NAME-0000i-of-0000N_SPLIT.tfrecord`; `--shards` is its old
+    /// name, still taken)
+    #[arg(long, alias = "shards", default_value_t = 1)]
+    pub tfrecord_files: usize,
     /// No progress bar
     #[arg(long)]
     pub quiet: bool,
@@ -92,7 +93,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         },
         semantics: !args.no_semantics,
         depth: args.depth,
-        shards: args.shards,
+        tfrecord_files: args.tfrecord_files,
         ..nrw_pipeline::export::official(&args.dataset, &args.out)
     };
     let summary = nrw_pipeline::export::export(&args.dataset, &cfg, &super::Bars::new(args.quiet))?;

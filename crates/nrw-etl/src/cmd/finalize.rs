@@ -14,7 +14,7 @@ use crate::error::Result;
 the unit, the parameter and the file; nothing is changed)."
 )]
 pub struct FinalizeArgs {
-    /// Dataset folder the units wrote into (`ingest --shard I/N`, `style --shard I/N`)
+    /// Dataset folder the units wrote into (`ingest --unit I/N`, `style --unit I/N`)
     pub dataset: PathBuf,
     /// Print a JSON summary on stdout
     #[arg(long)]

@@ -6,7 +6,7 @@ use clap::Args;
 use nrw_pipeline::ingest::IngestConfig;
 use nrw_render::Filters;
 
-use super::{Bars, ShardArgs};
+use super::{Bars, UnitArgs};
 use crate::error::Result;
 use nrw_colmap::Format;
 
@@ -18,10 +18,10 @@ pub const EXIT_NOTHING_KEPT: u8 = 3;
 #[derive(Debug, Clone, Args)]
 #[command(after_help = "Examples:
   nrw-etl ingest SCENE --out DATASET
-  nrw-etl ingest SCENE --out DATASET --shard 2/8     # one of 8 work units, then:
+  nrw-etl ingest SCENE --out DATASET --unit 2/8     # one of 8 work units, then:
   nrw-etl finalize DATASET
 
-Work units (--shard I/N) may run in any order, at the same time, on machines sharing the
+Work units (--unit I/N) may run in any order, at the same time, on machines sharing the
 dataset folder; each renders its own shards and writes nothing else, and finalize merges
 them into the bytes one process writes. docs/scale-out.md shows Slurm and Kubernetes jobs.")]
 pub struct IngestArgs {
@@ -91,7 +91,7 @@ pub struct IngestArgs {
     #[arg(long, default_value_t = Filters::default().min_photo_side)]
     pub min_photo_side: u32,
     /// Images per shard (one shard per group of this many images, in id order; the unit of
-    /// resumption and of --shard work units)
+    /// resumption and of --unit work units)
     #[arg(long, default_value_t = 64)]
     pub rows_per_shard: usize,
     /// Stop with an error (exit 1, naming the file) at the first photo or label map that
@@ -103,7 +103,7 @@ pub struct IngestArgs {
     #[arg(long)]
     pub follow_outside_links: bool,
     #[command(flatten)]
-    pub shard: ShardArgs,
+    pub unit: UnitArgs,
     /// Worker threads [default: all cores]; output bytes do not depend on it
     #[arg(long)]
     pub threads: Option<usize>,
@@ -190,7 +190,7 @@ impl IngestArgs {
 pub fn run(args: &IngestArgs) -> Result<bool> {
     let bars = Bars::new(args.quiet);
     let cfg = args.config()?;
-    match args.shard.unit()? {
+    match args.unit.unit()? {
         Some(unit) => {
             let s = nrw_pipeline::ingest::ingest_unit(&cfg, unit, &bars)?;
             if !args.quiet {

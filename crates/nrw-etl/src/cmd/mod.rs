@@ -50,26 +50,28 @@ where
     .map(|n| n.parse::<T>().expect("clap passes only the listed names"))
 }
 
-/// `--shard`/`--shard-count`: run one work unit of a stage instead of the whole stage.
+/// `--unit`/`--unit-count`: run one work unit of a stage instead of the whole stage.
 #[derive(Debug, Clone, Default, Args)]
-pub struct ShardArgs {
+pub struct UnitArgs {
     /// Do only work unit I of N (0-based), e.g. 2/8, then `nrw-etl finalize DATASET` once
     /// every unit has run. `auto` reads Slurm array (SLURM_ARRAY_TASK_ID/COUNT) or Kubernetes
-    /// Indexed Job (JOB_COMPLETION_INDEX, with --shard-count) variables
-    #[arg(long, value_name = "I/N|auto")]
-    pub shard: Option<String>,
-    /// Unit count for --shard auto when the scheduler does not export it (Kubernetes)
-    #[arg(long, value_name = "N")]
-    pub shard_count: Option<usize>,
+    /// Indexed Job (JOB_COMPLETION_INDEX, with --unit-count) variables. `--shard` is its old
+    /// name, still taken
+    #[arg(long = "unit", alias = "shard", value_name = "I/N|auto")]
+    pub unit: Option<String>,
+    /// Unit count for --unit auto when the scheduler does not export it (Kubernetes;
+    /// `--shard-count` is its old name)
+    #[arg(long, alias = "shard-count", value_name = "N")]
+    pub unit_count: Option<usize>,
 }
 
-impl ShardArgs {
+impl UnitArgs {
     /// The unit asked for, or `None` for the whole stage.
     pub fn unit(&self) -> crate::error::Result<Option<Unit>> {
-        let Some(text) = &self.shard else {
+        let Some(text) = &self.unit else {
             return Ok(None);
         };
-        Ok(Some(Unit::parse(text, self.shard_count, &|k| {
+        Ok(Some(Unit::parse(text, self.unit_count, &|k| {
             std::env::var(k).ok()
         })?))
     }

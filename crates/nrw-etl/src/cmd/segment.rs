@@ -7,7 +7,7 @@ use clap::Args;
 use nrw_pipeline::segment::SegmentConfig;
 use nrw_segment::{Mode, ModeKind};
 
-use super::{Bars, ShardArgs};
+use super::{Bars, UnitArgs};
 use crate::error::{EtlError, Result};
 use nrw_colmap::Format;
 
@@ -25,14 +25,14 @@ pub fn mode(kind: ModeKind, size: u32) -> Result<Mode> {
   nrw-etl segment SCENE --weights segformer-b0-finetuned-ade-512-512/ --out SCENE/labels
   nrw-etl ingest SCENE --out DATASET --semantics SCENE/labels
   nrw-etl ingest SCENE --out DATASET --segment-weights segformer-b0-finetuned-ade-512-512/
-  nrw-etl segment SCENE --weights MODEL --out LABELS --shard 2/8   # one of 8 machines
+  nrw-etl segment SCENE --weights MODEL --out LABELS --unit 2/8   # one of 8 machines
   nrw-etl segment --images ADEChallengeData2016/images/validation --weights MODEL --out L
 
 The model is a SegFormer fine-tuned on ADE20K-150 in the Hugging Face layout (a folder with
 config.json and model.safetensors, e.g. `huggingface-cli download nvidia/segformer-b0-finetuned-ade-512-512`
 on a machine with network). Nothing is downloaded. Each photo's map is an 8-bit PNG of ADE20K
 ids 1..150 (schemas/ade20k.csv; 0 = unlabelled), named like the photo with .png. A run that
-stops resumes: maps already written are kept. Work units (--shard I/N) write disjoint maps
+stops resumes: maps already written are kept. Work units (--unit I/N) write disjoint maps
 into the same folder and need no finalize. docs/segmentation.md has the details.")]
 pub struct SegmentArgs {
     /// Scene folder holding sparse/0/ (or sparse/) and images/, or a model folder itself;
@@ -66,7 +66,7 @@ pub struct SegmentArgs {
     #[arg(long)]
     pub follow_outside_links: bool,
     #[command(flatten)]
-    pub shard: ShardArgs,
+    pub unit: UnitArgs,
     /// Worker threads [default: all cores]; the maps do not depend on it
     #[arg(long)]
     pub threads: Option<usize>,
@@ -86,7 +86,7 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
         mode: mode(args.mode, args.size)?,
         strict: args.strict,
         follow_outside_links: args.follow_outside_links,
-        unit: args.shard.unit()?.unwrap_or(nrw_pipeline::Unit::WHOLE),
+        unit: args.unit.unit()?.unwrap_or(nrw_pipeline::Unit::WHOLE),
         scene: args.scene.clone(),
         ..SegmentConfig::new("", &args.weights, &args.out)
     };

@@ -7,7 +7,7 @@ use clap::{Args, ValueEnum};
 use nrw_pipeline::style::StyleConfig;
 use nrw_style::{Preprocess, Tier};
 
-use super::{Bars, ShardArgs};
+use super::{Bars, UnitArgs};
 use crate::error::Result;
 
 /// `--preprocess` values.
@@ -39,7 +39,7 @@ pub struct StyleArgs {
     /// v·2/255 − 1 into tensorflow-vgg's Caffe VGG16, per-layer mean squared Gram difference;
     /// needs that vgg16.npy; for the official export's dist_<name>.pckl), or color-stats (no
     /// weights needed)
-    #[arg(long, default_value = "vgg16-512", value_parser = |s: &str| s.parse::<Tier>())]
+    #[arg(long, default_value_t = nrw_pipeline::style::StyleConfig::new("").tier, value_parser = |s: &str| s.parse::<Tier>())]
     pub tier: Tier,
     /// Weights, never downloaded: VGG16 or VGG19 safetensors with torchvision names
     /// (features.N.weight / .bias) for the vgg tiers; the published code's vgg16.npy
@@ -58,11 +58,11 @@ pub struct StyleArgs {
     /// Network input scaling: torchvision's ImageNet mean/std, or the official code's v/127.5 − 1 (recorded with the descriptors; the official tiers always use the published code's own)
     #[arg(long, value_enum, default_value = "imagenet")]
     pub preprocess: Pre,
-    /// Photos per descriptor part (the unit of resumption and of --shard work units)
+    /// Photos per descriptor part (the unit of resumption and of --unit work units)
     #[arg(long, default_value_t = nrw_pipeline::style::PART_PHOTOS)]
     pub photos_per_part: usize,
     #[command(flatten)]
-    pub shard: ShardArgs,
+    pub unit: UnitArgs,
     /// No progress bar
     #[arg(long)]
     pub quiet: bool,
@@ -95,7 +95,7 @@ pub fn run(args: &StyleArgs) -> Result<()> {
         ..StyleConfig::new(dir)
     };
     let bars = Bars::new(args.quiet);
-    let s = match args.shard.unit()? {
+    let s = match args.unit.unit()? {
         Some(unit) => nrw_pipeline::style::style_unit(&cfg, unit, &bars)?,
         None => nrw_pipeline::style::style(&cfg, &bars)?,
     };

@@ -142,7 +142,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
     let (enc, layout) = encoding_and_layout(&rec);
     let segmenter = match &cfg.segment {
-        Some(s) => Some((crate::segment::load_model(&s.weights)?, s.mode)),
+        Some(s) => Some((crate::segment::load_segformer(&s.weights)?, s.mode)),
         None => None,
     };
     let parameters = nrw_dataset::provenance::to_parameters(&IngestParameters {

@@ -1,4 +1,4 @@
-//! The seam every layout plugs into: a [`Format`] checks what it can export and writes its
+//! The seam every layout plugs into: a [`LayoutWriter`] checks what it can export and writes its
 //! files into the staging folder; [`crate::export`] picks the layout's format and does the
 //! rest (staging, `export.json`, publishing) the same way for all.
 
@@ -75,7 +75,7 @@ impl Job<'_> {
 }
 
 /// One export layout: what it refuses before anything is written, and the files it writes.
-pub trait Format: Sync {
+pub trait LayoutWriter: Sync {
     /// Refuse what this layout cannot export (settings, dataset), before the staging folder
     /// exists.
     fn check(&self, job: &Job) -> Result<()>;
@@ -89,11 +89,11 @@ pub trait Format: Sync {
 /// and the points, returns the splits written.
 pub type PointsWriter = fn(&Job, &[ScenePoint], &Staged) -> Result<Vec<SplitExport>>;
 
-/// The [`Format`] of a layout with points: it needs train views and the points, and lists the
+/// The [`LayoutWriter`] of a layout with points: it needs train views and the points, and lists the
 /// splits without views as empty.
 pub struct WithPoints(pub PointsWriter);
 
-impl Format for WithPoints {
+impl LayoutWriter for WithPoints {
     fn check(&self, job: &Job) -> Result<()> {
         job.require_train("")?;
         job.points().map(|_| ())

@@ -130,7 +130,10 @@ pub fn image_grams(
 fn kind(cfg: &StyleConfig, net: Option<&dyn Backend>) -> DescriptorKind {
     DescriptorKind {
         tier: cfg.tier.name(),
-        weights_sha256: net.map_or(String::new(), |n| n.weights_sha256().to_string()),
+        // a backend given with color-stats computes nothing, so it names no weights either
+        weights_sha256: net
+            .filter(|_| cfg.tier.needs_weights())
+            .map_or(String::new(), |n| n.weights_sha256().to_string()),
         // color-stats ignores the network's input scaling, so it never tells descriptors apart
         preprocess: if cfg.tier.needs_weights() {
             cfg.tier.preprocess(cfg.preprocess).name().to_string()
@@ -649,6 +652,22 @@ mod tests {
                 && e.ends_with("style backend on fake-device: out of device memory"),
             "{e}"
         );
+        // color-stats never calls a backend it is given, nor records its weights or device.
+        let stats = StyleConfig {
+            tier: Tier::ColorStats,
+            ..cfg(&ds)
+        };
+        style_unit_on(&stats, Unit::WHOLE, Some(&fake), &crate::Silent).unwrap();
+        let store = Store::open_path(&ds).unwrap();
+        let (kind, _) = nrw_dataset::descriptors::read_all(&store).unwrap().unwrap();
+        assert_eq!(
+            (kind.tier.as_str(), kind.weights_sha256.as_str()),
+            ("color-stats", "")
+        );
+        assert!(units::unit_records(&store, units::STYLE)
+            .unwrap()
+            .iter()
+            .all(|r| r.instruction_set.is_none()));
         let e = style_unit_on(&cfg(&ds), Unit::WHOLE, None, &crate::Silent).unwrap_err();
         assert_eq!(
             e.to_string(),

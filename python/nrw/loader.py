@@ -1,5 +1,5 @@
 """Aligned random crops of one split, epoch after epoch, exactly as the Rust trainer's
-`Loader` takes them, sharded over processes without duplicates. NumPy only: `nrw.torch`
+`Loader` takes them, split over reading processes without duplicates. NumPy only: `nrw.torch`
 wraps this for PyTorch's DataLoader.
 
 >>> crops = Crops(nrw.Dataset("/tmp/nrw-demo/dataset"), "train", crop=256, seed=7)
@@ -8,11 +8,13 @@ wraps this for PyTorch's DataLoader.
 
 The order of an epoch and each crop's place come from (seed, epoch, position in the epoch),
 drawn by the same Rust code as the trainer's, so crops do not depend on how many workers or
-ranks share the epoch: shard `s` of `n` takes positions s, s+n, s+2n, ...
+ranks share the epoch: reader `r` of `n` takes positions r, r+n, r+2n, ... (a reader is one
+process's slice of the epoch: one DataLoader worker of one rank; "shard" means a Parquet file)
 """
 
 from __future__ import annotations
 
+import warnings
 from typing import Iterator, Sequence
 
 import numpy as np
@@ -89,12 +91,12 @@ class Crops:
         """The image ids of an epoch in its order (the Rust `Loader::epoch_order`)."""
         return epoch_order(self.ids, self.seed, epoch)
 
-    def positions(self, epoch: int, shard: int = 0, shards: int = 1) -> list[tuple[int, int]]:
-        """(position, image id) pairs shard `shard` of `shards` takes in `epoch`."""
-        if not 0 <= shard < shards:
-            raise ValueError(f"shard {shard} is not in 0..{shards}")
+    def positions(self, epoch: int, reader: int = 0, readers: int = 1) -> list[tuple[int, int]]:
+        """(position, image id) pairs reader `reader` of `readers` takes in `epoch`."""
+        if not 0 <= reader < readers:
+            raise ValueError(f"reader {reader} is not in 0..{readers}")
         order = self.order(epoch)
-        return [(p, order[p]) for p in range(shard, len(order), shards)]
+        return [(p, order[p]) for p in range(reader, len(order), readers)]
 
     def item(self, view: dict, epoch: int, position: int) -> dict:
         """The crop of a decoded view at `position` of `epoch`."""
@@ -109,9 +111,9 @@ class Crops:
         out["epoch"], out["position"] = epoch, position
         return out
 
-    def epoch(self, epoch: int, shard: int = 0, shards: int = 1) -> Iterator[dict]:
-        """This shard's crops of `epoch`, in epoch order (views read `read_ahead` at a time)."""
-        todo = self.positions(epoch, shard, shards)
+    def epoch(self, epoch: int, reader: int = 0, readers: int = 1) -> Iterator[dict]:
+        """This reader's crops of `epoch`, in epoch order (views read `read_ahead` at a time)."""
+        todo = self.positions(epoch, reader, readers)
         for at in range(0, len(todo), self.read_ahead):
             chunk: Sequence[tuple[int, int]] = todo[at : at + self.read_ahead]
             views = self.dataset.get_many([i for _, i in chunk])
@@ -119,11 +121,17 @@ class Crops:
                 yield self.item(view, epoch, position)
 
 
-def shard_of(rank: int, world_size: int, worker: int, workers: int) -> tuple[int, int]:
-    """The shard (index, count) of one DataLoader worker of one distributed rank: ranks split
+def reader_of(rank: int, world_size: int, worker: int, workers: int) -> tuple[int, int]:
+    """The reader (index, count) of one DataLoader worker of one distributed rank: ranks split
     an epoch first, then each rank's workers, so every position goes to exactly one."""
     for name, value, bound in (("rank", rank, world_size), ("worker", worker, workers)):
         if not 0 <= value < bound:
             raise ValueError(f"{name} {value} is not in 0..{bound}")
     return rank * workers + worker, world_size * workers
+
+
+def shard_of(rank: int, world_size: int, worker: int, workers: int) -> tuple[int, int]:
+    """Deprecated name of `reader_of` ("shard" now means only a Parquet file of views)."""
+    warnings.warn("nrw.loader.shard_of is now reader_of", DeprecationWarning, stacklevel=2)
+    return reader_of(rank, world_size, worker, workers)
 

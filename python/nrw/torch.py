@@ -3,7 +3,7 @@
 `CropDataset` is an `IterableDataset` of aligned random crops of one split, the crops the
 Rust trainer's `Loader` takes for the same seed; `TripletDataset` yields the appearance
 encoder's (anchor, positive, negative) crops drawn as the paper's code draws them. Both are
-sharded over DataLoader workers and distributed ranks without duplicates:
+split over DataLoader workers and distributed ranks without duplicates:
 
 >>> ds = nrw.torch.CropDataset("/tmp/nrw-demo/dataset", "train", crop=256, seed=0)
 >>> loader = torch.utils.data.DataLoader(ds, batch_size=8, num_workers=2)
@@ -18,6 +18,7 @@ directly is reopened there from its location and options).
 from __future__ import annotations
 
 import os
+import warnings
 from typing import Iterator, Mapping, Optional, Union
 
 import numpy as np
@@ -26,9 +27,9 @@ import torch.distributed as dist
 from torch.utils.data import IterableDataset, get_worker_info
 
 from ._nrw import Dataset, TripletSampler, crop_place
-from .loader import Crops, normalise, shard_of
+from .loader import Crops, normalise, reader_of
 
-__all__ = ["CropDataset", "TripletDataset", "current_shard", "process_rank"]
+__all__ = ["CropDataset", "TripletDataset", "current_reader", "process_rank"]
 
 Source = Union[str, "os.PathLike[str]", Dataset]
 
@@ -48,12 +49,18 @@ def process_rank(rank: Optional[int] = None, world_size: Optional[int] = None) -
     return 0, 1
 
 
-def current_shard(rank: int, world_size: int) -> tuple[int, int]:
-    """(shard, shards) of the calling DataLoader worker of `rank`: workers from
+def current_reader(rank: int, world_size: int) -> tuple[int, int]:
+    """(reader, readers) of the calling DataLoader worker of `rank`: workers from
     `get_worker_info()`, one when iterated in the main process."""
     info = get_worker_info()
     worker, workers = (info.id, info.num_workers) if info is not None else (0, 1)
-    return shard_of(rank, world_size, worker, workers)
+    return reader_of(rank, world_size, worker, workers)
+
+
+def current_shard(rank: int, world_size: int) -> tuple[int, int]:
+    """Deprecated name of `current_reader` ("shard" now means only a Parquet file of views)."""
+    warnings.warn("nrw.torch.current_shard is now current_reader", DeprecationWarning, stacklevel=2)
+    return current_reader(rank, world_size)
 
 
 def _tensors(item: dict) -> dict:
@@ -89,8 +96,8 @@ class CropDataset(IterableDataset):
         return len(self.crops)
 
     def __iter__(self) -> Iterator[dict]:
-        shard, shards = current_shard(self.rank, self.world_size)
-        for item in self.crops.epoch(self.epoch, shard, shards):
+        reader, readers = current_reader(self.rank, self.world_size)
+        for item in self.crops.epoch(self.epoch, reader, readers):
             yield _tensors(item)
 
 
@@ -98,7 +105,7 @@ class TripletDataset(IterableDataset):
     """`steps` triplets per epoch, each a dict of `anchor`, `positive`, `negative` photo crops
     (3 x S x S float32 in [-1, 1]), their image ids and the triplet's `index` in the epoch:
     the appearance encoder's training data.
-    Triplet k of an epoch goes to shard k mod shards; its ids come from a `TripletSampler`
+    Triplet k of an epoch goes to reader k mod readers; its ids come from a `TripletSampler`
     seeded by (seed, epoch, k), and crop j of it from position 3k + j, so the draws do not
     depend on the number of workers or ranks."""
 
@@ -145,8 +152,8 @@ class TripletDataset(IterableDataset):
         return {**self.__dict__, "_sampler": None}
 
     def __iter__(self) -> Iterator[dict]:
-        shard, shards = current_shard(self.rank, self.world_size)
-        for k in range(shard, self.steps, shards):
+        reader, readers = current_reader(self.rank, self.world_size)
+        for k in range(reader, self.steps, readers):
             ids = self.triplet(k)
             views = self.dataset.get_many(list(ids))
             item: dict = {"index": k}

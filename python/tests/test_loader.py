@@ -1,5 +1,5 @@
 """Crops equal the Rust Loader's for the same seed; triplets are the Rust sampler's draws;
-shards of an epoch cover every view exactly once."""
+readers of an epoch cover every view exactly once."""
 
 import json
 import os
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import nrw
-from nrw.loader import Crops, shard_of
+from nrw.loader import Crops, reader_of
 
 
 def rust(draws):
@@ -69,19 +69,19 @@ def test_two_workers_times_two_ranks_see_every_view_once_per_epoch(demo):
             seen = Counter()
             for rank in range(2):
                 for worker in range(2):
-                    shard, shards = shard_of(rank, 2, worker, 2)
-                    for item in crops.epoch(epoch, shard, shards):
+                    reader, readers = reader_of(rank, 2, worker, 2)
+                    for item in crops.epoch(epoch, reader, readers):
                         seen[item["image_id"]] += 1
-                        assert item["epoch"] == epoch and item["position"] % shards == shard
+                        assert item["epoch"] == epoch and item["position"] % readers == reader
             assert seen == Counter(ds.ids(split)), (split, epoch)
 
 
-def test_sharding_does_not_change_a_crop(demo):
+def test_splitting_over_readers_does_not_change_a_crop(demo):
     ds = nrw.Dataset(demo)
     crops = Crops(ds, "train", crop=48, seed=9)
     whole = {i["position"]: i for i in crops.epoch(2)}
-    for shard in range(3):
-        for item in crops.epoch(2, shard, 3):
+    for reader in range(3):
+        for item in crops.epoch(2, reader, 3):
             ref = whole[item["position"]]
             assert (item["image_id"], item["x"], item["y"]) == (ref["image_id"], ref["x"], ref["y"])
             np.testing.assert_array_equal(item["photo"], ref["photo"])
@@ -94,4 +94,11 @@ def test_bad_settings_name_the_setting(demo):
     with pytest.raises(ValueError, match="does not fit in"):
         next(Crops(ds, crop=5000).epoch(0))
     with pytest.raises(ValueError, match="rank 2 is not in 0..2"):
-        shard_of(2, 2, 0, 2)
+        reader_of(2, 2, 0, 2)
+
+
+def test_the_old_shard_name_warns_and_gives_the_reader():
+    import nrw.loader
+
+    with pytest.warns(DeprecationWarning, match="shard_of is now reader_of"):
+        assert nrw.loader.shard_of(1, 2, 1, 3) == reader_of(1, 2, 1, 3) == (4, 6)

@@ -1,7 +1,7 @@
 """What a DataLoader relies on, tested without PyTorch: an `nrw.Dataset` pickles as its location
 and reopens in another process; a forked child (a DataLoader worker under the default start
 method) reads with its own object-store runtime and decoding pool instead of hanging on the
-parent's; and nrw.torch's sharding over workers x ranks covers every item once, run against a
+parent's; and nrw.torch's split over workers x ranks covers every item once, run against a
 minimal stand-in for the three torch names it calls (the real thing: test_torch.py)."""
 
 import hashlib
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import nrw
-from nrw.loader import shard_of
+from nrw.loader import reader_of
 
 
 def digest(ds, ids):
@@ -145,7 +145,7 @@ def nrw_torch(monkeypatch):
         delattr(nrw, "torch")
 
 
-def test_torch_layer_shards_crops_over_workers_and_ranks_once(demo, nrw_torch):
+def test_torch_layer_splits_crops_over_workers_and_ranks_once(demo, nrw_torch):
     nt, state = nrw_torch
     want = Counter(nrw.Dataset(demo).ids("train"))
     for epoch in (0, 1):
@@ -172,7 +172,7 @@ def test_torch_layer_takes_ranks_from_the_process_group(demo, nrw_torch):
     ds = nt.CropDataset(demo, "train", crop=32, seed=1)
     assert (ds.rank, ds.world_size) == (1, 4)
     state["worker"] = _WorkerInfo(2, 3)
-    assert nt.current_shard(1, 4) == shard_of(1, 4, 2, 3)
+    assert nt.current_reader(1, 4) == reader_of(1, 4, 2, 3)
 
 
 def test_torch_layer_triplets_go_once_each_and_survive_a_pickle(demo, nrw_torch):

@@ -1,5 +1,5 @@
 """nrw.torch under a real DataLoader and a real process group (needs PyTorch: CI has none, as a
-CPU wheel is not on PyPI; the same sharding is checked without torch in test_loader.py)."""
+CPU wheel is not on PyPI; the same split over readers is checked without torch in test_loader.py)."""
 
 import os
 

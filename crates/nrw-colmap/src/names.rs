@@ -141,7 +141,7 @@ impl PhotoDir {
         };
         if !real.starts_with(root) {
             return Err(format!(
-                "{name:?} resolves to {}, outside the images folder {}: a link out of the folder is refused (--follow-outside-links allows it)",
+                "{name:?} resolves to {}, outside the images folder {}: a link out of the folder is refused (`follow_outside_links` allows it)",
                 real.display(),
                 root.display()
             ));

@@ -87,7 +87,7 @@ impl TripletSampler {
                 return Err(SamplingError::Setting {
                     setting,
                     problem: format!(
-                        "{k}: the triplet table holds {held} {which} per anchor, and it must be between 1 and that; rerun `nrw-etl triplets --k` with a larger k or lower it"
+                        "{k}: the triplet table holds {held} {which} per anchor, and it must be between 1 and that; rerun the triplets stage with a larger `triplets.k` or lower it"
                     ),
                 });
             }

@@ -99,14 +99,14 @@ pub fn assign(
         .collect();
     if val < change.kept_val {
         return Err(format!(
-            "--val {val} is below the {} validation photos already assigned; assignments are never undone (remove {SPLITS_TABLE} to start over)",
+            "`split.val` {val} is below the {} validation photos already assigned; assignments are never undone (remove {SPLITS_TABLE} to start over)",
             change.kept_val
         ));
     }
     let need = val - change.kept_val;
     if need > fresh.len() {
         return Err(format!(
-            "--val {val} asks for {need} more validation photos but only {} unassigned kept photos exist ({} kept in all)",
+            "`split.val` {val} asks for {need} more validation photos but only {} unassigned kept photos exist ({} kept in all)",
             fresh.len(),
             eligible.len()
         ));
@@ -408,11 +408,14 @@ mod tests {
     #[test]
     fn impossible_requests_name_both_numbers() {
         let e = assign(&photos(19), &[], 100, 1).unwrap_err();
-        assert!(e.contains("--val 100") && e.contains("only 19"), "{e}");
+        assert!(
+            e.contains("`split.val` 100") && e.contains("only 19"),
+            "{e}"
+        );
         let (first, _) = assign(&photos(50), &[], 10, 1).unwrap();
         let e = assign(&photos(50), &first, 5, 1).unwrap_err();
         assert!(
-            e.contains("--val 5") && e.contains("10 validation photos already"),
+            e.contains("`split.val` 5") && e.contains("10 validation photos already"),
             "{e}"
         );
         let (none, c) = assign(&photos(5), &[], 0, 1).unwrap();

@@ -20,7 +20,7 @@ impl From<nrw_pipeline::PipelineError> for EtlError {
         match e {
             nrw_pipeline::PipelineError::Config { setting, problem } => EtlError::Flag {
                 flag: flag(setting),
-                problem,
+                problem: flags(&problem),
             },
             e => EtlError::Pipeline(e),
         }
@@ -47,7 +47,29 @@ pub fn flag(s: nrw_pipeline::Setting) -> &'static str {
         S::Photos => "SCENE",
         // Only a pipeline file has a [split] table.
         S::Split => "[split]",
+        S::Images => "--images",
+        S::Semantics => "--semantics",
+        S::Points => "--points",
+        S::Overwrite => "--overwrite",
+        S::Val => "--val",
+        S::Crop => "--crop",
+        S::TfrecordFiles => "--tfrecord-files",
+        // The flag turns the setting off.
+        S::ExportSemantics => "--no-semantics",
+        S::Entries => "--entries",
+        S::FollowOutsideLinks => "--follow-outside-links",
     }
+}
+
+/// A library message as the CLI shows it: every setting it mentions (its key in backticks,
+/// as [`nrw_pipeline::Setting`] displays) shown as the flag that sets it.
+pub fn flags(text: &str) -> String {
+    if !text.contains('`') {
+        return text.to_string();
+    }
+    nrw_pipeline::Setting::ALL
+        .iter()
+        .fold(text.to_string(), |t, s| t.replace(&s.to_string(), flag(*s)))
 }
 
 impl EtlError {
@@ -62,3 +84,89 @@ impl EtlError {
 
 /// Result alias for the CLI.
 pub type Result<T, E = EtlError> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nrw_pipeline::Setting;
+
+    #[test]
+    fn every_mentioned_setting_shows_as_its_flag_and_other_text_stays() {
+        for s in Setting::ALL {
+            assert_eq!(
+                flags(&format!("use {s} here")),
+                format!("use {} here", flag(s))
+            );
+        }
+        let m = format!(
+            "{} 7 needs 8 photos; use {} 6 or a smaller {}",
+            Setting::K,
+            Setting::K,
+            Setting::Crop
+        );
+        assert_eq!(
+            flags(&m),
+            "--k 7 needs 8 photos; use --k 6 or a smaller --crop"
+        );
+        let other = "`dense/fused.ply` and `images/` stay; triplets.k without backticks stays";
+        assert_eq!(flags(other), other);
+    }
+
+    /// The stages whose keys messages mention (`stage.field`).
+    const STAGES: [&str; 7] = [
+        "ingest", "style", "triplets", "split", "export", "segment", "corpus",
+    ];
+
+    /// Endings that make a backticked word a file name (`export.json`), not a key.
+    const FILE_ENDINGS: [&str; 4] = ["json", "parquet", "toml", "txt"];
+
+    /// Backticked `stage.field` words in the crates' sources that name no setting: a message
+    /// of a crate below nrw-pipeline spells the key itself, and a renamed key must not leave
+    /// it shown raw by the CLI.
+    #[test]
+    fn every_key_the_crates_mention_is_a_setting() {
+        let known: Vec<String> = Setting::ALL.iter().map(|s| s.key().to_string()).collect();
+        let crates = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let mut orphans = Vec::new();
+        let mut seen = 0;
+        for krate in ["nrw-colmap", "nrw-dataset", "nrw-export", "nrw-pipeline"] {
+            for file in rs_files(&crates.join(krate).join("src")) {
+                let text = std::fs::read_to_string(&file).unwrap();
+                for word in text.split('`').skip(1).step_by(2) {
+                    let Some((stage, field)) = word.split_once('.') else {
+                        continue;
+                    };
+                    let is_key = STAGES.contains(&stage)
+                        && !FILE_ENDINGS.contains(&field)
+                        && !field.is_empty()
+                        && field.chars().all(|c| c.is_ascii_lowercase() || c == '_');
+                    if is_key {
+                        seen += 1;
+                        if !known.iter().any(|k| k == word) {
+                            orphans.push(format!("{}: `{word}`", file.display()));
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            seen >= 8,
+            "the scan found only {seen} mentions: it reads nothing"
+        );
+        assert!(orphans.is_empty(), "keys that name no setting: {orphans:?}");
+    }
+
+    /// Every `.rs` file under `dir`.
+    fn rs_files(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+        let mut out = Vec::new();
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                out.extend(rs_files(&p));
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+        out
+    }
+}

@@ -121,13 +121,13 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(code) => code,
         Err(e) if e.interrupted() => {
-            eprintln!("{e}");
+            eprintln!("{}", error::flags(&e.to_string()));
             std::process::ExitCode::from(130)
         }
         Err(e) => {
             nrw_pipeline::report::error_lines(&e)
                 .iter()
-                .for_each(|l| eprintln!("{l}"));
+                .for_each(|l| eprintln!("{}", error::flags(l)));
             std::process::ExitCode::FAILURE
         }
     }

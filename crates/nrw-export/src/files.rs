@@ -21,7 +21,7 @@ impl LayoutWriter for Files {
             // The files layout keeps every payload as stored; a crop would be silently ignored.
             return Err(ExportError::refused(
                 &job.cfg.out,
-                "--crop applies to the official and tfrecord layouts; the files layout keeps views whole",
+                "`export.crop` applies to the official and tfrecord layouts; the files layout keeps views whole",
             ));
         }
         Ok(())

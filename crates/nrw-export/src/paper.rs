@@ -31,7 +31,7 @@ pub struct OfficialView {
 
 /// Refuse what no paper layout can export: no train views, a crop or shard count of 0.
 pub fn check(job: &Job) -> Result<()> {
-    job.require_train(" (--val 0 puts every photo in train)")?;
+    job.require_train(" (`split.val` 0 puts every photo in train)")?;
     check_counts(job.cfg)
 }
 
@@ -81,7 +81,7 @@ impl Paper {
         Err(ExportError::refused(
             &job.ds.dir,
             format!(
-                "no train view is left to export: {} skipped as smaller than the crop, e.g. {}; use a smaller --crop",
+                "no train view is left to export: {} skipped as smaller than the crop, e.g. {}; use a smaller `export.crop`",
                 summary.skipped.len(),
                 summary
                     .skipped
@@ -140,6 +140,6 @@ fn no_semantics(v: &ViewRow) -> ExportError {
         path: PathBuf::from(&v.name),
         record: format!("image {}", v.image_id),
         field: "labels_png".into(),
-        problem: "the dataset has no semantic labels, and the published code reads *_seg_rgb.png by default: ingest with --semantics LABELS_DIR, or export with --no-semantics and train with --use_semantic=False --deep_buffer_nc=4 (RGB and depth)".into(),
+        problem: "the dataset has no semantic labels, and the published code reads *_seg_rgb.png by default: ingest with `ingest.semantics` LABELS_DIR, or export without labels (`export.semantics`) and train with --use_semantic=False --deep_buffer_nc=4 (RGB and depth)".into(),
     }
 }

@@ -38,9 +38,8 @@ impl Job<'_> {
         Err(ExportError::refused(
             &self.ds.dir,
             format!(
-                "the {:?} layout needs a train split with views; run `nrw-etl split {} --val N` first{advice}",
-                self.cfg.layout,
-                self.ds.dir.display()
+                "the {:?} layout needs a train split with views; split it first (`split.val` N holds out N photos){advice}",
+                self.cfg.layout
             ),
         ))
     }

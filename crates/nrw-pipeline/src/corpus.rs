@@ -4,7 +4,7 @@
 use nrw_dataset::corpus::{write_corpus, CorpusRow, STATUS_FAILED, STATUS_OK};
 use nrw_dataset::Store;
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 
 /// One scene as the driver ran it.
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -23,10 +23,10 @@ pub struct CorpusEntry {
 /// Parse the driver's entries (a JSON array of [`CorpusEntry`]), naming the bad one.
 pub fn parse_entries(json: &str) -> Result<Vec<CorpusEntry>> {
     serde_json::from_str(json).map_err(|e| {
-        PipelineError::input(
-            std::path::Path::new("--entries"),
+        PipelineError::config(
+            Setting::Entries,
             format!(
-                "not a JSON array of {{scene, name, dataset, error}}: {e} (line {}, column {})",
+                "is not a JSON array of {{scene, name, dataset, error}}: {e} (line {}, column {})",
                 e.line(),
                 e.column()
             ),

@@ -24,7 +24,7 @@ pub enum PipelineError {
     #[error(transparent)]
     StyleInput(#[from] nrw_style::StyleError),
     /// A setting outside what the stage accepts, named by its key (the binary shows its flag).
-    #[error("{} {problem}", setting.key())]
+    #[error("{setting} {problem}")]
     Config { setting: Setting, problem: String },
     /// A camera COLMAP's undistorter cannot undistort (named by the model folder).
     #[error("{}: {source}", path.display())]
@@ -81,8 +81,10 @@ pub enum PipelineError {
     Interrupted(String),
 }
 
-/// A setting of a stage's configuration that an error can name. Errors name it by its key
-/// (the stage's config field, as pipeline files spell it); the CLI shows its flag instead.
+/// A setting of a stage's configuration that a message can name. The library names it by its
+/// key (the stage's config field, as pipeline files spell it) in backticks, wherever in a
+/// message it stands; the CLI shows its flag instead ([`Setting::ALL`] is the closed set it
+/// looks for), so no library message spells a flag.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Setting {
     RowsPerShard,
@@ -103,9 +105,58 @@ pub enum Setting {
     Photos,
     /// A pipeline file's `[split]` table.
     Split,
+    /// The photo folder, where it is not the model's `images/`.
+    Images,
+    /// A folder of label maps given instead of a segmentation model.
+    Semantics,
+    /// A point cloud given instead of the scene's `dense/fused.ply`.
+    Points,
+    /// Whether a stage may replace what an earlier run of other settings wrote.
+    Overwrite,
+    /// How many photos the split holds out for validation.
+    Val,
+    /// The square an export crops views to.
+    Crop,
+    /// How many TFRecord files an export writes per split.
+    TfrecordFiles,
+    /// Whether an export writes the views' semantic labels.
+    ExportSemantics,
+    /// The corpus index's list of scenes and their outcomes.
+    Entries,
+    /// Whether photo names may resolve through links out of the photo folder.
+    FollowOutsideLinks,
 }
 
 impl Setting {
+    /// Every setting: the set the CLI maps from keys to flags.
+    pub const ALL: [Setting; 25] = [
+        Setting::RowsPerShard,
+        Setting::Radius,
+        Setting::MaxEmpty,
+        Setting::EstimateNormals,
+        Setting::Undistort,
+        Setting::SegmentWeights,
+        Setting::SegmentMode,
+        Setting::PhotosPerPart,
+        Setting::Tier,
+        Setting::Weights,
+        Setting::K,
+        Setting::Unit,
+        Setting::UnitCount,
+        Setting::Photos,
+        Setting::Split,
+        Setting::Images,
+        Setting::Semantics,
+        Setting::Points,
+        Setting::Overwrite,
+        Setting::Val,
+        Setting::Crop,
+        Setting::TfrecordFiles,
+        Setting::ExportSemantics,
+        Setting::Entries,
+        Setting::FollowOutsideLinks,
+    ];
+
     /// The setting's key: `stage.field` as a pipeline file or a library caller names it.
     pub fn key(self) -> &'static str {
         match self {
@@ -124,7 +175,24 @@ impl Setting {
             Setting::UnitCount => "unit_count",
             Setting::Photos => "segment.scene",
             Setting::Split => "split",
+            Setting::Images => "ingest.images",
+            Setting::Semantics => "ingest.semantics",
+            Setting::Points => "ingest.points",
+            Setting::Overwrite => "overwrite",
+            Setting::Val => "split.val",
+            Setting::Crop => "export.crop",
+            Setting::TfrecordFiles => "export.tfrecord_files",
+            Setting::ExportSemantics => "export.semantics",
+            Setting::Entries => "corpus.entries",
+            Setting::FollowOutsideLinks => "follow_outside_links",
         }
+    }
+}
+
+/// The key in backticks, as messages mention a setting (the CLI swaps in the flag).
+impl std::fmt::Display for Setting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "`{}`", self.key())
     }
 }
 

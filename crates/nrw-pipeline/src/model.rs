@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use nrw_colmap::{Format, Reconstruction, Scene, UndistortOptions};
 use nrw_dataset::{FileEntry, SceneSource};
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 
 /// Find and read the model of a scene folder (or a model folder itself).
 pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(Scene, Reconstruction)> {
@@ -95,7 +95,10 @@ pub fn encoding_and_layout(rec: &Reconstruction) -> (&'static str, &'static str)
 pub fn images_dir(images: Option<&Path>, scene: &Scene) -> Result<PathBuf> {
     if let Some(d) = images {
         if !d.is_dir() {
-            return Err(PipelineError::input(d, "--images is not a folder"));
+            return Err(PipelineError::input(
+                d,
+                format!("{} is not a folder", Setting::Images),
+            ));
         }
         return Ok(d.to_path_buf());
     }
@@ -108,8 +111,9 @@ pub fn images_dir(images: Option<&Path>, scene: &Scene) -> Result<PathBuf> {
         PipelineError::input(
             &scene.dir,
             format!(
-                "no photo folder found (tried {}); pass --images DIR",
-                tried.join(", ")
+                "no photo folder found (tried {}); give {} a folder",
+                tried.join(", "),
+                Setting::Images
             ),
         )
     })

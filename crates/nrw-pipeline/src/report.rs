@@ -9,6 +9,7 @@ use std::path::Path;
 
 use nrw_export::{ExportSummary, Layout};
 
+use crate::error::Setting;
 use crate::ingest::{IngestSummary, UnitSummary};
 use crate::inspect::{DatasetSummary, Inspected, ModelSummary};
 use crate::runner::StageDone;
@@ -128,7 +129,8 @@ pub fn export(dataset: &Path, out: &Path, s: &ExportSummary) -> Report {
     }
     for e in &s.empty_splits {
         r.err(format!(
-            "split {e} has no view: not written (the published code's {e} glob will find nothing; `nrw-etl split DATASET --val N` holds out N photos)"
+            "split {e} has no view: not written (the published code's {e} glob will find nothing; the split stage's {} N holds out N photos)",
+            Setting::Val
         ));
     }
     let train = s
@@ -147,7 +149,11 @@ pub fn export(dataset: &Path, out: &Path, s: &ExportSummary) -> Report {
             out.join(p).display()
         )),
         None if s.layout == Layout::Official => r.err(
-            "no dist_NAME.pckl: the dataset has no official style descriptors (`nrw-etl style DATASET --tier official --weights VGG16`)".into(),
+            format!(
+                "no dist_NAME.pckl: the dataset has no official style descriptors (the style stage with {} official and {} VGG16)",
+                Setting::Tier,
+                Setting::Weights
+            ),
         ),
         None => {}
     }
@@ -247,7 +253,7 @@ pub fn finalize(s: &crate::finalize::FinalizeSummary) -> Report {
             s.dataset, st.units, st.parts, st.tier
         ));
     }
-    if s.ingest.is_none() && s.style.is_none() {
+    if s.merged_nothing() {
         r.err(format!(
             "{}: nothing to finalize (no unit records; the dataset is final)",
             s.dataset

@@ -175,7 +175,10 @@ fn photo_list(cfg: &SegmentConfig) -> Result<(PathBuf, Vec<String>)> {
         ));
     };
     if !dir.is_dir() {
-        return Err(PipelineError::input(dir, "--images is not a folder"));
+        return Err(PipelineError::input(
+            dir,
+            format!("{} is not a folder", Setting::Images),
+        ));
     }
     let mut names = Vec::new();
     let mut stack = vec![dir.clone()];

@@ -70,8 +70,9 @@ pub fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
     match (tier.needs_weights(), path) {
         (false, _) => Ok(None),
         (true, None) => Err(PipelineError::config(Setting::Weights, format!(
-            "FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); --tier color-stats is the explicit non-neural fallback",
-            tier.name()
+            "FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); {} color-stats is the explicit non-neural fallback",
+            tier.name(),
+            Setting::Tier
         ))),
         (true, Some(p)) => {
             let net = Vgg::load(p)?;
@@ -130,10 +131,7 @@ pub fn image_grams(
 fn kind(cfg: &StyleConfig, net: Option<&dyn Backend>) -> DescriptorKind {
     DescriptorKind {
         tier: cfg.tier.name(),
-        // a backend given with color-stats computes nothing, so it names no weights either
-        weights_sha256: net
-            .filter(|_| cfg.tier.needs_weights())
-            .map_or(String::new(), |n| n.weights_sha256().to_string()),
+        weights_sha256: net.map_or(String::new(), |n| n.weights_sha256().to_string()),
         // color-stats ignores the network's input scaling, so it never tells descriptors apart
         preprocess: if cfg.tier.needs_weights() {
             cfg.tier.preprocess(cfg.preprocess).name().to_string()
@@ -147,8 +145,8 @@ fn kind(cfg: &StyleConfig, net: Option<&dyn Backend>) -> DescriptorKind {
 /// their convolutions and Grams are GEMMs, whose sums the AVX-512 and AVX2 kernels order
 /// differently, so values agree to about 1e-6 relative across machines, not bit for bit);
 /// none for colour statistics, summed in plain f64 the same way everywhere.
-fn device_of(tier: &Tier, net: Option<&dyn Backend>) -> Option<String> {
-    net.filter(|_| tier.needs_weights()).map(|n| n.device())
+fn device_of(net: Option<&dyn Backend>) -> Option<String> {
+    net.map(|n| n.device())
 }
 
 /// Manifest key listing the instruction sets the descriptors were computed with.
@@ -200,8 +198,9 @@ fn clear_other_kinds(
                 return Err(PipelineError::input(
                     &path,
                     format!(
-                        "holds descriptors of {:?}, not {kind:?}; pass --overwrite to replace them",
-                        pk.expect("some")
+                        "holds descriptors of {:?}, not {kind:?}; set {} to replace them",
+                        pk.expect("some"),
+                        Setting::Overwrite
                     ),
                 ));
             }
@@ -250,7 +249,7 @@ fn describe_part(
 ) -> Result<()> {
     // Read the group's photos a row group at a time (sequential I/O).
     let views: Vec<_> = ds.iter_ids(ids)?.collect::<std::result::Result<_, _>>()?;
-    let mut rows: Vec<DescriptorRow> = match net.filter(|_| cfg.tier.needs_weights()) {
+    let mut rows: Vec<DescriptorRow> = match net {
         None => views
             .par_iter()
             .map(|v| {
@@ -400,6 +399,9 @@ pub fn style_unit_on(
 ) -> Result<StyleSummary> {
     let t0 = Instant::now();
     check_backend(&cfg.tier, net)?;
+    // A backend given with color-stats computes nothing: dropped here, it names no weights
+    // and no device either (as the loading path, which loads none).
+    let net = net.filter(|_| cfg.tier.needs_weights());
     if cfg.photos_per_part == 0 {
         return Err(PipelineError::config(
             Setting::PhotosPerPart,
@@ -467,7 +469,7 @@ pub fn style_unit_on(
         warnings: Vec::new(),
         groups: ids.len().div_ceil(cfg.photos_per_part),
         seconds: t0.elapsed().as_secs_f64(),
-        instruction_set: device_of(&cfg.tier, net),
+        instruction_set: device_of(net),
     };
     crate::stage::record_unit::<StyleStage>(store, unit, &record)?;
     Ok(StyleSummary {
@@ -577,6 +579,13 @@ mod tests {
         }
     }
 
+    fn fake(fail: bool) -> Fake {
+        Fake {
+            fail,
+            batches: Mutex::new(Vec::new()),
+        }
+    }
+
     fn fake_grams(x: &NetInput, taps: &[usize]) -> Grams {
         let mean = x.chw.iter().map(|v| *v as f64).sum::<f64>() / x.chw.len() as f64;
         taps.iter()
@@ -602,10 +611,7 @@ mod tests {
     fn the_stage_describes_through_any_backend_in_its_batches() {
         let tmp = tempfile::tempdir().unwrap();
         let ds = demo_dataset(tmp.path());
-        let fake = Fake {
-            fail: false,
-            batches: Mutex::new(Vec::new()),
-        };
+        let fake = fake(false);
         let s = style_unit_on(&cfg(&ds), Unit::WHOLE, Some(&fake), &crate::Silent).unwrap();
         let batches = fake.batches.into_inner().unwrap();
         assert!(batches.iter().all(|b| (1..=3).contains(b)), "{batches:?}");
@@ -640,10 +646,7 @@ mod tests {
     fn a_failing_backend_names_the_part_and_its_photos() {
         let tmp = tempfile::tempdir().unwrap();
         let ds = demo_dataset(tmp.path());
-        let fake = Fake {
-            fail: true,
-            batches: Mutex::new(Vec::new()),
-        };
+        let fake = fake(true);
         let e = style_unit_on(&cfg(&ds), Unit::WHOLE, Some(&fake), &crate::Silent)
             .unwrap_err()
             .to_string();
@@ -671,7 +674,7 @@ mod tests {
         let e = style_unit_on(&cfg(&ds), Unit::WHOLE, None, &crate::Silent).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "style.weights tier vgg16-64-l1 runs a network and none was given"
+            "`style.weights` tier vgg16-64-l1 runs a network and none was given"
         );
     }
 }

@@ -152,10 +152,11 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
     let rows = &index.entries;
     if cfg.k + 1 > rows.len() {
         return Err(PipelineError::config(Setting::K, format!(
-            "{} needs at least {} photos in scope {scope}, found {}; use --k {} or fewer (dataset {})",
+            "{} needs at least {} photos in scope {scope}, found {}; use {} {} or fewer (dataset {})",
             cfg.k,
             cfg.k + 1,
             rows.len(),
+            Setting::K,
             rows.len().saturating_sub(1),
             cfg.dataset.display()
         )));
@@ -244,7 +245,9 @@ pub fn official_distance_matrix(
     };
     if let Some(c) = crop.filter(|&c| c < tier_crop) {
         return Err(field(format!(
-            "the descriptors are of a {tier_crop}×{tier_crop} crop but the export crops to {c}×{c}; describe with --tier official-{c} or export with a larger --crop"
+            "the descriptors are of a {tier_crop}×{tier_crop} crop but the export crops to {c}×{c}; describe with {} official-{c} or export with a larger {}",
+            Setting::Tier,
+            Setting::Crop
         )));
     }
     let want: BTreeMap<u32, usize> = ids.iter().enumerate().map(|(p, id)| (*id, p)).collect();

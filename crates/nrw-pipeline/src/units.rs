@@ -259,7 +259,7 @@ mod tests {
         );
         for bad in ["3/3", "0/0", "x/2", "2", "-1/2"] {
             let e = Unit::parse(bad, None, &env(&[])).unwrap_err().to_string();
-            assert!(e.starts_with("unit "), "{bad}: {e}");
+            assert!(e.starts_with("`unit` "), "{bad}: {e}");
         }
     }
 
@@ -280,7 +280,7 @@ mod tests {
             Unit { index: 3, count: 4 }
         );
         let e = Unit::parse("auto", None, &k8s).unwrap_err().to_string();
-        assert!(e.starts_with("unit_count is needed"), "{e}");
+        assert!(e.starts_with("`unit_count` is needed"), "{e}");
         let e = Unit::parse("auto", None, &env(&[]))
             .unwrap_err()
             .to_string();

@@ -36,6 +36,21 @@ pub trait Backend: Sync {
     fn style_grams(&self, batch: &[NetInput], taps: &[usize]) -> Result<Vec<Grams>>;
 }
 
+/// The Grams of one input: a batch of one, and a backend that returns no Grams for it is an
+/// error rather than a panic.
+pub fn grams_of_one<B: Backend + ?Sized>(
+    net: &B,
+    input: &NetInput,
+    taps: &[usize],
+) -> Result<Grams> {
+    net.style_grams(std::slice::from_ref(input), taps)?
+        .pop()
+        .ok_or_else(|| StyleError::Backend {
+            device: net.device(),
+            problem: "no Grams returned for the one input given".into(),
+        })
+}
+
 /// Refuses an input whose values do not fill its stated size (a caller's bug, not a photo's).
 fn check_input(i: usize, x: &NetInput) -> Result<()> {
     let want = 3usize

@@ -236,20 +236,13 @@ pub fn describe<B: Backend + ?Sized>(
     };
     let net = net.expect("VGG tiers need weights (checked by the caller)");
     check_arch(tier, net);
-    let grams = net.style_grams(std::slice::from_ref(&input), &tier.taps())?;
-    let grams = grams
-        .into_iter()
-        .next()
-        .ok_or_else(|| StyleError::Backend {
-            device: net.device(),
-            problem: "no Grams returned for the one input given".into(),
-        })?;
+    let grams = crate::backend::grams_of_one(net, &input, &tier.taps())?;
     Ok(from_grams(tier, &grams))
 }
 
 /// The architecture a tier runs is the one the weights hold (the caller checked it when it
 /// loaded them; a mismatch here is a bug).
-pub fn check_arch<B: Backend + ?Sized>(tier: &Tier, net: &B) {
+pub(crate) fn check_arch<B: Backend + ?Sized>(tier: &Tier, net: &B) {
     let Some(want) = tier.arch() else {
         return;
     };

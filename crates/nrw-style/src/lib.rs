@@ -19,7 +19,7 @@ pub mod winograd;
 pub use backend::{Backend, Grams, NetInput};
 pub use conv::ConvAlgo;
 pub use descriptor::{
-    central_crop, check_arch, color_stats, describe, distance2, from_grams, network_input, Tier,
+    central_crop, color_stats, describe, distance2, from_grams, network_input, Tier,
 };
 pub use error::{Result, StyleError};
 pub use gemm::Parallelism;
@@ -53,13 +53,7 @@ pub fn image_grams_safetensors(
         width: img.width() as usize,
     };
     let all: Vec<usize> = (0..STYLE_LAYERS.len()).collect();
-    let g = net
-        .style_grams(std::slice::from_ref(&input), &all)?
-        .pop()
-        .ok_or_else(|| StyleError::Backend {
-            device: net.device(),
-            problem: "no Grams returned for the one input given".into(),
-        })?;
+    let g = backend::grams_of_one(net, &input, &all)?;
     let data: Vec<(String, usize, Vec<u8>)> = g
         .iter()
         .zip(STYLE_LAYERS)

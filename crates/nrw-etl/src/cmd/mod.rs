@@ -25,8 +25,8 @@ use nrw_pipeline::{Progress, Unit};
 pub fn print_report(report: &nrw_pipeline::report::Report) {
     for line in &report.0 {
         match line {
-            nrw_pipeline::report::Line::Out(s) => println!("{s}"),
-            nrw_pipeline::report::Line::Err(s) => eprintln!("{s}"),
+            nrw_pipeline::report::Line::Out(s) => println!("{}", crate::error::flags(s)),
+            nrw_pipeline::report::Line::Err(s) => eprintln!("{}", crate::error::flags(s)),
         }
     }
 }
@@ -45,7 +45,7 @@ where
     use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
     PossibleValuesParser::new(
         all.iter()
-            .map(|v| PossibleValue::new(name(*v)).help(summary(*v))),
+            .map(|v| PossibleValue::new(name(*v)).help(crate::error::flags(summary(*v)))),
     )
     .map(|n| n.parse::<T>().expect("clap passes only the listed names"))
 }
@@ -128,7 +128,7 @@ impl Progress for Bars {
 
     fn warn(&self, message: &str) {
         if !self.quiet {
-            eprintln!("warning: {message}");
+            eprintln!("warning: {}", crate::error::flags(message));
         }
     }
 }

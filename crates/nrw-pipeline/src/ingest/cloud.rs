@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use nrw_colmap::{read_ply, Reconstruction};
 use nrw_render::RenderCloud;
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 
 use super::config::IngestConfig;
 use nrw_dataset::provenance::DenoiseRecord;
@@ -67,9 +67,16 @@ pub(super) fn point_source(
                     .values()
                     .map(|p| {
                         let n = p.track.len().max(1) as f64;
-                        let sum: glam::DVec3 =
-                            p.track.iter().filter_map(|t| centres.get(&t.image_id)).sum();
-                        if p.track.is_empty() { mean_centre } else { sum / n }
+                        let sum: glam::DVec3 = p
+                            .track
+                            .iter()
+                            .filter_map(|t| centres.get(&t.image_id))
+                            .sum();
+                        if p.track.is_empty() {
+                            mean_centre
+                        } else {
+                            sum / n
+                        }
                     })
                     .collect(),
             };
@@ -77,7 +84,10 @@ pub(super) fn point_source(
         }
         None => Err(PipelineError::input(
             &scene.model_dir,
-            "nothing to render: no dense/fused.ply, no --points FILE, and the model has no 3D points",
+            format!(
+                "nothing to render: no dense/fused.ply, no {} file, and the model has no 3D points",
+                Setting::Points
+            ),
         )),
     }
 }
@@ -137,7 +147,8 @@ pub(super) fn render_cloud(
     if let Some(k) = cfg.estimate_normals {
         if normals.is_some() {
             warnings.push(format!(
-                "--estimate-normals {k}: the cloud has normals of its own; they are used"
+                "{} {k}: the cloud has normals of its own; they are used",
+                Setting::EstimateNormals
             ));
         } else {
             let n = nrw_render::clean::estimate_normals(&positions, origin, k, &|i| seen_from[i]);

@@ -90,20 +90,26 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
         ));
     }
     if let Some(d) = cfg.semantics.as_ref().filter(|d| !d.is_dir()) {
-        return Err(PipelineError::input(d, "--semantics is not a folder"));
+        return Err(PipelineError::input(
+            d,
+            format!("{} is not a folder", Setting::Semantics),
+        ));
     }
     if cfg.semantics.is_some() && cfg.undistort.is_some() {
         return Err(PipelineError::config(
             Setting::Undistort,
-            "cannot be combined with --semantics yet (label maps of the distorted photos \
-             would need resampling too); segment the undistorted photos with \
-             --segment-weights instead",
+            format!(
+                "cannot be combined with {} yet (label maps of the distorted photos would \
+                 need resampling too); segment the undistorted photos with {} instead",
+                Setting::Semantics,
+                Setting::SegmentWeights
+            ),
         ));
     }
     if cfg.semantics.is_some() && cfg.segment.is_some() {
         return Err(PipelineError::config(
             Setting::SegmentWeights,
-            "and --semantics both give label maps: use one",
+            format!("and {} both give label maps: use one", Setting::Semantics),
         ));
     }
     Ok(())
@@ -353,7 +359,7 @@ mod tests {
             "{e:?}"
         );
         assert!(
-            e.to_string().starts_with("ingest.radius 40 is outside"),
+            e.to_string().starts_with("`ingest.radius` 40 is outside"),
             "{e}"
         );
         assert!(!tmp.join("out").exists(), "nothing written");

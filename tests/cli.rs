@@ -1124,7 +1124,10 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
     let off = tmp.path().join("official");
     let tfr = tmp.path().join("tfr");
     let err = fails(&["export", d, "--out", off.to_str().unwrap()]);
-    assert!(err.contains("nrw-etl split"), "{err}");
+    assert!(
+        err.contains("needs a train split") && err.contains("split it first (--val N"),
+        "{err}"
+    );
     ok(&["split", d, "--val", "2"]);
     let stdout = ok(&[
         "export",
@@ -2326,7 +2329,7 @@ fn trainer_loader_crops_align_cover_every_row_once_repeat_under_a_seed_and_stay_
                     assert_eq!(at(0), p[0] as f32 / 127.5 - 1.0);
                     assert_eq!(at(2), p[2] as f32 / 127.5 - 1.0);
                     let c = color.get_pixel(px, py);
-                    let r = b.render[((k * 3 + 1) * s + j) * s + i];
+                    let r = b.color[((k * 3 + 1) * s + j) * s + i];
                     let z = b.depth[(k * s + j) * s + i];
                     let dz = depth.data[py as usize * depth.width + px as usize];
                     assert_eq!(z, if dz > 0.0 { (dz / scale).min(1.0) } else { 0.0 });

@@ -69,7 +69,7 @@ fn dump_rust_draws(ds: &Path, out: &Path) {
                 let mut f = std::fs::File::create(out.join(&file)).unwrap();
                 f.write_all(&f32_bytes(&b.photo[i * 3 * s..(i + 1) * 3 * s]))
                     .unwrap();
-                f.write_all(&f32_bytes(&b.render[i * 3 * s..(i + 1) * 3 * s]))
+                f.write_all(&f32_bytes(&b.color[i * 3 * s..(i + 1) * 3 * s]))
                     .unwrap();
                 f.write_all(&f32_bytes(&b.depth[i * s..(i + 1) * s]))
                     .unwrap();

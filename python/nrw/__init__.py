@@ -4,7 +4,7 @@
 >>> ds = nrw.Dataset("/tmp/nrw-demo/dataset")          # or s3://bucket/prefix, gs://, az://
 >>> len(ds), ds.splits()
 >>> for view in ds.views("train"):                     # dicts of NumPy arrays
-...     view["photo"].shape, view["render"].shape, view["depth"].dtype
+...     view["photo"].shape, view["color"].shape, view["depth"].dtype
 
 Payloads are decoded in Rust with the GIL released, each checked against its CRC-32 first;
 `nrw.loader.Crops` takes the aligned random crops the Rust trainer takes, and `nrw.torch`

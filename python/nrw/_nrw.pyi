@@ -21,8 +21,9 @@ class View(TypedDict, total=False):
     name: str
     photo: npt.NDArray[np.uint8]
     """The resized photo, H x W x 3 RGB."""
-    render: npt.NDArray[np.uint8]
-    """The colour render, H x W x 4 RGBA; alpha is coverage (255 where a point was drawn)."""
+    color: npt.NDArray[np.uint8]
+    """The colour render, H x W x 4 RGBA; alpha is coverage (255 where a point was drawn).
+    `view["render"]`, its earlier name, still reads it with a DeprecationWarning."""
     depth: npt.NDArray[np.float32]
     """Camera-space depth, H x W, 0 where empty."""
     normals: npt.NDArray[np.uint8]

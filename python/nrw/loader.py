@@ -4,7 +4,7 @@ wraps this for PyTorch's DataLoader.
 
 >>> crops = Crops(nrw.Dataset("/tmp/nrw-demo/dataset"), "train", crop=256, seed=7)
 >>> for item in crops.epoch(0):                 # every view of the split once, as float32 CHW
-...     item["photo"].shape, item["render"].shape, item["depth"].shape   # (3,S,S) (3,S,S) (1,S,S)
+...     item["photo"].shape, item["color"].shape, item["depth"].shape   # (3,S,S) (3,S,S) (1,S,S)
 
 The order of an epoch and each crop's place come from (seed, epoch, position in the epoch),
 drawn by the same Rust code as the trainer's, so crops do not depend on how many workers or
@@ -20,6 +20,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from ._nrw import Dataset, crop_place, epoch_order
+from ._view import View
 
 _HALF = np.float32(127.5)
 _ONE = np.float32(1.0)
@@ -33,18 +34,18 @@ def to_unit(pixels: np.ndarray) -> np.ndarray:
 
 def normalise(view: dict, x: int, y: int, size: int, depth_scale: float, semantics: bool) -> dict:
     """The crop at (x, y) of every channel of a decoded view, normalised as the Rust `Loader`
-    normalises a batch item: photo and render in [-1, 1] (render -1 where nothing was drawn),
+    normalises a batch item: photo and colour render in [-1, 1] (-1 where nothing was drawn),
     depth / depth_scale clipped to [0, 1] (0 where empty or not finite)."""
     s = np.s_[y : y + size, x : x + size]
-    render = view["render"][s]
-    out = {
+    color = view["color"][s]
+    out = View({
         "image_id": view["image_id"],
         "x": x,
         "y": y,
         "photo": to_unit(view["photo"][s]),
-        "render": to_unit(render[..., :3]),
-    }
-    out["render"][:, render[..., 3] == 0] = -_ONE
+        "color": to_unit(color[..., :3]),
+    })
+    out["color"][:, color[..., 3] == 0] = -_ONE
     d = view["depth"][s]
     with np.errstate(invalid="ignore"):
         keep = np.isfinite(d) & (d > 0)

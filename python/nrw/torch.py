@@ -27,6 +27,7 @@ import torch.distributed as dist
 from torch.utils.data import IterableDataset, get_worker_info
 
 from ._nrw import Dataset, TripletSampler, crop_place
+from ._view import View
 from .loader import Crops, normalise, reader_of
 
 __all__ = ["CropDataset", "TripletDataset", "current_reader", "process_rank"]
@@ -63,12 +64,14 @@ def current_shard(rank: int, world_size: int) -> tuple[int, int]:
     return current_reader(rank, world_size)
 
 
-def _tensors(item: dict) -> dict:
-    return {k: torch.from_numpy(v) if isinstance(v, np.ndarray) else v for k, v in item.items()}
+def _tensors(item: dict) -> View:
+    return View(
+        {k: torch.from_numpy(v) if isinstance(v, np.ndarray) else v for k, v in item.items()}
+    )
 
 
 class CropDataset(IterableDataset):
-    """Aligned random crops of one split: each item is a dict of `photo` (3 x S x S), `render`
+    """Aligned random crops of one split: each item is a dict of `photo` (3 x S x S), `color`
     (3 x S x S, -1 where nothing was drawn), `depth` (1 x S x S, in [0, 1]) float32 tensors,
     `semantics` when asked for and present, and `image_id`, `x`, `y`, `epoch`, `position`."""
 

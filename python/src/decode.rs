@@ -19,7 +19,7 @@ pub struct Decoded {
     width: usize,
     height: usize,
     photo: Vec<u8>,
-    render: Vec<u8>,
+    color: Vec<u8>,
     depth: Vec<f32>,
     normals: Option<Vec<u8>>,
     semantics: Option<Vec<u8>>,
@@ -31,7 +31,7 @@ pub struct Decoded {
 pub fn decode(v: ViewRow) -> nrw_dataset::Result<Decoded> {
     Ok(Decoded {
         photo: v.photo()?.into_raw(),
-        render: v.color()?.into_raw(),
+        color: v.color()?.into_raw(),
         depth: v.depth()?.data,
         normals: v.normals()?.map(|n| n.into_raw()),
         semantics: v.semantics()?.map(|s| s.into_raw()),
@@ -50,17 +50,22 @@ pub fn decode(v: ViewRow) -> nrw_dataset::Result<Decoded> {
 }
 
 impl Decoded {
-    /// The view as the dict `Dataset.views` yields: arrays H × W × C (H × W for one channel).
+    /// The view as the dict `Dataset.views` yields (an `nrw._view.View`, where the old key
+    /// `render` still reads `color`): arrays H × W × C (H × W for one channel).
     pub fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
         let (h, w) = (self.height, self.width);
-        let d = PyDict::new(py);
+        let d = py
+            .import("nrw._view")?
+            .getattr("View")?
+            .call0()?
+            .cast_into::<PyDict>()?;
         let shape_err =
             |e: numpy::ndarray::ShapeError| crate::py_err(format!("{}: {e}", self.name));
         let hwc = |px: Vec<u8>, c: usize| Array3::from_shape_vec((h, w, c), px).map_err(shape_err);
         let hw = |px: Vec<u8>| Array2::from_shape_vec((h, w), px).map_err(shape_err);
         d.set_item("image_id", self.image_id)?;
         d.set_item("photo", hwc(self.photo, 3)?.into_pyarray(py))?;
-        d.set_item("render", hwc(self.render, 4)?.into_pyarray(py))?;
+        d.set_item("color", hwc(self.color, 4)?.into_pyarray(py))?;
         let depth = Array2::from_shape_vec((h, w), self.depth).map_err(shape_err)?;
         d.set_item("depth", depth.into_pyarray(py))?;
         if let Some(n) = self.normals {

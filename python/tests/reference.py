@@ -14,7 +14,7 @@ from PIL import Image
 # Payload column -> key of nrw.Dataset's view dicts.
 IMAGES = {
     "photo_png": "photo",
-    "color_png": "render",
+    "color_png": "color",
     "normal_png": "normals",
     "semantics_png": "semantics",
     "labels_png": "labels",

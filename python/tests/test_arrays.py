@@ -12,7 +12,7 @@ import pytest
 import nrw
 import reference
 
-ARRAYS = {"photo": (3, np.uint8), "render": (4, np.uint8), "depth": (None, np.float32),
+ARRAYS = {"photo": (3, np.uint8), "color": (4, np.uint8), "depth": (None, np.float32),
           "normals": (3, np.uint8), "semantics": (3, np.uint8), "labels": (None, np.uint8),
           "transient": (None, np.uint8)}
 
@@ -20,7 +20,7 @@ ARRAYS = {"photo": (3, np.uint8), "render": (4, np.uint8), "depth": (None, np.fl
 def assert_view_equals(view, expected):
     keys = {k for k in view if k in ARRAYS}
     assert keys == {k for k in expected if k in ARRAYS}, (view["image_id"], keys)
-    assert {"photo", "render", "depth"} <= keys
+    assert {"photo", "color", "depth"} <= keys
     for key in keys:
         got, want = view[key], expected[key]
         channels, dtype = ARRAYS[key]
@@ -103,3 +103,19 @@ def test_bad_requests_name_what_is_missing(demo, tmp_path):
     missing = tmp_path / "nowhere"
     with pytest.raises(nrw.DatasetError, match=str(missing)):
         nrw.Dataset(missing)
+
+
+def test_the_old_render_key_warns_and_reads_the_color_array(demo):
+    import pickle
+
+    view = nrw.Dataset(demo).get(nrw.Dataset(demo).ids()[0])
+    assert "color" in view and "render" not in view, sorted(view)
+    with pytest.warns(DeprecationWarning, match=r"view\['render'\] is now view\['color'\]"):
+        old = view["render"]
+    assert old is view["color"]
+    with pytest.raises(KeyError, match="rendr"):
+        view["rendr"]
+    # A view pickles (DataLoader workers send it) and keeps the alias.
+    back = pickle.loads(pickle.dumps(view))
+    with pytest.warns(DeprecationWarning):
+        np.testing.assert_array_equal(back["render"], view["color"])

@@ -31,9 +31,9 @@ def test_crops_equal_the_rust_loaders_for_the_same_seed(demo, rust_draws):
         item = got[(c["epoch"], c["position"])]
         assert (item["image_id"], item["x"], item["y"]) == (c["image_id"], c["x"], c["y"]), c
         values = np.fromfile(os.path.join(rust_draws, c["file"]), dtype="<f4")
-        photo, render, depth = np.split(values, [3 * s * s, 6 * s * s])
+        photo, color, depth = np.split(values, [3 * s * s, 6 * s * s])
         np.testing.assert_array_equal(item["photo"], photo.reshape(3, s, s))
-        np.testing.assert_array_equal(item["render"], render.reshape(3, s, s))
+        np.testing.assert_array_equal(item["color"], color.reshape(3, s, s))
         np.testing.assert_array_equal(item["depth"], depth.reshape(1, s, s))
     # Two epochs differ in order and places.
     assert [got[(0, p)]["image_id"] for p in range(4)] != [got[(1, p)]["image_id"] for p in range(4)]

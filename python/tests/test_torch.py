@@ -63,7 +63,7 @@ def test_crop_dataset_items_are_the_loader_crops(demo):
     got = list(DataLoader(torch_ds, batch_size=None, num_workers=2))
     assert sorted(i["position"] for i in got) == sorted(want)
     for item in got:
-        np.testing.assert_array_equal(item["render"].numpy(), want[item["position"]]["render"])
+        np.testing.assert_array_equal(item["color"].numpy(), want[item["position"]]["color"])
 
 
 def test_triplet_dataset_draws_do_not_depend_on_workers(demo):

@@ -83,6 +83,23 @@ impl EtlError {
 }
 
 /// Result alias for the CLI.
+/// An error as the command line prints it: `error: …`, then each cause not already in the
+/// line before it (messages that include their cause would print it twice).
+pub fn error_lines(e: &dyn std::error::Error) -> Vec<String> {
+    let mut shown = e.to_string();
+    let mut out = vec![format!("error: {shown}")];
+    let mut src = e.source();
+    while let Some(s) = src {
+        let text = s.to_string();
+        if !shown.contains(&text) {
+            out.push(format!("  caused by: {text}"));
+            shown = text;
+        }
+        src = s.source();
+    }
+    out
+}
+
 pub type Result<T, E = EtlError> = std::result::Result<T, E>;
 
 #[cfg(test)]

@@ -125,7 +125,7 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::from(130)
         }
         Err(e) => {
-            nrw_pipeline::report::error_lines(&e)
+            error::error_lines(&e)
                 .iter()
                 .for_each(|l| eprintln!("{}", error::flags(l)));
             std::process::ExitCode::FAILURE

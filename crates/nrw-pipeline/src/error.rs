@@ -232,3 +232,27 @@ impl PipelineError {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Setting;
+
+    /// `Setting::ALL` is written by hand: a variant left out of it would never show as its
+    /// flag, so the declared variants (read from this file) must be exactly the list.
+    #[test]
+    fn every_declared_setting_is_in_the_list_the_cli_maps() {
+        let body = include_str!("error.rs")
+            .split("pub enum Setting {")
+            .nth(1)
+            .and_then(|rest| rest.split("\n}").next())
+            .expect("the Setting enum in error.rs");
+        let declared: Vec<&str> = body
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with("//"))
+            .map(|l| l.trim_end_matches(','))
+            .collect();
+        let listed: Vec<String> = Setting::ALL.iter().map(|s| format!("{s:?}")).collect();
+        assert_eq!(declared, listed);
+    }
+}

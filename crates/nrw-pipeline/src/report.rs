@@ -396,40 +396,6 @@ fn model(m: &ModelSummary) -> Report {
     r
 }
 
-/// An error as the command line prints it: `error: …`, then each cause not already in the
-/// line before it (messages that include their cause would print it twice).
-pub fn error_lines(e: &dyn std::error::Error) -> Vec<String> {
-    let mut shown = e.to_string();
-    let mut out = vec![format!("error: {shown}")];
-    let mut src = e.source();
-    while let Some(s) = src {
-        let text = s.to_string();
-        if !shown.contains(&text) {
-            out.push(format!("  caused by: {text}"));
-            shown = text;
-        }
-        src = s.source();
-    }
-    out
-}
-
-/// One scene of a corpus index, as `nrw-etl corpus` prints it.
-pub fn corpus_line(r: &nrw_dataset::corpus::CorpusRow) -> String {
-    match &r.error {
-        Some(e) => format!("{}: {} ({}): {e}", r.name, r.status, r.scene),
-        None => format!(
-            "{}: {}, {} registered, {} kept, {} train / {} val; report {}",
-            r.name,
-            r.status,
-            r.registered.unwrap_or(0),
-            r.kept.unwrap_or(0),
-            r.train.unwrap_or(0),
-            r.val.unwrap_or(0),
-            r.report.as_deref().unwrap_or("-")
-        ),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

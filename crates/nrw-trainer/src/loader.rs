@@ -34,7 +34,7 @@ pub struct Batch {
     /// B × 3 × S × S, RGB in [−1, 1].
     pub photo: Vec<f32>,
     /// B × 3 × S × S, the colour render in [−1, 1] (−1 where empty).
-    pub render: Vec<f32>,
+    pub color: Vec<f32>,
     /// B × 1 × S × S, depth / the dataset's largest depth, in [0, 1]; 0 where empty.
     pub depth: Vec<f32>,
     /// B × 3 × S × S semantic colours in [−1, 1], when asked for and present.
@@ -58,7 +58,7 @@ struct Item {
     x: u32,
     y: u32,
     photo: Vec<f32>,
-    render: Vec<f32>,
+    color: Vec<f32>,
     depth: Vec<f32>,
     semantics: Option<Vec<f32>>,
     _guard: Guard,
@@ -151,7 +151,7 @@ impl<'a> Loader<'a> {
             offsets: Vec::with_capacity(items.len()),
             crop: s,
             photo: Vec::with_capacity(items.len() * 3 * s * s),
-            render: Vec::with_capacity(items.len() * 3 * s * s),
+            color: Vec::with_capacity(items.len() * 3 * s * s),
             depth: Vec::with_capacity(items.len() * s * s),
             semantics: self.cfg.semantics.then(Vec::new),
         };
@@ -159,7 +159,7 @@ impl<'a> Loader<'a> {
             b.ids.push(it.id);
             b.offsets.push((it.x, it.y));
             b.photo.extend_from_slice(&it.photo);
-            b.render.extend_from_slice(&it.render);
+            b.color.extend_from_slice(&it.color);
             b.depth.extend_from_slice(&it.depth);
             match (&mut b.semantics, it.semantics) {
                 (Some(all), Some(sem)) => all.extend_from_slice(&sem),
@@ -182,11 +182,11 @@ impl<'a> Loader<'a> {
         let c = view.random_crop(self.cfg.crop, &mut pick)?;
         let s = self.cfg.crop as usize;
         let photo = to_chw(c.photo.as_raw(), 3, 3, s);
-        let mut render = to_chw(c.color.as_raw(), 4, 3, s);
+        let mut color = to_chw(c.color.as_raw(), 4, 3, s);
         for i in 0..s * s {
             if c.color.as_raw()[i * 4 + 3] == 0 {
                 for ch in 0..3 {
-                    render[ch * s * s + i] = -1.0;
+                    color[ch * s * s + i] = -1.0;
                 }
             }
         }
@@ -211,7 +211,7 @@ impl<'a> Loader<'a> {
             x: c.x,
             y: c.y,
             photo,
-            render,
+            color,
             depth,
             semantics,
             _guard: guard,

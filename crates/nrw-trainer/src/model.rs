@@ -49,14 +49,14 @@ impl Encoder {
     }
 }
 
-/// The network input of a batch: photo, render and depth stacked on the channel axis.
+/// The network input of a batch: photo, colour render and depth stacked on the channel axis.
 pub fn input(b: &Batch) -> Result<Tensor> {
     let (n, s) = (b.len(), b.crop);
     let dev = Device::Cpu;
     let photo = Tensor::from_slice(&b.photo, (n, 3, s, s), &dev)?;
-    let render = Tensor::from_slice(&b.render, (n, 3, s, s), &dev)?;
+    let color = Tensor::from_slice(&b.color, (n, 3, s, s), &dev)?;
     let depth = Tensor::from_slice(&b.depth, (n, 1, s, s), &dev)?;
-    Ok(Tensor::cat(&[&photo, &render, &depth], 1)?)
+    Ok(Tensor::cat(&[&photo, &color, &depth], 1)?)
 }
 
 /// Mean triplet loss over anchors, positives and negatives (each B × dim).

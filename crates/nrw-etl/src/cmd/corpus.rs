@@ -22,7 +22,24 @@ pub struct CorpusArgs {
 pub fn run(args: &CorpusArgs) -> Result<()> {
     let entries = nrw_pipeline::corpus::parse_entries(&args.entries)?;
     for r in nrw_pipeline::corpus::index(&args.out, &entries)? {
-        println!("{}", nrw_pipeline::report::corpus_line(&r));
+        println!("{}", corpus_line(&r));
     }
     Ok(())
+}
+
+/// One scene of a corpus index, as `nrw-etl corpus` prints it.
+fn corpus_line(r: &nrw_dataset::corpus::CorpusRow) -> String {
+    match &r.error {
+        Some(e) => format!("{}: {} ({}): {e}", r.name, r.status, r.scene),
+        None => format!(
+            "{}: {}, {} registered, {} kept, {} train / {} val; report {}",
+            r.name,
+            r.status,
+            r.registered.unwrap_or(0),
+            r.kept.unwrap_or(0),
+            r.train.unwrap_or(0),
+            r.val.unwrap_or(0),
+            r.report.as_deref().unwrap_or("-")
+        ),
+    }
 }

@@ -6,6 +6,8 @@ mod architecture;
 mod bad_inputs;
 #[path = "clean.rs"]
 mod clean;
+#[path = "colmap_dense.rs"]
+mod colmap_dense;
 #[path = "golden.rs"]
 mod golden;
 #[path = "jpeg.rs"]

@@ -5,10 +5,12 @@
 
 mod bin;
 pub mod camera;
+pub mod dense;
 pub mod error;
 mod load;
 pub mod model;
 pub mod names;
+pub mod overlap;
 mod parse;
 pub mod ply;
 pub mod pose;

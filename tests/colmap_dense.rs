@@ -1,0 +1,87 @@
+//! COLMAP's dense-workspace files as COLMAP's own script reads and writes them: depth and
+//! normal maps written by `nrw_colmap::dense` equal what `read_write_dense.py` reads, and
+//! maps it writes read back to the same values (tests/colmap_dense.py follows the script).
+
+use std::path::Path;
+
+use nrw_colmap::dense::DenseMap;
+
+use super::python_has;
+
+/// A map whose every value names its pixel and channel, so any transposition shows.
+fn numbered(width: usize, height: usize, channels: usize) -> DenseMap {
+    let mut m = DenseMap::filled(width, height, channels, 0.0);
+    for y in 0..height {
+        for x in 0..width {
+            for c in 0..channels {
+                m.set(x, y, c, (10_000 * c + 100 * y + x) as f32 + 0.25);
+            }
+        }
+    }
+    m
+}
+
+/// The map as a NumPy `.npy` (float32, height × width [× channels], C order), as the
+/// script's `read_array` returns it (one channel squeezed away).
+fn npy(m: &DenseMap, path: &Path) {
+    let shape = if m.channels == 1 {
+        format!("({}, {})", m.height, m.width)
+    } else {
+        format!("({}, {}, {})", m.height, m.width, m.channels)
+    };
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    b.extend_from_slice(header.as_bytes());
+    m.data
+        .iter()
+        .for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
+    std::fs::write(path, b).unwrap();
+}
+
+fn script(args: &[&Path]) -> std::process::Output {
+    std::process::Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/colmap_dense.py"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn depth_and_normal_maps_are_what_colmaps_script_reads_and_writes() {
+    if !python_has("import numpy") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    // A depth map and a normal map, not square, so width and height cannot be swapped.
+    for (w, h, c) in [(5, 3, 1), (4, 7, 3)] {
+        let m = numbered(w, h, c);
+        let (bin, want) = (tmp.path().join("m.bin"), tmp.path().join("m.npy"));
+        std::fs::write(&bin, m.to_bytes()).unwrap();
+        npy(&m, &want);
+        let read = script(&[Path::new("read"), &bin, &want]);
+        assert!(
+            read.status.success(),
+            "{w}×{h}×{c}: {}",
+            String::from_utf8_lossy(&read.stderr)
+        );
+        let theirs = tmp.path().join("theirs.bin");
+        let write = script(&[Path::new("write"), &theirs, &want]);
+        assert!(
+            write.status.success(),
+            "{}",
+            String::from_utf8_lossy(&write.stderr)
+        );
+        let bytes = std::fs::read(&theirs).unwrap();
+        assert_eq!(DenseMap::from_bytes(&bytes, &theirs).unwrap(), m);
+        assert_eq!(
+            bytes,
+            m.to_bytes(),
+            "{w}×{h}×{c}: the same bytes as COLMAP writes"
+        );
+    }
+}

@@ -113,7 +113,7 @@ impl Moto {
             .into_iter()
             .map(|(k, v)| (k.to_ascii_lowercase(), v))
             .collect();
-        let store = nrw_dataset::Store::open_with(url, &opts).unwrap();
+        let store = nrw_dataset::Store::open_with(&url.into(), &opts).unwrap();
         store
             .list("")
             .unwrap()
@@ -269,7 +269,7 @@ fn every_export_layout_on_s3_holds_the_bytes_of_the_local_export_and_replaces_an
         .into_iter()
         .map(|(k, v)| (k.to_ascii_lowercase(), v))
         .collect();
-    let other = nrw_dataset::Store::open_with("s3://nrw/papers", &opts).unwrap();
+    let other = nrw_dataset::Store::open_with(&"s3://nrw/papers".into(), &opts).unwrap();
     other.write("draft.tex", b"keep me".to_vec()).unwrap();
     let e = assert_fails(&export("files", "s3://nrw/papers"));
     assert!(
@@ -306,7 +306,7 @@ fn a_file_larger_than_one_part_uploads_in_parts_and_reads_back_whole() {
         .into_iter()
         .map(|(k, v)| (k.to_ascii_lowercase(), v))
         .collect();
-    let store = nrw_dataset::Store::open_with("s3://nrw/big", &opts).unwrap();
+    let store = nrw_dataset::Store::open_with(&"s3://nrw/big".into(), &opts).unwrap();
     store.upload("a/big.bin", &local).unwrap();
     assert_eq!(store.read("a/big.bin").unwrap().as_ref(), bytes.as_slice());
     // It travelled as three parts, not one PUT (which would also read back whole).

@@ -221,7 +221,7 @@ fn rename_views(ds: &Path, rename: &dyn Fn(&str) -> Option<String>) {
         }
         let path = ds.join(&t.path);
         let file = std::fs::File::open(&path).unwrap();
-        let mut rows = nrw_dataset::reader::views_in(file, &path).unwrap();
+        let mut rows = nrw_dataset::reader::views_in(file, &path.clone().into()).unwrap();
         for r in &mut rows {
             if let Some(n) = rename(&r.name) {
                 r.name = n;

@@ -41,7 +41,10 @@ fn decode_all(
 /// Open a dataset (without the GIL).
 fn open(location: &str, options: &HashMap<String, String>) -> nrw_dataset::Result<reader::Dataset> {
     let pairs: Vec<(String, String)> = options.clone().into_iter().collect();
-    reader::Dataset::open(Store::open_with(location, &pairs)?)
+    reader::Dataset::open(Store::open_with(
+        &nrw_dataset::Location::parse(location),
+        &pairs,
+    )?)
 }
 
 impl Dataset {

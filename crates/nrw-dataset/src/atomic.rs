@@ -75,7 +75,7 @@ fn sweep_stale_temps(dir: &Path) {
 }
 
 /// A function run before each commit with its target.
-pub type CommitHook = Box<dyn Fn(&Path) + Send + Sync>;
+pub type CommitHook = Box<dyn Fn(&crate::Location) + Send + Sync>;
 
 /// What runs before each commit; see [`set_commit_hook`].
 static COMMIT_HOOK: std::sync::OnceLock<CommitHook> = std::sync::OnceLock::new();
@@ -89,7 +89,7 @@ pub fn set_commit_hook(hook: CommitHook) {
 }
 
 /// Run the hook of [`set_commit_hook`] before committing `target` (nothing when unset).
-pub fn before_commit(target: &Path) {
+pub fn before_commit(target: &crate::Location) {
     if let Some(hook) = COMMIT_HOOK.get() {
         hook(target);
     }
@@ -110,7 +110,7 @@ where
         fill(&mut f)?;
         f.flush().map_err(|e| DatasetError::io(&tmp, e))?;
         f.sync_all().map_err(|e| DatasetError::io(&tmp, e))?;
-        before_commit(path);
+        before_commit(&path.into());
         std::fs::rename(&tmp, path).map_err(|e| DatasetError::io(path, e))
     })();
     if result.is_err() {

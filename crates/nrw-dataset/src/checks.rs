@@ -7,7 +7,7 @@ use crate::payload::PayloadMismatch;
 /// payloads; other files have none (their manifest SHA-256 covers them).
 pub fn check_payloads(
     rel: &str,
-    path: &std::path::Path,
+    path: &crate::Location,
     data: bytes::Bytes,
 ) -> Result<Vec<PayloadMismatch>> {
     if crate::views::is_shard(rel) {

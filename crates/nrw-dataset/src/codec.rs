@@ -39,7 +39,7 @@ pub const MAX_PHOTO_PIXELS: u64 = 1 << 28;
 pub fn load_photo(path: &Path) -> Result<RgbImage> {
     let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
     decode_photo(&bytes, MAX_PHOTO_PIXELS).map_err(|problem| DatasetError::Unreadable {
-        path: path.to_path_buf(),
+        path: path.into(),
         problem,
     })
 }
@@ -247,7 +247,7 @@ pub fn decode_png(bytes: &[u8], name: &Path) -> Result<(u32, u32, u8, Vec<u8>)> 
     let img = image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Png)
         .decode()
         .map_err(|e| DatasetError::Schema {
-            path: name.to_path_buf(),
+            path: name.into(),
             problem: format!("not a PNG payload: {e}"),
         })?;
     let ch = img.color().channel_count();

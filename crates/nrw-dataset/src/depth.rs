@@ -67,7 +67,7 @@ pub fn decode_exr(bytes: &[u8], name: &Path) -> Result<DepthMap> {
         .all_attributes()
         .from_buffered(Cursor::new(bytes))
         .map_err(|e| DatasetError::Schema {
-            path: name.to_path_buf(),
+            path: name.into(),
             problem: format!("not a depth EXR: {e}"),
         })?;
     Ok(image.layer_data.channel_data.pixels)
@@ -85,7 +85,7 @@ pub const MAX_EXR_BLOCK_BYTES: usize = 64 << 20;
 fn check_exr_size(bytes: &[u8], name: &Path) -> Result<()> {
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| {
         DatasetError::Schema {
-            path: name.to_path_buf(),
+            path: name.into(),
             problem: format!("not a depth EXR: {e}"),
         }
     })?;
@@ -93,7 +93,7 @@ fn check_exr_size(bytes: &[u8], name: &Path) -> Result<()> {
         // The reader allocates a block's claimed size before reading it.
         if h.max_block_byte_size() > MAX_EXR_BLOCK_BYTES {
             return Err(DatasetError::Schema {
-                path: name.to_path_buf(),
+                path: name.into(),
                 problem: format!(
                     "the depth EXR's blocks would take {} bytes each, more than the {MAX_EXR_BLOCK_BYTES}-byte limit",
                     h.max_block_byte_size()
@@ -103,7 +103,7 @@ fn check_exr_size(bytes: &[u8], name: &Path) -> Result<()> {
         let size = h.layer_size;
         if size.area() > MAX_DEPTH_PIXELS {
             return Err(DatasetError::Schema {
-                path: name.to_path_buf(),
+                path: name.into(),
                 problem: format!(
                     "the depth EXR claims {}x{} pixels, more than the {MAX_DEPTH_PIXELS}-pixel limit",
                     size.x(),

@@ -3,6 +3,7 @@
 //! different kinds can never be mixed silently; parts are written atomically and a rerun
 //! with the same settings skips the parts already there.
 
+use crate::location::Location;
 use crate::store::Store;
 use std::sync::Arc;
 
@@ -117,13 +118,13 @@ pub fn table(dir: &Store) -> Result<Vec<RecordBatch>> {
 /// Rows of a part's bytes whose descriptor does not match its checksum (`path` names the
 /// file).
 pub fn check_part(
-    path: &std::path::Path,
+    path: &Location,
     data: bytes::Bytes,
 ) -> Result<Vec<crate::payload::PayloadMismatch>> {
     let mut out = Vec::new();
     let mut row = 0;
     let cols = ["image_id", "descriptor", "descriptor_crc32"];
-    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), Some(&cols), 1024)? {
+    for b in crate::parquet_io::batches_from(data, path.clone(), Some(&cols), 1024)? {
         let b = b?;
         out.extend(descriptor_mismatches(&b, row, path)?);
         row += b.num_rows();
@@ -134,7 +135,7 @@ pub fn check_part(
 fn descriptor_mismatches(
     b: &RecordBatch,
     first_row: usize,
-    path: &std::path::Path,
+    path: &Location,
 ) -> Result<Vec<crate::payload::PayloadMismatch>> {
     let ids = column::<UInt32Array>(b, "image_id", path)?;
     let desc = column::<ListArray>(b, "descriptor", path)?;
@@ -148,7 +149,7 @@ fn descriptor_mismatches(
 }
 
 /// Row `i`'s descriptor values.
-fn row_values(desc: &ListArray, i: usize, path: &std::path::Path) -> Result<Float32Array> {
+fn row_values(desc: &ListArray, i: usize, path: &Location) -> Result<Float32Array> {
     desc.value(i)
         .as_any()
         .downcast_ref::<Float32Array>()
@@ -233,7 +234,7 @@ pub fn write_part(
 }
 
 /// Every row's kind in a batch holding the kind columns.
-fn kinds_in(b: &RecordBatch, path: &std::path::Path) -> Result<Vec<DescriptorKind>> {
+fn kinds_in(b: &RecordBatch, path: &Location) -> Result<Vec<DescriptorKind>> {
     let (tier, sha, pre) = (
         column::<StringArray>(b, "tier", path)?,
         column::<StringArray>(b, "weights_sha256", path)?,
@@ -267,11 +268,11 @@ pub fn read_part(dir: &Store, rel: &str) -> Result<(Option<DescriptorKind>, Vec<
 /// checked against its CRC-32.
 pub fn part_in<R: parquet::file::reader::ChunkReader + 'static>(
     data: R,
-    path: &std::path::Path,
+    path: &Location,
 ) -> Result<(Option<DescriptorKind>, Vec<DescriptorRow>)> {
     let mut kind: Option<DescriptorKind> = None;
     let mut rows = Vec::new();
-    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, 1024)? {
+    for b in crate::parquet_io::batches_from(data, path.clone(), None, 1024)? {
         let b = b?;
         let crcs = column::<UInt32Array>(&b, "descriptor_crc32", path)?;
         let ids = column::<UInt32Array>(&b, "image_id", path)?;

@@ -1,19 +1,19 @@
 //! Errors of reading and writing dataset files, each naming the file.
 
-use std::path::PathBuf;
+use crate::location::Location;
 
 /// Every way a dataset read or write can fail.
 #[derive(Debug, thiserror::Error)]
 pub enum DatasetError {
-    #[error("{}: {source}", path.display())]
+    #[error("{path}: {source}")]
     Io {
-        path: PathBuf,
+        path: Location,
         #[source]
         source: std::io::Error,
     },
-    #[error("{}: Parquet: {source}", path.display())]
+    #[error("{path}: Parquet: {source}")]
     Parquet {
-        path: PathBuf,
+        path: Location,
         #[source]
         source: parquet::errors::ParquetError,
     },
@@ -23,35 +23,35 @@ pub enum DatasetError {
         #[source]
         source: arrow_schema::ArrowError,
     },
-    #[error("{}: {problem}", path.display())]
-    Schema { path: PathBuf, problem: String },
+    #[error("{path}: {problem}")]
+    Schema { path: Location, problem: String },
     /// A split the dataset does not have (readers map it to a missing key).
-    #[error("{}: no split {split:?}; the dataset has {have:?}", path.display())]
+    #[error("{path}: no split {split:?}; the dataset has {have:?}")]
     NoSplit {
-        path: PathBuf,
+        path: Location,
         split: String,
         have: Vec<String>,
     },
     /// An image id that is not a kept view (never registered, or dropped by the filters).
-    #[error("{}: image {image_id} is not a kept view of this dataset", path.display())]
-    NotKept { path: PathBuf, image_id: u32 },
+    #[error("{path}: image {image_id} is not a kept view of this dataset")]
+    NotKept { path: Location, image_id: u32 },
     /// An object-store URL that cannot be opened (scheme, bucket, options).
     #[error("{url}: cannot open this object-store location: {problem}")]
     Location { url: String, problem: String },
-    #[error("{}: record {record}: field `{field}`: {problem}", path.display())]
+    #[error("{path}: record {record}: field `{field}`: {problem}")]
     Value {
-        path: PathBuf,
+        path: Location,
         record: String,
         field: String,
         problem: String,
     },
     /// A photo or label map whose bytes cannot be decoded whole (truncated, corrupt, not an
     /// image): ingest records the view as `unreadable` instead of storing filled-in pixels.
-    #[error("{}: unreadable: {problem}", path.display())]
-    Unreadable { path: PathBuf, problem: String },
-    #[error("{}: JSON: {source}", path.display())]
+    #[error("{path}: unreadable: {problem}")]
+    Unreadable { path: Location, problem: String },
+    #[error("{path}: JSON: {source}")]
     Json {
-        path: PathBuf,
+        path: Location,
         #[source]
         source: serde_json::Error,
     },
@@ -59,7 +59,7 @@ pub enum DatasetError {
 
 impl DatasetError {
     /// Wrap an I/O error with its file.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<Location>, source: std::io::Error) -> Self {
         DatasetError::Io {
             path: path.into(),
             source,

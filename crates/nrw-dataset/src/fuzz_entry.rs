@@ -3,13 +3,13 @@
 //! definition. Each returns an error for bytes a reader refuses; none may panic or allocate
 //! beyond what the bytes justify.
 
-use std::path::Path;
+use crate::location::Location;
 
 use crate::error::Result;
 
 /// A view shard: Parquet, schema, every payload's CRC-32, then every decoder; the rows read.
 pub fn shard(data: &[u8]) -> Result<usize> {
-    let path = Path::new("fuzz.parquet");
+    let path = &Location::parse("fuzz.parquet");
     let bytes = bytes::Bytes::copy_from_slice(data);
     crate::views::check_shard(path, bytes.clone())?;
     let views = crate::reader::views_in(bytes, path)?;
@@ -84,7 +84,7 @@ pub fn payload(data: &[u8]) -> Result<()> {
 
 /// A descriptor part: every row's CRC-32, then its kind and rows; the rows read.
 pub fn descriptors(data: &[u8]) -> Result<usize> {
-    let path = Path::new("part.parquet");
+    let path = &Location::parse("part.parquet");
     let bytes = bytes::Bytes::copy_from_slice(data);
     crate::descriptors::check_part(path, bytes.clone())?;
     Ok(crate::descriptors::part_in(bytes, path)?.1.len())
@@ -92,7 +92,7 @@ pub fn descriptors(data: &[u8]) -> Result<usize> {
 
 /// A triplets table as the trainer's sampler reads it; the rows read.
 pub fn triplets(data: &[u8]) -> Result<usize> {
-    let path = Path::new("triplets.parquet");
+    let path = &Location::parse("triplets.parquet");
     Ok(crate::triplets::triplets_in(bytes::Bytes::copy_from_slice(data), path)?.len())
 }
 

@@ -11,6 +11,7 @@ pub mod descriptors;
 pub mod error;
 pub mod fuzz_entry;
 pub mod jpeg;
+pub mod location;
 pub mod manifest;
 pub mod panic_guard;
 pub mod parquet_io;
@@ -30,6 +31,7 @@ pub mod units;
 pub mod views;
 
 pub use error::{DatasetError, Result};
+pub use location::Location;
 pub use store::Store;
 
 /// Folder of the QA report inside a dataset by default (derived, not listed in the manifest).

@@ -154,7 +154,7 @@ impl Manifest {
     }
 
     /// Parse a manifest's bytes (`path` names them in errors), refusing other schema versions.
-    pub fn parse(text: &[u8], path: std::path::PathBuf) -> Result<Manifest> {
+    pub fn parse(text: &[u8], path: crate::Location) -> Result<Manifest> {
         let m: Manifest = serde_json::from_slice(text).map_err(|e| DatasetError::Json {
             path: path.clone(),
             source: e,

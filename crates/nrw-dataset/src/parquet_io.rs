@@ -1,7 +1,7 @@
 //! Parquet writing and reading with the dataset's settings (zstd, deterministic bytes),
 //! through the dataset's [`Store`].
 
-use std::path::Path;
+use crate::location::Location;
 
 use arrow_array::RecordBatch;
 use parquet::arrow::ArrowWriter;
@@ -30,9 +30,13 @@ pub fn writer_properties_builder(
 }
 
 /// Encode one batch as Parquet bytes with `props`.
-pub fn encode_batch(name: &Path, batch: &RecordBatch, props: WriterProperties) -> Result<Vec<u8>> {
+pub fn encode_batch(
+    name: &Location,
+    batch: &RecordBatch,
+    props: WriterProperties,
+) -> Result<Vec<u8>> {
     let perr = |e| DatasetError::Parquet {
-        path: name.to_path_buf(),
+        path: name.into(),
         source: e,
     };
     let mut out = Vec::new();
@@ -85,7 +89,7 @@ pub fn batches(
 /// [`batches`] of Parquet bytes already at hand (`path` names them in errors).
 pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
     f: R,
-    path: std::path::PathBuf,
+    path: Location,
     columns: Option<&[&str]>,
     batch_rows: usize,
 ) -> Result<impl Iterator<Item = Result<RecordBatch>>> {
@@ -108,9 +112,9 @@ pub fn batches_from<R: parquet::file::reader::ChunkReader + 'static>(
 /// stops at the first.
 pub fn guarded(
     mut reader: parquet::arrow::arrow_reader::ParquetRecordBatchReader,
-    path: &Path,
+    path: &Location,
 ) -> impl Iterator<Item = Result<RecordBatch>> {
-    let path = path.to_path_buf();
+    let path = path.clone();
     let mut failed = false;
     std::iter::from_fn(move || {
         if failed {
@@ -120,7 +124,7 @@ pub fn guarded(
             Ok(None) => return None,
             Ok(Some(Ok(b))) => return Some(Ok(b)),
             Ok(Some(Err(e))) => DatasetError::Arrow {
-                table: path.display().to_string(),
+                table: path.to_string(),
                 source: e,
             },
             Err(panic) => DatasetError::Schema {
@@ -142,7 +146,7 @@ pub fn check_pages<R: parquet::file::reader::ChunkReader>(
     meta: &parquet::file::metadata::ParquetMetaData,
     groups: Option<&[usize]>,
     columns: Option<&[&str]>,
-    path: &Path,
+    path: &Location,
 ) -> Result<()> {
     use parquet::basic::Type as Physical;
     for (g, rg) in meta.row_groups().iter().enumerate() {
@@ -158,7 +162,7 @@ pub fn check_pages<R: parquet::file::reader::ChunkReader>(
             let bytes = f
                 .get_bytes(start, len as usize)
                 .map_err(|e| DatasetError::Parquet {
-                    path: path.to_path_buf(),
+                    path: path.into(),
                     source: e,
                 })?;
             let min_value_bytes = match c.column_type() {
@@ -170,7 +174,7 @@ pub fn check_pages<R: parquet::file::reader::ChunkReader>(
             };
             crate::thrift_bounds::check_pages(&bytes, min_value_bytes).map_err(|problem| {
                 DatasetError::Schema {
-                    path: path.to_path_buf(),
+                    path: path.into(),
                     problem: format!(
                         "damaged Parquet page: row group {g}, column `{}`: {problem}",
                         c.column_path()
@@ -188,10 +192,10 @@ pub fn check_pages<R: parquet::file::reader::ChunkReader>(
 fn check_footer_of<R: parquet::file::reader::ChunkReader>(
     f: &R,
     len: u64,
-    path: &Path,
+    path: &Location,
 ) -> Result<()> {
     let io = |e: parquet::errors::ParquetError| DatasetError::Parquet {
-        path: path.to_path_buf(),
+        path: path.into(),
         source: e,
     };
     if len < 12 {
@@ -211,7 +215,7 @@ fn check_footer_of<R: parquet::file::reader::ChunkReader>(
 /// panics deep in the reader): such a file is an error naming `path`.
 pub fn reader_builder<R: parquet::file::reader::ChunkReader + 'static>(
     f: R,
-    path: &Path,
+    path: &Location,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
     checked_builder(f, path, Some(&[]), None)
 }
@@ -221,7 +225,7 @@ pub fn reader_builder<R: parquet::file::reader::ChunkReader + 'static>(
 /// decode them uses.
 pub fn checked_builder<R: parquet::file::reader::ChunkReader + 'static>(
     f: R,
-    path: &Path,
+    path: &Location,
     groups: Option<&[usize]>,
     columns: Option<&[&str]>,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
@@ -235,7 +239,7 @@ pub fn checked_builder<R: parquet::file::reader::ChunkReader + 'static>(
 /// decoder read them from memory.
 pub fn prefetched_builder<R: parquet::file::reader::ChunkReader + 'static>(
     f: R,
-    path: &Path,
+    path: &Location,
     groups: &[usize],
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<Prefetched<R>>> {
     let meta = checked_metadata(&f, path)?;
@@ -252,7 +256,7 @@ pub fn prefetched_builder<R: parquet::file::reader::ChunkReader + 'static>(
         Some((lo, hi)) => {
             f.get_bytes(lo, (hi - lo) as usize)
                 .map_err(|e| DatasetError::Parquet {
-                    path: path.to_path_buf(),
+                    path: path.into(),
                     source: e,
                 })?
         }
@@ -323,14 +327,14 @@ impl<R: parquet::file::reader::ChunkReader> parquet::file::reader::ChunkReader f
 /// inside the file.
 fn checked_metadata<R: parquet::file::reader::ChunkReader>(
     f: &R,
-    path: &Path,
+    path: &Location,
 ) -> Result<parquet::file::metadata::ParquetMetaData> {
     let len = f.len();
     check_footer_of(f, len, path)?;
     let meta = parquet::file::metadata::ParquetMetaDataReader::new()
         .parse_and_finish(f)
         .map_err(|e| DatasetError::Parquet {
-            path: path.to_path_buf(),
+            path: path.into(),
             source: e,
         })?;
     for (g, rg) in meta.row_groups().iter().enumerate() {
@@ -344,7 +348,7 @@ fn checked_metadata<R: parquet::file::reader::ChunkReader>(
                     .is_some_and(|end| end <= len);
             if !fits {
                 return Err(DatasetError::Schema {
-                    path: path.to_path_buf(),
+                    path: path.into(),
                     problem: format!(
                         "damaged Parquet footer: row group {g}, column `{}` claims bytes {start}..+{size} of a {len}-byte file",
                         c.column_path()
@@ -360,7 +364,7 @@ fn checked_metadata<R: parquet::file::reader::ChunkReader>(
 fn builder_with<R: parquet::file::reader::ChunkReader + 'static>(
     f: R,
     meta: parquet::file::metadata::ParquetMetaData,
-    path: &Path,
+    path: &Location,
 ) -> Result<parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<R>> {
     use parquet::arrow::arrow_reader::{
         ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder,
@@ -368,18 +372,18 @@ fn builder_with<R: parquet::file::reader::ChunkReader + 'static>(
     let meta =
         ArrowReaderMetadata::try_new(std::sync::Arc::new(meta), ArrowReaderOptions::default())
             .map_err(|e| DatasetError::Parquet {
-                path: path.to_path_buf(),
+                path: path.into(),
                 source: e,
             })?;
     Ok(ParquetRecordBatchReaderBuilder::new_with_metadata(f, meta))
 }
 
 /// A column of a batch as its concrete Arrow type, or an error naming file and column.
-pub fn column<'a, T: 'static>(b: &'a RecordBatch, name: &str, path: &Path) -> Result<&'a T> {
+pub fn column<'a, T: 'static>(b: &'a RecordBatch, name: &str, path: &Location) -> Result<&'a T> {
     b.column_by_name(name)
         .and_then(|c| c.as_any().downcast_ref::<T>())
         .ok_or_else(|| DatasetError::Schema {
-            path: path.to_path_buf(),
+            path: path.into(),
             problem: format!("column `{name}` is missing or of another type"),
         })
 }

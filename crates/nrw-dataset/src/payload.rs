@@ -2,6 +2,7 @@
 //! with it, and every reader checks it before use. Shared by the view shards and the
 //! descriptor parts.
 
+use crate::location::Location;
 use arrow_array::{RecordBatch, UInt32Array};
 
 use crate::error::{DatasetError, Result};
@@ -31,10 +32,10 @@ pub struct PayloadMismatch {
 
 impl PayloadMismatch {
     /// The mismatch as the error every reader returns.
-    pub fn error(&self, path: &std::path::Path) -> DatasetError {
+    pub fn error(&self, path: &Location) -> DatasetError {
         let hex = |c: Option<u32>| c.map_or("none".to_string(), |c| format!("{c:08x}"));
         DatasetError::Value {
-            path: path.to_path_buf(),
+            path: path.into(),
             record: format!("row {} (image {})", self.row, self.image_id),
             field: self.column.clone(),
             problem: format!(
@@ -52,7 +53,7 @@ pub fn payload_mismatches(
     b: &RecordBatch,
     rows: &[usize],
     column: &str,
-    path: &std::path::Path,
+    path: &Location,
 ) -> Result<Vec<PayloadMismatch>> {
     use arrow_array::{Array, BinaryArray};
     if b.column_by_name(column).is_none() {

@@ -86,7 +86,7 @@ pub fn to_parameters<T: Serialize>(value: &T) -> Parameters {
 /// The typed parameters in `map` (other stages' keys are ignored); an error names `file`
 /// (where the map was read from) and the field.
 pub fn from_parameters<T: for<'de> Deserialize<'de>>(
-    file: &std::path::Path,
+    file: &crate::Location,
     map: &Parameters,
 ) -> Result<T> {
     serde_json::from_value(serde_json::Value::Object(map.clone())).map_err(|e| {
@@ -131,10 +131,10 @@ mod tests {
         assert_eq!(m["undistort"]["max_image_size"], serde_json::Value::Null);
         // Another stage's keys in the same map are ignored.
         m.insert("tier".into(), "official".into());
-        let back: IngestParameters = from_parameters(std::path::Path::new("m"), &m).unwrap();
+        let back: IngestParameters = from_parameters(&"m".into(), &m).unwrap();
         assert_eq!(back, p);
         m.remove("max_empty");
-        let e = from_parameters::<IngestParameters>(std::path::Path::new("manifest.json"), &m)
+        let e = from_parameters::<IngestParameters>(&"manifest.json".into(), &m)
             .unwrap_err()
             .to_string();
         assert!(

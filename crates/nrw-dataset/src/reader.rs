@@ -6,6 +6,7 @@
 //! are read row group by row group with a row selection, so rows of other splits are skipped
 //! before any PNG or EXR is decoded.
 
+use crate::location::Location;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
@@ -49,7 +50,7 @@ impl ViewRow {
     /// bytes can neither allocate more than the view needs nor give an image of another size.
     fn decode_image(&self, bytes: &[u8], what: &str) -> Result<image::DynamicImage> {
         let err = |problem: String| DatasetError::Value {
-            path: PathBuf::from(&self.name),
+            path: Location::Local(PathBuf::from(&self.name)),
             record: format!("image {}", self.image_id),
             field: what.into(),
             problem,
@@ -90,7 +91,7 @@ impl ViewRow {
         let d = decode_exr(&self.depth_exr, Path::new(&self.name))?;
         if (d.width, d.height) != (self.width as usize, self.height as usize) {
             return Err(DatasetError::Value {
-                path: PathBuf::from(&self.name),
+                path: Location::Local(PathBuf::from(&self.name)),
                 record: format!("image {}", self.image_id),
                 field: crate::views::columns::DEPTH_EXR.into(),
                 problem: format!(
@@ -153,7 +154,7 @@ impl ViewRow {
     pub fn crop_at(&self, x: u32, y: u32, size: u32) -> Result<Crop> {
         if x + size > self.width || y + size > self.height {
             return Err(DatasetError::Value {
-                path: PathBuf::from(&self.name),
+                path: Location::Local(PathBuf::from(&self.name)),
                 record: format!("image {}", self.image_id),
                 field: "crop".into(),
                 problem: format!(
@@ -198,7 +199,7 @@ impl ViewRow {
 
 /// Where a view lives: shard file and row inside it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Location {
+struct RowAt {
     shard: usize,
     row: usize,
 }
@@ -206,21 +207,21 @@ struct Location {
 /// An opened dataset.
 #[derive(Debug)]
 pub struct Dataset {
-    /// Where the dataset is (a folder or a URL), to show.
-    pub dir: PathBuf,
+    /// Where the dataset is (a folder or a URL).
+    pub dir: Location,
     /// Its files.
     pub store: Store,
     pub manifest: Manifest,
     shards: Vec<String>,
     sizes: Vec<u64>,
-    index: HashMap<u32, Location>,
+    index: HashMap<u32, RowAt>,
     /// split name → image ids (sorted).
     splits: BTreeMap<String, Vec<u32>>,
 }
 
-fn parquet_err(path: &Path) -> impl Fn(parquet::errors::ParquetError) -> DatasetError + '_ {
+fn parquet_err(path: &Location) -> impl Fn(parquet::errors::ParquetError) -> DatasetError + '_ {
     move |e| DatasetError::Parquet {
-        path: path.to_path_buf(),
+        path: path.into(),
         source: e,
     }
 }
@@ -262,7 +263,7 @@ impl Dataset {
                 let batch = batch?;
                 let ids = column::<UInt32Array>(&batch, crate::views::columns::IMAGE_ID, &path)?;
                 for i in 0..ids.len() {
-                    index.insert(ids.value(i), Location { shard: s, row });
+                    index.insert(ids.value(i), RowAt { shard: s, row });
                     row += 1;
                 }
             }
@@ -336,7 +337,7 @@ impl Dataset {
 
     /// Every kept view's image id, in shard and row order (the order files hold them).
     pub fn all_ids(&self) -> Vec<u32> {
-        let mut ids: Vec<(Location, u32)> = self.index.iter().map(|(id, l)| (*l, *id)).collect();
+        let mut ids: Vec<(RowAt, u32)> = self.index.iter().map(|(id, l)| (*l, *id)).collect();
         ids.sort_unstable_by_key(|(l, _)| (l.shard, l.row));
         ids.into_iter().map(|(_, id)| id).collect()
     }
@@ -490,10 +491,10 @@ impl GroupRead {
 /// its CRC-32: a shard read whole, without a dataset around it.
 pub fn views_in<R: parquet::file::reader::ChunkReader + 'static>(
     data: R,
-    path: &Path,
+    path: &Location,
 ) -> Result<Vec<ViewRow>> {
     let mut out: Vec<ViewRow> = Vec::new();
-    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, ROW_GROUP_ROWS)? {
+    for b in crate::parquet_io::batches_from(data, path.clone(), None, ROW_GROUP_ROWS)? {
         let b = b?;
         let rows: Vec<usize> = (out.len()..out.len() + b.num_rows()).collect();
         out.extend(views_of(&b, &rows, path)?);
@@ -503,7 +504,7 @@ pub fn views_in<R: parquet::file::reader::ChunkReader + 'static>(
 
 /// The views of a batch whose row i is row `rows[i]` of the shard at `path`, every payload
 /// checked against its checksum first.
-fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<ViewRow>> {
+fn views_of(b: &RecordBatch, rows: &[usize], path: &Location) -> Result<Vec<ViewRow>> {
     use crate::views::columns as col;
     for c in crate::views::PAYLOAD_COLUMNS {
         if let Some(m) = crate::views::payload_mismatches(b, rows, c, path)?.first() {
@@ -543,7 +544,7 @@ fn views_of(b: &RecordBatch, rows: &[usize], path: &Path) -> Result<Vec<ViewRow>
             .as_any()
             .downcast_ref::<Float64Array>()
             .ok_or_else(|| DatasetError::Schema {
-                path: path.to_path_buf(),
+                path: path.into(),
                 problem: "params are not float64".into(),
             })?;
         out.push(ViewRow {

@@ -60,7 +60,7 @@ impl TableDoc {
     pub fn load(path: &Path) -> Result<TableDoc> {
         let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
         toml::from_str(&text).map_err(|e| DatasetError::Schema {
-            path: path.to_path_buf(),
+            path: path.into(),
             problem: e.to_string(),
         })
     }
@@ -72,7 +72,7 @@ impl TableDoc {
             .iter()
             .map(|f| {
                 let ty = parse_type(&f.ty).ok_or_else(|| DatasetError::Schema {
-                    path: path.to_path_buf(),
+                    path: path.into(),
                     problem: format!("field `{}`: unknown type {:?}", f.name, f.ty),
                 })?;
                 Ok(Field::new(&f.name, ty, f.nullable))

@@ -59,7 +59,7 @@ pub fn label_path(dir: &Path, photo: &str) -> Result<std::path::PathBuf> {
     let rel = Path::new(photo).with_extension("png");
     nrw_colmap::names::join_checked(dir, &rel.to_string_lossy()).map_err(|problem| {
         DatasetError::Value {
-            path: dir.to_path_buf(),
+            path: dir.into(),
             record: format!("label map of photo {photo:?}"),
             field: "name".into(),
             problem,
@@ -75,13 +75,13 @@ pub fn load_labels(path: &Path, width: u32, height: u32) -> Result<GrayImage> {
     let img =
         image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|e| {
             DatasetError::Unreadable {
-                path: path.to_path_buf(),
+                path: path.into(),
                 problem: format!("label map (PNG): {e}"),
             }
         })?;
     if img.color() != image::ColorType::L8 {
         return Err(DatasetError::Schema {
-            path: path.to_path_buf(),
+            path: path.into(),
             problem: format!(
                 "label map must be 8-bit single-channel class ids, found {:?}",
                 img.color()
@@ -91,7 +91,7 @@ pub fn load_labels(path: &Path, width: u32, height: u32) -> Result<GrayImage> {
     let g = img.into_luma8();
     if (g.width(), g.height()) != (width, height) {
         return Err(DatasetError::Schema {
-            path: path.to_path_buf(),
+            path: path.into(),
             problem: format!(
                 "label map is {}x{} but its photo is {width}x{height}",
                 g.width(),
@@ -101,7 +101,7 @@ pub fn load_labels(path: &Path, width: u32, height: u32) -> Result<GrayImage> {
     }
     if let Some(bad) = g.as_raw().iter().find(|&&c| c as usize >= classes().len()) {
         return Err(DatasetError::Schema {
-            path: path.to_path_buf(),
+            path: path.into(),
             problem: format!("class id {bad} is not an ADE20K id (0–150)"),
         });
     }

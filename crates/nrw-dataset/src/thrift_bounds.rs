@@ -5,7 +5,7 @@
 //! walks read no values: every count must fit in the bytes that remain, every page in its
 //! column chunk, and a page's claims within [`MAX_PAGE_BYTES`] and its own size.
 
-use std::path::Path;
+use crate::location::Location;
 
 use crate::error::{DatasetError, Result};
 
@@ -205,9 +205,9 @@ pub fn check_pages(chunk: &[u8], min_value_bytes: i64) -> std::result::Result<()
 
 /// Check the footer (FileMetaData) of a Parquet file's last bytes: `footer` is the Thrift
 /// metadata, without the length and magic that follow it.
-pub fn check_footer(footer: &[u8], path: &Path) -> Result<()> {
+pub fn check_footer(footer: &[u8], path: &Location) -> Result<()> {
     walk_file_metadata(footer).map_err(|problem| DatasetError::Schema {
-        path: path.to_path_buf(),
+        path: path.into(),
         problem: format!("damaged Parquet footer: {problem}"),
     })
 }
@@ -287,8 +287,12 @@ mod tests {
             ("c", std::sync::Arc::new(list) as _),
         ])
         .unwrap();
-        crate::parquet_io::encode_batch(Path::new("t"), &b, crate::parquet_io::writer_properties(8))
-            .unwrap()
+        crate::parquet_io::encode_batch(
+            &crate::Location::parse("t"),
+            &b,
+            crate::parquet_io::writer_properties(8),
+        )
+        .unwrap()
     }
 
     #[test]

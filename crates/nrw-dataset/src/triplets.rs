@@ -1,7 +1,7 @@
 //! `triplets.parquet`: per anchor photo, its k nearest and k furthest photos under the style
 //! distance, in order, with squared distances: what appearance pretraining samples from.
 
-use std::path::Path;
+use crate::location::Location;
 
 use crate::store::Store;
 use std::sync::Arc;
@@ -142,15 +142,15 @@ pub fn table(dir: &Store) -> Result<Option<Vec<arrow_array::RecordBatch>>> {
 /// The rows of a triplets table's bytes (`path` names them in errors).
 pub fn triplets_in<R: parquet::file::reader::ChunkReader + 'static>(
     data: R,
-    path: &Path,
+    path: &Location,
 ) -> Result<Vec<TripletRow>> {
     use crate::parquet_io::column;
     use arrow_array::types::{Float64Type, UInt32Type};
     use arrow_array::ListArray;
     let mut out = Vec::new();
-    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, 1024)? {
+    for b in crate::parquet_io::batches_from(data, path.clone(), None, 1024)? {
         let b = b?;
-        let path = path.to_path_buf();
+        let path = path.clone();
         let anchors = column::<UInt32Array>(&b, "anchor_id", &path)?;
         let names = column::<StringArray>(&b, "anchor_name", &path)?;
         let lists = |name: &str| column::<ListArray>(&b, name, &path);
@@ -179,14 +179,14 @@ fn list_values<T: arrow_array::ArrowPrimitiveType>(
     l: &arrow_array::ListArray,
     i: usize,
     name: &str,
-    path: &Path,
+    path: &Location,
 ) -> Result<Vec<T::Native>> {
     let v = l.value(i);
     let a = v
         .as_any()
         .downcast_ref::<arrow_array::PrimitiveArray<T>>()
         .ok_or_else(|| DatasetError::Schema {
-            path: path.to_path_buf(),
+            path: path.into(),
             problem: format!("column `{name}` does not hold {} lists", T::DATA_TYPE),
         })?;
     Ok(a.values().to_vec())

@@ -4,6 +4,7 @@
 //! Shards are small (default 64 rows) with row groups of 8 rows, so a reader streams them
 //! and random access costs one small row group.
 
+use crate::location::Location;
 use crate::store::Store;
 use std::sync::Arc;
 
@@ -266,10 +267,10 @@ fn write_shard_batch(dir: &Store, rel: &str, b: RecordBatch) -> Result<FileEntry
 
 /// Every payload of a shard's bytes checked against its checksum (what `verify` runs), a
 /// row group at a time; `path` names the file.
-pub fn check_shard(path: &std::path::Path, data: bytes::Bytes) -> Result<Vec<PayloadMismatch>> {
+pub fn check_shard(path: &Location, data: bytes::Bytes) -> Result<Vec<PayloadMismatch>> {
     let mut out = Vec::new();
     let mut row = 0;
-    for b in crate::parquet_io::batches_from(data, path.to_path_buf(), None, ROW_GROUP_ROWS)? {
+    for b in crate::parquet_io::batches_from(data, path.clone(), None, ROW_GROUP_ROWS)? {
         let b = b?;
         let rows: Vec<usize> = (row..row + b.num_rows()).collect();
         for c in PAYLOAD_COLUMNS {

@@ -70,10 +70,7 @@ fn main() -> std::process::ExitCode {
     if let Some(ms) = cli.pause_before_commit_ms {
         // Announced on stderr, so a kill test knows which commit it is at.
         nrw_dataset::atomic::set_commit_hook(Box::new(move |target| {
-            eprintln!(
-                "nrw-etl: pausing {ms} ms before committing {}",
-                target.display()
-            );
+            eprintln!("nrw-etl: pausing {ms} ms before committing {}", target);
             std::thread::sleep(std::time::Duration::from_millis(ms));
         }));
     }

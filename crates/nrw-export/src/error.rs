@@ -1,7 +1,5 @@
 //! Errors of an export, each naming the file or folder and, for a value, the record and field.
 
-use std::path::PathBuf;
-
 /// Every way an export can fail.
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
@@ -9,19 +7,22 @@ pub enum ExportError {
     #[error(transparent)]
     Dataset(#[from] nrw_dataset::DatasetError),
     /// The export cannot be made as asked: the folder, the settings or the dataset.
-    #[error("{}: {problem}", path.display())]
-    Refused { path: PathBuf, problem: String },
+    #[error("{path}: {problem}")]
+    Refused {
+        path: nrw_dataset::Location,
+        problem: String,
+    },
     /// One value of one record cannot be exported (a name, a camera, a pose).
-    #[error("{}: record {record}: field `{field}`: {problem}", path.display())]
+    #[error("{path}: record {record}: field `{field}`: {problem}")]
     Value {
-        path: PathBuf,
+        path: nrw_dataset::Location,
         record: String,
         field: String,
         problem: String,
     },
-    #[error("{}: {source}", path.display())]
+    #[error("{path}: {source}")]
     Io {
-        path: PathBuf,
+        path: nrw_dataset::Location,
         #[source]
         source: std::io::Error,
     },
@@ -29,7 +30,7 @@ pub enum ExportError {
 
 impl ExportError {
     /// Wrap an I/O error with its file.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<nrw_dataset::Location>, source: std::io::Error) -> Self {
         ExportError::Io {
             path: path.into(),
             source,
@@ -37,7 +38,7 @@ impl ExportError {
     }
 
     /// The export refused, naming `path`.
-    pub fn refused(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
+    pub fn refused(path: impl Into<nrw_dataset::Location>, problem: impl Into<String>) -> Self {
         ExportError::Refused {
             path: path.into(),
             problem: problem.into(),

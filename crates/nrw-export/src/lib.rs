@@ -73,7 +73,7 @@ pub fn export(
     let layout = writer_of(cfg.layout);
     layout.check(&job)?;
     let staged = staging::Staged::new(&cfg.out)?;
-    let mut summary = ExportSummary::begin(&ds.dir.display().to_string(), cfg);
+    let mut summary = ExportSummary::begin(&ds.dir.to_string(), cfg);
     let written = layout.write(&job, &staged, &mut summary).and_then(|()| {
         staged.write(
             EXPORT_JSON,

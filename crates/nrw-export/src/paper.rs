@@ -137,7 +137,7 @@ impl Paper {
 /// A view without labels, with the two ways forward.
 fn no_semantics(v: &ViewRow) -> ExportError {
     ExportError::Value {
-        path: PathBuf::from(&v.name),
+        path: PathBuf::from(&v.name).into(),
         record: format!("image {}", v.image_id),
         field: "labels_png".into(),
         problem: "the dataset has no semantic labels, and the published code reads *_seg_rgb.png by default: ingest with `ingest.semantics` LABELS_DIR, or export without labels (`export.semantics`) and train with --use_semantic=False --deep_buffer_nc=4 (RGB and depth)".into(),

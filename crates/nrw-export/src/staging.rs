@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use nrw_dataset::Store;
+use nrw_dataset::{Location, Store};
 
 use crate::error::{ExportError, Result};
 
@@ -19,7 +19,7 @@ pub const EXPORT_JSON: &str = "export.json";
 /// Where a finished export goes.
 enum Destination {
     /// A local folder: the staging folder is renamed to it.
-    Folder,
+    Folder(PathBuf),
     /// An object-store prefix: the staged files are uploaded under it; `earlier` lists what
     /// it held when the export began (listed once, to check and then to clean up).
     Remote { store: Store, earlier: Vec<String> },
@@ -32,7 +32,7 @@ enum Destination {
 pub struct Staged {
     dir: PathBuf,
     /// The export's destination, named in messages (the hidden folder means nothing to a user).
-    out: PathBuf,
+    out: Location,
     dest: Destination,
     claimed: Mutex<HashMap<String, String>>,
 }
@@ -40,19 +40,21 @@ pub struct Staged {
 impl Staged {
     /// Check the destination `out` (a folder or an object-store URL) and make the hidden
     /// folder the export is built in.
-    pub fn new(out: &Path) -> Result<Staged> {
-        let text = out.to_string_lossy();
-        let (dir, dest) = if nrw_dataset::store::is_url(&text) {
-            let store = Store::open(&text)?;
-            let earlier = store.list("")?;
-            refuse_foreign(out, &earlier, |k| k == EXPORT_JSON)?;
-            (remote_staging()?, Destination::Remote { store, earlier })
-        } else {
-            (local_staging(out)?, Destination::Folder)
+    pub fn new(out: &Location) -> Result<Staged> {
+        let (dir, dest) = match out {
+            Location::Url(_) => {
+                let store = Store::open(out)?;
+                let earlier = store.list("")?;
+                refuse_foreign(out, &earlier, |k| k == EXPORT_JSON)?;
+                (remote_staging()?, Destination::Remote { store, earlier })
+            }
+            Location::Local(folder) => {
+                (local_staging(folder)?, Destination::Folder(folder.clone()))
+            }
         };
         Ok(Staged {
             dir,
-            out: out.into(),
+            out: out.clone(),
             dest,
             claimed: Default::default(),
         })
@@ -65,7 +67,7 @@ impl Staged {
     }
 
     /// The destination as the user gave it.
-    pub fn out(&self) -> &Path {
+    pub fn out(&self) -> &Location {
         &self.out
     }
 
@@ -117,7 +119,7 @@ impl Staged {
     /// Make the finished export visible at its destination, replacing an earlier one whole.
     pub fn publish(self) -> Result<()> {
         let published = match &self.dest {
-            Destination::Folder => rename_into_place(&self.dir, &self.out),
+            Destination::Folder(folder) => rename_into_place(&self.dir, folder),
             Destination::Remote { store, earlier } => upload(&self.dir, store, earlier),
         };
         if published.is_ok() && self.dir.exists() {
@@ -134,7 +136,11 @@ impl Staged {
 
 /// Refuse a non-empty destination that is not an earlier export (`has_marker` tells whether a
 /// listed name is its `export.json`).
-fn refuse_foreign(out: &Path, names: &[String], has_marker: impl Fn(&str) -> bool) -> Result<()> {
+fn refuse_foreign(
+    out: &Location,
+    names: &[String],
+    has_marker: impl Fn(&str) -> bool,
+) -> Result<()> {
     if names.is_empty() || names.iter().any(|n| has_marker(n)) {
         return Ok(());
     }
@@ -159,7 +165,9 @@ fn local_staging(out: &Path) -> Result<PathBuf> {
             .flatten()
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .collect();
-        refuse_foreign(out, &names, |n| n == EXPORT_JSON && out.join(n).is_file())?;
+        refuse_foreign(&out.into(), &names, |n| {
+            n == EXPORT_JSON && out.join(n).is_file()
+        })?;
     }
     let parent = match out.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -202,7 +210,7 @@ fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
             .to_string_lossy()
             .replace(".export-new-", ".export-old-"),
     );
-    nrw_dataset::atomic::before_commit(out);
+    nrw_dataset::atomic::before_commit(&out.into());
     if out.exists() {
         std::fs::rename(out, &old).map_err(|e| ExportError::io(out, e))?;
     }
@@ -231,7 +239,7 @@ fn upload(staged: &Path, store: &Store, earlier: &[String]) -> Result<()> {
 }
 
 /// An output file name refused, naming the export folder.
-fn name_error(out: &Path, problem: String) -> ExportError {
+fn name_error(out: &Location, problem: String) -> ExportError {
     ExportError::Value {
         path: out.into(),
         record: "output file".into(),
@@ -245,7 +253,7 @@ fn name_error(out: &Path, problem: String) -> ExportError {
 /// [`Staged::claim`]), so no name from a dataset (or an export's `--name`) can put a file
 /// outside the export folder.
 pub fn join_under(root: &Path, rel: &str) -> Result<PathBuf> {
-    nrw_colmap::names::join_checked(root, rel).map_err(|problem| name_error(root, problem))
+    nrw_colmap::names::join_checked(root, rel).map_err(|problem| name_error(&root.into(), problem))
 }
 
 /// Write a file, creating its folders.

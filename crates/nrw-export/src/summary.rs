@@ -1,8 +1,6 @@
 //! What to export (`ExportConfig`) and what an export wrote (`ExportSummary`, which is also
 //! `export.json`).
 
-use std::path::PathBuf;
-
 use serde::Serialize;
 
 use crate::published::{DepthMapping, DepthScale};
@@ -14,7 +12,7 @@ pub struct ExportConfig {
     pub layout: Layout,
     /// Destination: a folder (created, or replaced whole when it holds an earlier export) or
     /// an `s3://`, `gs://` or `az://` URL (the same files, uploaded).
-    pub out: PathBuf,
+    pub out: nrw_dataset::Location,
     /// The dataset name the published code is run with (`--dataset_name`): TFRecord and
     /// distance-matrix file names.
     pub name: String,
@@ -31,7 +29,7 @@ pub struct ExportConfig {
 
 impl ExportConfig {
     /// The paper's layout with the defaults the published code runs with.
-    pub fn official(out: PathBuf, name: String) -> Self {
+    pub fn official(out: nrw_dataset::Location, name: String) -> Self {
         ExportConfig {
             layout: Layout::Official,
             out,

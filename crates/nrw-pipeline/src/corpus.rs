@@ -42,7 +42,7 @@ fn count(v: &serde_json::Value, key: &str) -> Option<u64> {
 /// The row of a scene whose pipeline finished: its dataset's QA figures, or a failed row
 /// naming the figures that could not be read.
 fn finished(e: &CorpusEntry, base: CorpusRow) -> CorpusRow {
-    let figures = Store::open(&e.dataset)
+    let figures = Store::open(&nrw_dataset::Location::parse(&e.dataset))
         .and_then(|s| s.sub(nrw_dataset::QA_DIR))
         .and_then(|qa| qa.read(nrw_qa::QA_JSON).map(|b| (qa, b)));
     let (qa, bytes) = match figures {
@@ -60,13 +60,13 @@ fn finished(e: &CorpusEntry, base: CorpusRow) -> CorpusRow {
         Err(err) => {
             return CorpusRow {
                 status: STATUS_FAILED.into(),
-                error: Some(format!("{}: {err}", qa.name(nrw_qa::QA_JSON).display())),
+                error: Some(format!("{}: {err}", qa.name(nrw_qa::QA_JSON))),
                 ..base
             }
         }
     };
     CorpusRow {
-        report: Some(qa.name(nrw_qa::REPORT_FILE).display().to_string()),
+        report: Some(qa.name(nrw_qa::REPORT_FILE).to_string()),
         status: STATUS_OK.into(),
         registered: count(&v, "registered"),
         kept: count(&v, "kept"),
@@ -101,6 +101,6 @@ pub fn index(out: &str, entries: &[CorpusEntry]) -> Result<Vec<CorpusRow>> {
             }
         })
         .collect();
-    write_corpus(&Store::open(out)?, &rows)?;
+    write_corpus(&Store::open(&nrw_dataset::Location::parse(out))?, &rows)?;
     Ok(rows)
 }

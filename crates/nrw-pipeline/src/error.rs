@@ -48,14 +48,23 @@ pub enum PipelineError {
         source: toml::de::Error,
     },
     /// An input file or folder that cannot serve (missing, inconsistent with the model, …).
-    #[error("{}: {problem}", path.display())]
-    Input { path: PathBuf, problem: String },
+    #[error("{path}: {problem}")]
+    Input {
+        path: nrw_dataset::Location,
+        problem: String,
+    },
     /// A stage needs an earlier stage's output, or a non-empty dataset.
-    #[error("{}: {problem}", dataset.display())]
-    NotReady { dataset: PathBuf, problem: String },
+    #[error("{dataset}: {problem}")]
+    NotReady {
+        dataset: nrw_dataset::Location,
+        problem: String,
+    },
     /// Work units that cannot be merged (missing, or run with other parameters).
-    #[error("{}: {problem}", dataset.display())]
-    Units { dataset: PathBuf, problem: String },
+    #[error("{dataset}: {problem}")]
+    Units {
+        dataset: nrw_dataset::Location,
+        problem: String,
+    },
     /// Style descriptors could not be computed for a photo.
     #[error("photo {name} (image {image_id}): {source}")]
     Style {
@@ -217,7 +226,7 @@ impl PipelineError {
     }
 
     /// A problem with an input file or folder.
-    pub fn input(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
+    pub fn input(path: impl Into<nrw_dataset::Location>, problem: impl Into<String>) -> Self {
         PipelineError::Input {
             path: path.into(),
             problem: problem.into(),
@@ -225,7 +234,7 @@ impl PipelineError {
     }
 
     /// A dataset that lacks what the stage needs.
-    pub fn dataset(dataset: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
+    pub fn dataset(dataset: impl Into<nrw_dataset::Location>, problem: impl Into<String>) -> Self {
         PipelineError::NotReady {
             dataset: dataset.into(),
             problem: problem.into(),

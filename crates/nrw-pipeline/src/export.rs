@@ -2,39 +2,36 @@
 //! `nrw_export`); this supplies what the layouts need from other stages (the style distance
 //! matrix, the scene's points) and the default name.
 
-use std::path::Path;
-
 use nrw_export::{ExportConfig, ExportSummary};
 
 use crate::error::Result;
 use crate::Progress;
 
 /// The export's default name: the dataset folder's.
-pub fn default_name(dataset: &Path) -> String {
-    std::fs::canonicalize(dataset)
-        .ok()
-        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .or_else(|| {
-            dataset
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-        })
+pub fn default_name(dataset: &nrw_dataset::Location) -> String {
+    let folder = match dataset {
+        nrw_dataset::Location::Local(d) => std::fs::canonicalize(d)
+            .ok()
+            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .or_else(|| d.file_name().map(|n| n.to_string_lossy().into_owned())),
+        nrw_dataset::Location::Url(u) => u.rsplit('/').next().map(str::to_string),
+    };
+    folder
+        .filter(|n| !n.is_empty())
         .unwrap_or_else(|| "dataset".into())
 }
 
-/// The official export of a dataset into `out` with the defaults (name, linear depth, one
-/// shard, semantics when present).
-pub fn official(dataset: &Path, out: &Path) -> ExportConfig {
-    ExportConfig::official(out.into(), default_name(dataset))
+pub fn official(dataset: &nrw_dataset::Location, out: &nrw_dataset::Location) -> ExportConfig {
+    ExportConfig::official(out.clone(), default_name(dataset))
 }
 
 /// Export `dataset` as `cfg` says.
 pub fn export(
-    dataset: &Path,
+    dataset: &nrw_dataset::Location,
     cfg: &ExportConfig,
     progress: &dyn Progress,
 ) -> Result<ExportSummary> {
-    let store = &nrw_dataset::Store::open_path(dataset)?;
+    let store = &nrw_dataset::Store::open(dataset)?;
     crate::timing::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();

@@ -67,7 +67,7 @@ pub fn finalize(dataset: &Store) -> Result<FinalizeSummary> {
         }
     }
     let mut summary = FinalizeSummary {
-        dataset: dataset.root().display().to_string(),
+        dataset: dataset.root().to_string(),
         ..FinalizeSummary::default()
     };
     for step in &STEPS {

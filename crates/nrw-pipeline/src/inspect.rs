@@ -69,25 +69,23 @@ pub enum Inspected {
 
 /// Summarise `location`: a dataset when it is a URL or holds a manifest, else the COLMAP
 /// model of a scene folder (or a model folder itself), read as `format` when given.
-pub fn inspect(location: &Path, format: Option<Format>) -> Result<Inspected> {
-    let is_dataset = nrw_dataset::store::is_url(&location.to_string_lossy())
-        || location.join(nrw_dataset::Manifest::FILE).is_file();
-    Ok(if is_dataset {
-        Inspected::Dataset(dataset_summary(location)?)
-    } else {
-        Inspected::Model(model_summary(location, format)?)
-    })
+pub fn inspect(location: &nrw_dataset::Location, format: Option<Format>) -> Result<Inspected> {
+    let folder = match location {
+        nrw_dataset::Location::Local(f) if !f.join(nrw_dataset::Manifest::FILE).is_file() => f,
+        _ => return Ok(Inspected::Dataset(dataset_summary(location)?)),
+    };
+    Ok(Inspected::Model(model_summary(folder, format)?))
 }
 
-fn dataset_summary(location: &Path) -> Result<DatasetSummary> {
-    let ds = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open_path(location)?)?;
+fn dataset_summary(location: &nrw_dataset::Location) -> Result<DatasetSummary> {
+    let ds = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open(location)?)?;
     let verdicts = nrw_dataset::scene::read_verdicts(&ds.store)?;
     let mut counts = BTreeMap::new();
     for (_, _, v) in &verdicts {
         *counts.entry(v.clone()).or_insert(0usize) += 1;
     }
     Ok(DatasetSummary {
-        dataset: location.display().to_string(),
+        dataset: location.to_string(),
         schema_version: ds.manifest.schema_version,
         registered: verdicts.len(),
         verdicts: counts,

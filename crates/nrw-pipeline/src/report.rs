@@ -5,7 +5,7 @@
 //! stages. Nothing here prints.
 
 use nrw_dataset::split::TRAIN;
-use std::path::Path;
+use nrw_dataset::Location;
 
 use nrw_export::{ExportSummary, Layout};
 
@@ -106,7 +106,7 @@ pub fn ingest_unit(s: &UnitSummary) -> Report {
 }
 
 /// What was exported, what was skipped, and the style distances.
-pub fn export(dataset: &Path, out: &Path, s: &ExportSummary) -> Report {
+pub fn export(dataset: &Location, out: &Location, s: &ExportSummary) -> Report {
     let mut r = Report::default();
     let per: Vec<String> = s
         .splits
@@ -117,8 +117,8 @@ pub fn export(dataset: &Path, out: &Path, s: &ExportSummary) -> Report {
         "exported {} views ({}) of {} to {} ({} layout)",
         s.views(),
         per.join(", "),
-        dataset.display(),
-        out.display(),
+        dataset,
+        out,
         s.layout
     ));
     for k in &s.skipped {
@@ -146,7 +146,7 @@ pub fn export(dataset: &Path, out: &Path, s: &ExportSummary) -> Report {
     match &s.dist_pickle {
         Some(p) => r.out(format!(
             "style distances: {} (pretrain_appearance loads it)",
-            out.join(p).display()
+            out.join(p)
         )),
         None if s.layout == Layout::Official => r.err(
             format!(
@@ -173,7 +173,7 @@ pub fn qa(w: &nrw_qa::Written) -> Report {
         c.val,
         w.figures.warnings.len()
     ));
-    r.out(w.report.display().to_string());
+    r.out(w.report.to_string());
     r
 }
 
@@ -188,18 +188,13 @@ pub fn split(cfg: &SplitConfig, s: &SplitSummary) -> Report {
     let Some(tsv) = &cfg.from_tsv else {
         r.out(format!(
             "split {}: {} train, {} val ({} kept as before, {} newly assigned with seed {})",
-            cfg.dataset.display(),
-            s.train,
-            s.val,
-            s.kept,
-            s.new,
-            cfg.seed
+            cfg.dataset, s.train, s.val, s.kept, s.new, cfg.seed
         ));
         return r;
     };
     r.out(format!(
         "split {}: {} train, {} val, as {} lists them",
-        cfg.dataset.display(),
+        cfg.dataset,
         s.train,
         s.val,
         tsv.display()
@@ -263,7 +258,7 @@ pub fn finalize(s: &crate::finalize::FinalizeSummary) -> Report {
 }
 
 /// The triplet table's summary (and the approximate path's recall).
-pub fn triplets(dataset: &Path, s: &TripletsSummary) -> Report {
+pub fn triplets(dataset: &Location, s: &TripletsSummary) -> Report {
     let mut r = Report::default();
     if let Some((n, f)) = s.recall {
         r.err(format!(
@@ -273,13 +268,7 @@ pub fn triplets(dataset: &Path, s: &TripletsSummary) -> Report {
     }
     r.out(format!(
         "triplets {}: {} anchors × {} nearest / {} furthest ({}, scope {}, {})",
-        dataset.display(),
-        s.anchors,
-        s.k,
-        s.k,
-        s.tier,
-        s.scope,
-        s.method
+        dataset, s.anchors, s.k, s.k, s.tier, s.scope, s.method
     ));
     r
 }
@@ -313,14 +302,12 @@ pub fn synth(s: &nrw_synth::SynthReport) -> Report {
 }
 
 /// A finished stage of a pipeline run, as its own command reports it.
-pub fn stage(dataset: &Path, done: StageDone) -> Report {
+pub fn stage(dataset: &Location, done: StageDone) -> Report {
     match done {
         StageDone::Ingest(s) => ingest(s),
         StageDone::Split(s) => Report(vec![Line::Out(format!(
             "split {}: {} train, {} val",
-            dataset.display(),
-            s.train,
-            s.val
+            dataset, s.train, s.val
         ))]),
         StageDone::Style(s) => style(s),
         StageDone::Triplets(s) => triplets(dataset, s),
@@ -429,7 +416,7 @@ mod tests {
             dist_pickle: Some("dist_n.pckl".into()),
         };
         let warned = |s: &ExportSummary| {
-            export(Path::new("d"), Path::new("o"), s)
+            export(&"d".into(), &"o".into(), s)
                 .0
                 .iter()
                 .any(|l| matches!(l, Line::Err(e) if e.contains("IndexError")))

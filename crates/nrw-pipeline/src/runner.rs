@@ -2,6 +2,7 @@
 //! demo's pipeline on the embedded synthetic scene (`nrw-etl demo`).
 
 use nrw_dataset::split::TRAIN;
+use nrw_dataset::Location;
 use std::path::{Path, PathBuf};
 
 use nrw_export::{ExportConfig, ExportSummary};
@@ -134,7 +135,7 @@ pub struct ExportTable {
 impl Default for ExportTable {
     fn default() -> Self {
         ExportTable {
-            layout: crate::export::official(Path::new(""), Path::new("")).layout,
+            layout: crate::export::official(&Path::new("").into(), &Path::new("").into()).layout,
             semantics: true,
             crop: None,
         }
@@ -206,7 +207,7 @@ pub enum StageDone<'a> {
     Split(&'a SplitSummary),
     Style(&'a StyleSummary),
     Triplets(&'a TripletsSummary),
-    Export(&'a Path, &'a ExportSummary),
+    Export(&'a Location, &'a ExportSummary),
     Qa(&'a nrw_qa::Written),
 }
 
@@ -215,9 +216,9 @@ pub enum StageDone<'a> {
 pub struct RunOutcome {
     /// false when ingest kept no view (later stages were skipped).
     pub kept: bool,
-    pub dataset: PathBuf,
-    pub export: Option<PathBuf>,
-    pub report: Option<PathBuf>,
+    pub dataset: Location,
+    pub export: Option<Location>,
+    pub report: Option<Location>,
 }
 
 /// The model files a pipeline's stages read, given on the command line (never downloaded).
@@ -233,7 +234,7 @@ pub struct Models<'a> {
 fn ingest_config(
     i: &IngestTable,
     scene: &Path,
-    out: &Path,
+    out: &Location,
     models: Models,
 ) -> Result<IngestConfig> {
     let mut c = IngestConfig::new(scene, out);
@@ -256,7 +257,12 @@ fn ingest_config(
     Ok(c)
 }
 
-fn export_config(e: &ExportTable, dataset: &Path, out: &Path, segmented: bool) -> ExportConfig {
+fn export_config(
+    e: &ExportTable,
+    dataset: &Location,
+    out: &Location,
+    segmented: bool,
+) -> ExportConfig {
     let layout = e.layout;
     ExportConfig {
         layout,
@@ -272,7 +278,7 @@ fn export_config(e: &ExportTable, dataset: &Path, out: &Path, segmented: bool) -
     }
 }
 
-fn style_config(s: &StyleTable, dataset: &Path, weights: Option<&Path>) -> Result<StyleConfig> {
+fn style_config(s: &StyleTable, dataset: &Location, weights: Option<&Path>) -> Result<StyleConfig> {
     let tier = nrw_style::Tier::parse(&s.tier).ok_or_else(|| {
         PipelineError::config(Setting::Tier, format!("{:?} is not a tier", s.tier))
     })?;
@@ -295,8 +301,8 @@ fn style_config(s: &StyleTable, dataset: &Path, weights: Option<&Path>) -> Resul
 pub fn run(
     p: &Pipeline,
     scene: &Path,
-    out: &Path,
-    export_dir: &Path,
+    out: &Location,
+    export_dir: &Location,
     models: Models,
     progress: &dyn Progress,
     done: &mut dyn FnMut(StageDone),
@@ -318,7 +324,7 @@ pub fn run(
         .transpose()?;
     let mut outcome = RunOutcome {
         kept: true,
-        dataset: out.into(),
+        dataset: out.clone(),
         export: None,
         report: None,
     };
@@ -335,7 +341,7 @@ pub fn run(
         return Ok(outcome);
     }
     if let Some(s) = &p.split {
-        let kept = nrw_dataset::reader::Dataset::open(out)?.len();
+        let kept = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open(out)?)?.len();
         let val = match (s.val, s.val_fraction) {
             (None, None) => SplitConfig::new(out).val,
             (Some(v), None) => v,
@@ -371,7 +377,7 @@ pub fn run(
     if let Some(c) = &export {
         let r = crate::export::export(out, c, progress)?;
         done(StageDone::Export(export_dir, &r));
-        outcome.export = Some(export_dir.into());
+        outcome.export = Some(export_dir.clone());
     }
     if p.qa.is_some() {
         let w = crate::qa::qa(&crate::qa::QaConfig {
@@ -385,8 +391,8 @@ pub fn run(
 }
 
 /// `k`, lowered to the training photos minus the anchor when there are fewer (with a warning).
-fn capped_k(k: usize, dataset: &Path, progress: &dyn Progress) -> Result<usize> {
-    let dataset = &nrw_dataset::Store::open_path(dataset)?;
+fn capped_k(k: usize, dataset: &nrw_dataset::Location, progress: &dyn Progress) -> Result<usize> {
+    let dataset = &nrw_dataset::Store::open(dataset)?;
     let splits = nrw_dataset::split::read_splits(dataset)?;
     let scope = if splits.is_empty() {
         nrw_dataset::reader::Dataset::open(dataset)?.len()
@@ -419,8 +425,8 @@ pub fn demo(
     let out = run(
         &pipeline,
         &scene,
-        &dir.join("dataset"),
-        &dir.join("export"),
+        &dir.join("dataset").into(),
+        &dir.join("export").into(),
         Models {
             vgg: weights,
             segformer: None,

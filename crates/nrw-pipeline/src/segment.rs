@@ -244,7 +244,7 @@ fn segment_one(
     let photo = match nrw_dataset::codec::load_photo(&path) {
         Ok(p) => p,
         Err(nrw_dataset::DatasetError::Unreadable { path, problem }) if !cfg.strict => {
-            return Ok(Some(format!("{}: {problem}", path.display())));
+            return Ok(Some(format!("{}: {problem}", path)));
         }
         Err(e) => return Err(e.into()),
     };

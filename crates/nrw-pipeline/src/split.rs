@@ -11,7 +11,7 @@ use crate::error::{PipelineError, Result};
 /// Split's settings; `new` is the paper's (100 validation photos, seed 0).
 #[derive(Debug, Clone)]
 pub struct SplitConfig {
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Validation photos; 0 puts every photo in training.
     pub val: usize,
     /// Same seed, same split on any machine.
@@ -23,7 +23,7 @@ pub struct SplitConfig {
 
 impl SplitConfig {
     /// The paper's split of a dataset.
-    pub fn new(dataset: impl Into<PathBuf>) -> SplitConfig {
+    pub fn new(dataset: impl Into<nrw_dataset::Location>) -> SplitConfig {
         SplitConfig {
             dataset: dataset.into(),
             val: 100,
@@ -99,7 +99,7 @@ fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> 
 
 /// Assign the kept photos and list the table in the manifest.
 pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
-    let store = &Store::open_path(&cfg.dataset)?;
+    let store = &Store::open(&cfg.dataset)?;
     crate::timing::timed(store, "split", || {
         if let Some(tsv) = &cfg.from_tsv {
             return split_from_tsv(tsv, store);

@@ -26,7 +26,7 @@ pub const PART_PHOTOS: usize = 64;
 /// Style's settings; [`StyleConfig::new`] is the paper's reference tier.
 #[derive(Debug, Clone)]
 pub struct StyleConfig {
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     pub tier: Tier,
     /// VGG weights (safetensors, torchvision names); required by the VGG tiers.
     pub weights: Option<PathBuf>,
@@ -40,7 +40,7 @@ pub struct StyleConfig {
 
 impl StyleConfig {
     /// The reference tier (VGG16, 512² crop) with ImageNet scaling.
-    pub fn new(dataset: impl Into<PathBuf>) -> StyleConfig {
+    pub fn new(dataset: impl Into<nrw_dataset::Location>) -> StyleConfig {
         StyleConfig {
             dataset: dataset.into(),
             tier: Tier::reference(),
@@ -409,7 +409,7 @@ pub fn style_unit_on(
         ));
     }
     let kind = kind(cfg, net);
-    let ds = Dataset::open(Store::open_path(&cfg.dataset)?)?;
+    let ds = Dataset::open(Store::open(&cfg.dataset)?)?;
     let store = &ds.store.clone();
     let mut ids: Vec<u32> = ds
         .splits()
@@ -473,7 +473,7 @@ pub fn style_unit_on(
     };
     crate::stage::record_unit::<StyleStage>(store, unit, &record)?;
     Ok(StyleSummary {
-        dataset: store.root().display().to_string(),
+        dataset: store.root().to_string(),
         unit,
         tier: kind.tier,
         photos: owned_photos,
@@ -486,7 +486,7 @@ pub fn style_unit_on(
 /// Describe every kept photo in this process, then list the parts in the manifest. Parts
 /// of another kind are replaced only with `overwrite`.
 pub fn style(cfg: &StyleConfig, progress: &dyn Progress) -> Result<StyleSummary> {
-    let store = &Store::open_path(&cfg.dataset)?;
+    let store = &Store::open(&cfg.dataset)?;
     let (s, _) = crate::stage::whole::<StyleStage, _>(store, || {
         let net = load_weights(cfg.weights.as_deref(), &cfg.tier)?;
         style_unit_on(
@@ -616,7 +616,7 @@ mod tests {
         let batches = fake.batches.into_inner().unwrap();
         assert!(batches.iter().all(|b| (1..=3).contains(b)), "{batches:?}");
         assert_eq!(batches.iter().sum::<usize>(), s.photos);
-        let store = Store::open_path(&ds).unwrap();
+        let store = Store::open(&ds.clone().into()).unwrap();
         let (kind, rows) = nrw_dataset::descriptors::read_all(&store).unwrap().unwrap();
         assert_eq!(kind.weights_sha256, "fake-weights");
         let data = Dataset::open(store.clone()).unwrap();
@@ -661,7 +661,7 @@ mod tests {
             ..cfg(&ds)
         };
         style_unit_on(&stats, Unit::WHOLE, Some(&fake), &crate::Silent).unwrap();
-        let store = Store::open_path(&ds).unwrap();
+        let store = Store::open(&ds.clone().into()).unwrap();
         let (kind, _) = nrw_dataset::descriptors::read_all(&store).unwrap().unwrap();
         assert_eq!(
             (kind.tier.as_str(), kind.weights_sha256.as_str()),

@@ -3,7 +3,6 @@
 
 use nrw_dataset::split::TRAIN;
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::PathBuf;
 
 use nrw_dataset::descriptors::{Entry, Index};
 use nrw_dataset::triplets::{write_triplets, TripletInfo, TripletRow};
@@ -14,7 +13,7 @@ use crate::error::{PipelineError, Result, Setting};
 /// Triplets' settings; `new` is the paper's (k = 20, exact, training split).
 #[derive(Debug, Clone)]
 pub struct TripletsConfig {
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Neighbours per anchor, nearest and furthest.
     pub k: usize,
     /// Anchors and neighbours from every split, not only training.
@@ -27,7 +26,7 @@ pub struct TripletsConfig {
 
 impl TripletsConfig {
     /// The paper's triplets of a dataset.
-    pub fn new(dataset: impl Into<PathBuf>) -> TripletsConfig {
+    pub fn new(dataset: impl Into<nrw_dataset::Location>) -> TripletsConfig {
         TripletsConfig {
             dataset: dataset.into(),
             k: 20,
@@ -57,7 +56,7 @@ pub fn require_views(dataset: &Store) -> Result<nrw_dataset::reader::Dataset> {
         let registered = nrw_dataset::scene::read_verdicts(dataset)?.len();
         return Err(PipelineError::dataset(dataset.root(), format!(
             "no kept view: ingest dropped all {registered} registered photos (`nrw-etl inspect {}` shows why)",
-            dataset.root().display()
+            dataset.root()
         )));
     }
     Ok(ds)
@@ -89,13 +88,13 @@ fn in_scope(
 
 /// Compute and write the triplet table.
 pub fn triplets(cfg: &TripletsConfig) -> Result<TripletsSummary> {
-    let store = &Store::open_path(&cfg.dataset)?;
+    let store = &Store::open(&cfg.dataset)?;
     crate::timing::timed(store, "triplets", || run(cfg, store))
 }
 
 /// A problem of the descriptors themselves, naming the photo (row `row` of `entries`).
 fn descriptor_error(
-    dataset: &std::path::Path,
+    dataset: &nrw_dataset::Location,
     entries: &[Entry],
     e: nrw_knn::KnnError,
 ) -> PipelineError {
@@ -140,10 +139,7 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
     let Some(mut index) = Index::read(store)? else {
         return Err(PipelineError::dataset(
             &cfg.dataset,
-            format!(
-                "no descriptors; run `nrw-etl style {}` first",
-                cfg.dataset.display()
-            ),
+            format!("no descriptors; run `nrw-etl style {}` first", cfg.dataset),
         ));
     };
     let described: BTreeSet<u32> = index.entries.iter().map(|r| r.image_id).collect();
@@ -158,7 +154,7 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
             rows.len(),
             Setting::K,
             rows.len().saturating_sub(1),
-            cfg.dataset.display()
+            cfg.dataset
         )));
     }
     let desc = spill(store, &index)?;

@@ -57,7 +57,7 @@ fn parquet_rows(store: &Store, rel: &str) -> Option<u64> {
 /// Every payload of a shard or descriptor part against its CRC-32 (other files have none).
 fn payload_check(rel: &str, name: &str, data: bytes::Bytes) -> Vec<Mismatch> {
     let hex = |c: Option<u32>| c.map_or("none".into(), |c| format!("crc32 {c:08x}"));
-    match nrw_dataset::checks::check_payloads(rel, std::path::Path::new(name), data) {
+    match nrw_dataset::checks::check_payloads(rel, &std::path::Path::new(name).into(), data) {
         Ok(found) => found
             .into_iter()
             .map(|m| Mismatch {
@@ -86,7 +86,7 @@ pub fn verify(store: &Store, progress: &dyn Progress) -> Result<VerifyReport> {
         .tables
         .par_iter()
         .map(|t| {
-            let name = store.name(&t.path).display().to_string();
+            let name = store.name(&t.path).to_string();
             let miss = |field: &str, expected: String, found: String| Mismatch {
                 file: name.clone(),
                 field: field.into(),
@@ -148,7 +148,7 @@ pub fn verify(store: &Store, progress: &dyn Progress) -> Result<VerifyReport> {
         })
         .collect();
     Ok(VerifyReport {
-        dataset: store.root().display().to_string(),
+        dataset: store.root().to_string(),
         files: manifest.tables.len(),
         bytes: checked.iter().map(|c| c.0).sum(),
         mismatches: checked.into_iter().flat_map(|c| c.1).collect(),

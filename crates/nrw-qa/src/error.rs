@@ -1,18 +1,18 @@
 //! Errors of the QA report, naming the table or file that failed.
 
-use std::path::PathBuf;
+use nrw_dataset::Location;
 
 /// What went wrong while reading a dataset for QA or writing the report.
 #[derive(Debug, thiserror::Error)]
 pub enum QaError {
     #[error("{path}: {source}")]
     Polars {
-        path: PathBuf,
+        path: Location,
         source: polars::error::PolarsError,
     },
     #[error("{path}: column `{column}`: {problem}")]
     Column {
-        path: PathBuf,
+        path: Location,
         column: String,
         problem: String,
     },
@@ -20,7 +20,7 @@ pub enum QaError {
     Dataset(#[from] nrw_dataset::DatasetError),
     #[error("{path}: {source}")]
     Io {
-        path: PathBuf,
+        path: Location,
         source: std::io::Error,
     },
     #[error("chart {chart}: {problem}")]

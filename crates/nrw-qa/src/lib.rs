@@ -10,7 +10,6 @@ pub mod thumbs;
 
 use nrw_dataset::split::{TRAIN, VAL};
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
 use serde::Serialize;
 
@@ -102,8 +101,8 @@ pub struct Warning {
 /// Where the report went.
 #[derive(Debug, Clone)]
 pub struct Written {
-    pub report: PathBuf,
-    pub json: PathBuf,
+    pub report: nrw_dataset::Location,
+    pub json: nrw_dataset::Location,
     pub figures: Figures,
 }
 
@@ -199,7 +198,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
     }
     let warnings = warnings(&images, &counts, max_empty);
     let figures = Figures {
-        dataset: dir.root().display().to_string(),
+        dataset: dir.root().to_string(),
         scene_dir: manifest.scene.scene_dir.clone(),
         tool: format!("{} {}", manifest.tool.name, manifest.tool.version),
         counts,

@@ -1,7 +1,7 @@
 //! The dataset's small tables (scene, split, triplets) read with polars through the
 //! dataset's store; shards are never read here (their row counts come from the manifest).
 
-use std::path::Path;
+use nrw_dataset::Location;
 
 use nrw_dataset::Store;
 
@@ -44,16 +44,16 @@ fn scan(store: &Store, rel: &str) -> Result<LazyFrame> {
         })
 }
 
-fn collect(path: &Path, lf: LazyFrame) -> Result<DataFrame> {
+fn collect(path: &Location, lf: LazyFrame) -> Result<DataFrame> {
     lf.collect().map_err(|source| QaError::Polars {
-        path: path.to_path_buf(),
+        path: path.clone(),
         source,
     })
 }
 
-fn col_err(path: &Path, column: &str, e: impl std::fmt::Display) -> QaError {
+fn col_err(path: &Location, column: &str, e: impl std::fmt::Display) -> QaError {
     QaError::Column {
-        path: path.to_path_buf(),
+        path: path.clone(),
         column: column.into(),
         problem: e.to_string(),
     }

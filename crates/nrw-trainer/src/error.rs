@@ -8,8 +8,11 @@ pub enum TrainError {
     #[error(transparent)]
     Dataset(#[from] nrw_dataset::DatasetError),
     /// A split with no view to load.
-    #[error("{}: split {split:?} holds no views", dataset.display())]
-    EmptySplit { dataset: PathBuf, split: String },
+    #[error("{dataset}: split {split:?} holds no views")]
+    EmptySplit {
+        dataset: nrw_dataset::Location,
+        split: String,
+    },
     /// A setting out of its range, named as the config field (`pos_k`); the binary names its
     /// own flag for it.
     #[error("{setting}: {problem}")]
@@ -18,8 +21,8 @@ pub enum TrainError {
         problem: String,
     },
     /// The dataset has no triplet table yet.
-    #[error("{}: no triplets.parquet; run `nrw-etl style` and `nrw-etl triplets` first", dataset.display())]
-    NoTripletTable { dataset: PathBuf },
+    #[error("{dataset}: no triplets.parquet; run `nrw-etl style` and `nrw-etl triplets` first")]
+    NoTripletTable { dataset: nrw_dataset::Location },
     /// Holding photos out left no triplet to train on.
     #[error("no training triplets: {anchors} anchors, {held_out} held out")]
     NoTriplets { anchors: usize, held_out: usize },

@@ -75,7 +75,9 @@ fn main() -> std::process::ExitCode {
         .clone()
         .unwrap_or_else(|| a.dataset.join("appearance"));
     let run = || -> nrw_trainer::Result<nrw_trainer::Report> {
-        let ds = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open_path(&a.dataset)?)?;
+        let ds = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open(
+            &a.dataset.as_path().into(),
+        )?)?;
         let bar = if a.quiet {
             ProgressBar::hidden()
         } else {

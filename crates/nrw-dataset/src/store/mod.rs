@@ -16,13 +16,15 @@ use futures_util::TryStreamExt;
 use object_store::{ObjectStore, ObjectStoreExt};
 
 use crate::error::{DatasetError, Result};
+use crate::location::Location;
 
 mod chunks;
 mod remote;
 
+pub use crate::location::is_url;
 pub use chunks::{Chunks, RemoteFile, RemoteRead};
+pub use remote::UPLOAD_PART;
 use remote::{build_remote, remote_err, runtime, upload_parts, Remote, Upload};
-pub use remote::{is_url, UPLOAD_PART};
 
 /// A dataset's location and the operations on its files (paths relative to the dataset).
 #[derive(Clone)]
@@ -37,7 +39,7 @@ enum Inner {
 
 impl std::fmt::Debug for Store {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Store({})", self.root().display())
+        write!(f, "Store({})", self.root())
     }
 }
 
@@ -73,20 +75,18 @@ impl Store {
         }
     }
 
-    /// A dataset at `location`: an `s3://`, `gs://` or `az://` URL, or a local path.
-    pub fn open(location: &str) -> Result<Store> {
+    /// A dataset at `location`: a local folder or an object-store prefix.
+    pub fn open(location: &Location) -> Result<Store> {
         Store::open_with(location, &[])
     }
 
     /// [`Store::open`] with provider settings given here, over the environment's (keys as
     /// the variables' names in lower case, e.g. `aws_endpoint_url`).
-    pub fn open_with(location: &str, options: &[(String, String)]) -> Result<Store> {
-        if !is_url(location) {
-            return Ok(Store::local(
-                location.strip_prefix("file://").unwrap_or(location),
-            ));
-        }
-        let url = location.trim_end_matches('/').to_string();
+    pub fn open_with(location: &Location, options: &[(String, String)]) -> Result<Store> {
+        let url = match location {
+            Location::Local(dir) => return Ok(Store::local(dir)),
+            Location::Url(url) => url.clone(),
+        };
         let (store, prefix) =
             build_remote(&url, options).map_err(|problem| DatasetError::Location {
                 url: url.clone(),
@@ -121,11 +121,6 @@ impl Store {
         })
     }
 
-    /// [`Store::open`] of a path argument (a URL passes through a `PathBuf` unchanged).
-    pub fn open_path(location: &Path) -> Result<Store> {
-        Store::open(&location.to_string_lossy())
-    }
-
     /// Whether the dataset is on object storage.
     pub fn is_remote(&self) -> bool {
         matches!(*self.inner, Inner::Remote(_))
@@ -139,20 +134,17 @@ impl Store {
         }
     }
 
-    /// The dataset's location, to show (a folder or a URL).
-    pub fn root(&self) -> PathBuf {
+    /// The dataset's location (a folder or a URL).
+    pub fn root(&self) -> Location {
         match &*self.inner {
-            Inner::Local(d) => d.clone(),
-            Inner::Remote(r) => PathBuf::from(&r.url),
+            Inner::Local(d) => Location::Local(d.clone()),
+            Inner::Remote(r) => Location::Url(r.url.clone()),
         }
     }
 
-    /// A file's full name, to show in messages (a path or a URL).
-    pub fn name(&self, rel: &str) -> PathBuf {
-        match &*self.inner {
-            Inner::Local(d) => d.join(rel),
-            Inner::Remote(r) => PathBuf::from(format!("{}/{rel}", r.url)),
-        }
+    /// Where the file `rel` is (a path or a URL), to name it in messages.
+    pub fn name(&self, rel: &str) -> Location {
+        self.root().join(rel)
     }
 
     /// `rel` after the one name check ([`nrw_colmap::names::check_name`]): every file the
@@ -198,7 +190,7 @@ impl Store {
             Inner::Remote(r) => {
                 let key = Store::key(r, rel);
                 r.rt.block_on(async { r.store.get(&key).await?.bytes().await })
-                    .map_err(|e| remote_err(self.name(rel).display().to_string(), e))
+                    .map_err(|e| remote_err(self.name(rel).to_string(), e))
             }
         }
     }
@@ -226,7 +218,7 @@ impl Store {
                 let key = Store::key(r, rel);
                 r.rt.block_on(r.store.put(&key, bytes.into()))
                     .map(|_| ())
-                    .map_err(|e| remote_err(self.name(rel).display().to_string(), e))
+                    .map_err(|e| remote_err(self.name(rel).to_string(), e))
             }
         }
     }
@@ -247,7 +239,7 @@ impl Store {
             }
             Inner::Remote(r) => {
                 let key = Store::key(r, rel);
-                let name = self.name(rel).display().to_string();
+                let name = self.name(rel).to_string();
                 r.rt.block_on(upload_parts(r, &key, from))
                     .map_err(|e| match e {
                         Upload::Read(e) => DatasetError::io(from, e),
@@ -267,7 +259,7 @@ impl Store {
                 match r.rt.block_on(r.store.head(&key)) {
                     Ok(_) => Ok(true),
                     Err(object_store::Error::NotFound { .. }) => Ok(false),
-                    Err(e) => Err(remote_err(self.name(rel).display().to_string(), e)),
+                    Err(e) => Err(remote_err(self.name(rel).to_string(), e)),
                 }
             }
         }
@@ -305,7 +297,7 @@ impl Store {
                 let key = Store::key(r, dir_rel);
                 let metas: Vec<object_store::ObjectMeta> =
                     r.rt.block_on(r.store.list(Some(&key)).try_collect())
-                        .map_err(|e| remote_err(self.name(dir_rel).display().to_string(), e))?;
+                        .map_err(|e| remote_err(self.name(dir_rel).to_string(), e))?;
                 let base = r.prefix.as_ref().len();
                 metas
                     .into_iter()
@@ -334,7 +326,7 @@ impl Store {
                 let key = Store::key(r, rel);
                 match r.rt.block_on(r.store.delete(&key)) {
                     Ok(()) | Err(object_store::Error::NotFound { .. }) => Ok(()),
-                    Err(e) => Err(remote_err(self.name(rel).display().to_string(), e)),
+                    Err(e) => Err(remote_err(self.name(rel).to_string(), e)),
                 }
             }
         }
@@ -377,7 +369,7 @@ impl Store {
                     Some(s) => s,
                     None => {
                         r.rt.block_on(r.store.head(&key))
-                            .map_err(|e| remote_err(self.name(rel).display().to_string(), e))?
+                            .map_err(|e| remote_err(self.name(rel).to_string(), e))?
                             .size
                     }
                 };
@@ -403,7 +395,7 @@ mod tests {
         assert!(!is_url("/tmp/ds"));
         assert!(!is_url("file:///tmp/ds"));
         assert!(!is_url("relative/dir"));
-        let s = Store::open("file:///tmp/x").unwrap();
+        let s = Store::open(&Location::parse("file:///tmp/x")).unwrap();
         assert_eq!(s.local_dir(), Some(Path::new("/tmp/x")));
     }
 
@@ -411,7 +403,7 @@ mod tests {
     fn no_name_leaves_the_dataset_locally_or_as_an_object_key() {
         let d = tempfile::tempdir().unwrap();
         let inner = d.path().join("ds");
-        let remote = Store::open("s3://bucket/ds").unwrap();
+        let remote = Store::open(&Location::parse("s3://bucket/ds")).unwrap();
         for s in [Store::local(&inner), remote] {
             for bad in [
                 "../x.json",

@@ -57,13 +57,6 @@ pub(super) fn runtime(url: &str) -> Result<&'static tokio::runtime::Runtime> {
     Ok(made)
 }
 
-/// Whether a location names an object store (`scheme://…` other than `file://`).
-pub fn is_url(location: &str) -> bool {
-    location.split_once("://").is_some_and(|(s, _)| {
-        !s.is_empty() && s != "file" && s.chars().all(|c| c.is_ascii_alphanumeric())
-    })
-}
-
 /// Environment variables object_store's builders read (never printed).
 fn provider_env() -> Vec<(String, String)> {
     std::env::vars()

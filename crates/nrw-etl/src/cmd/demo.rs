@@ -29,7 +29,7 @@ pub struct DemoArgs {
 /// Run `demo`: synthesise the scene, then every stage (ingest, split, style, triplets,
 /// export, qa) through the pipeline runner.
 pub fn run(args: &DemoArgs) -> Result<()> {
-    let dataset = args.out.join("dataset");
+    let dataset = nrw_dataset::Location::from(args.out.join("dataset"));
     let (report, out) = nrw_pipeline::runner::demo(
         &args.out,
         args.spec.as_deref(),
@@ -40,14 +40,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     )?;
     super::print_report(&nrw_pipeline::report::synth(&report));
     println!("scene:   {}", args.out.join("scene").display());
-    println!("dataset: {}", out.dataset.display());
-    println!(
-        "export:  {}",
-        out.export.expect("the demo exports").display()
-    );
-    println!(
-        "report:  {}",
-        out.report.expect("the demo writes a report").display()
-    );
+    println!("dataset: {}", out.dataset);
+    println!("export:  {}", out.export.expect("the demo exports"));
+    println!("report:  {}", out.report.expect("the demo writes a report"));
     Ok(())
 }

@@ -3,8 +3,6 @@
 //! viewers. The layouts and their bytes live in `nrw_dataset::export`; this parses arguments,
 //! supplies the style distance matrix, draws the bar and prints.
 
-use std::path::PathBuf;
-
 use clap::Args;
 use nrw_export::official::DepthMapping;
 use nrw_export::{ExportConfig, Layout};
@@ -44,13 +42,13 @@ the mapping --depth names; export.json records the mapping, its near and far, an
 that recovers depth. Writing into an earlier export replaces it whole.")]
 pub struct ExportArgs {
     /// Dataset folder written by `ingest` (and `split`)
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Which layout to write
     #[arg(long, value_parser = super::names(&Layout::ALL, Layout::name, Layout::summary), default_value = "official")]
     pub layout: Layout,
     /// Folder to write into (created; an earlier export there is replaced whole)
     #[arg(long)]
-    pub out: PathBuf,
+    pub out: nrw_dataset::Location,
     /// Dataset name the published code is run with (--dataset_name): NAME_train.tfrecord, dist_NAME.pckl [default: the dataset folder's name]
     #[arg(long)]
     pub name: Option<String>,

@@ -1,7 +1,5 @@
 //! `nrw-etl finalize`: merge the work units that ran into a dataset.
 
-use std::path::PathBuf;
-
 use clap::Args;
 
 use crate::error::Result;
@@ -15,7 +13,7 @@ the unit, the parameter and the file; nothing is changed)."
 )]
 pub struct FinalizeArgs {
     /// Dataset folder the units wrote into (`ingest --unit I/N`, `style --unit I/N`)
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Print a JSON summary on stdout
     #[arg(long)]
     pub json: bool,
@@ -23,7 +21,7 @@ pub struct FinalizeArgs {
 
 /// Run `finalize`.
 pub fn run(args: &FinalizeArgs) -> Result<()> {
-    let s = nrw_pipeline::finalize::finalize(&nrw_dataset::Store::open_path(&args.dataset)?)?;
+    let s = nrw_pipeline::finalize::finalize(&nrw_dataset::Store::open(&args.dataset)?)?;
     super::print_report(&nrw_pipeline::report::finalize(&s));
     if args.json {
         println!(

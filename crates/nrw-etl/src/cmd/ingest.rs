@@ -29,7 +29,7 @@ pub struct IngestArgs {
     pub scene: PathBuf,
     /// Dataset folder to write (created if missing; files in it are replaced atomically)
     #[arg(long)]
-    pub out: PathBuf,
+    pub out: nrw_dataset::Location,
     /// Folder of the photos named in the model [default: <scene>/images]
     #[arg(long)]
     pub images: Option<PathBuf>,

@@ -1,8 +1,6 @@
 //! `nrw-etl inspect`: what a COLMAP model holds and how well it agrees with itself, or what a
 //! dataset holds (`nrw_pipeline::inspect`), printed.
 
-use std::path::PathBuf;
-
 use clap::Args;
 use nrw_pipeline::inspect::Inspected;
 
@@ -13,7 +11,7 @@ use nrw_colmap::Format;
 #[derive(Debug, Args)]
 pub struct InspectArgs {
     /// Scene folder holding sparse/0/ (or sparse/), a model folder itself, or a dataset folder
-    pub scene: PathBuf,
+    pub scene: nrw_dataset::Location,
     /// Print one JSON object instead of a readable summary
     #[arg(long)]
     pub json: bool,

@@ -1,7 +1,5 @@
 //! `nrw-etl qa`: the dataset QA report, to look at before training on a dataset.
 
-use std::path::PathBuf;
-
 use clap::Args;
 
 use crate::error::Result;
@@ -10,10 +8,10 @@ use crate::error::Result;
 #[derive(Debug, Args)]
 pub struct QaArgs {
     /// Dataset folder (written by `nrw-etl ingest`; split, style and triplets are shown when present)
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Folder for report.html and qa.json [default: DATASET/qa]
     #[arg(long)]
-    pub out: Option<PathBuf>,
+    pub out: Option<nrw_dataset::Location>,
 }
 
 /// Run `qa`.

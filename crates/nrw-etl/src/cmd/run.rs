@@ -18,7 +18,7 @@ pub struct RunArgs {
     pub scene: PathBuf,
     /// Output folder: DIR is the dataset; an export goes to DIR/export, the report to DIR/qa
     #[arg(long)]
-    pub out: PathBuf,
+    pub out: nrw_dataset::Location,
     /// VGG weights for a style stage with a VGG tier (safetensors; never downloaded)
     #[arg(long)]
     pub weights: Option<PathBuf>,

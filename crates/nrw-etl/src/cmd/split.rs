@@ -11,7 +11,7 @@ use crate::error::Result;
 #[derive(Debug, Args)]
 pub struct SplitArgs {
     /// Dataset folder written by `ingest`
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Number of validation photos (the paper: 100); 0 puts every photo in training
     #[arg(long, default_value_t = 100)]
     pub val: usize,

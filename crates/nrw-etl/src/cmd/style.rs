@@ -33,7 +33,7 @@ impl From<Pre> for Preprocess {
 pub struct StyleArgs {
     /// Dataset folder: describe every kept photo into DATASET/descriptors/
     #[arg(required_unless_present = "image")]
-    pub dataset: Option<PathBuf>,
+    pub dataset: Option<nrw_dataset::Location>,
     /// Descriptor tier: vgg16-<128|256|512|full>[-l<layers 1-5>], the same with vgg19,
     /// official[-N] (the published code's distance: N×N centre crop, default 512, no resize,
     /// v·2/255 − 1 into tensorflow-vgg's Caffe VGG16, per-layer mean squared Gram difference;

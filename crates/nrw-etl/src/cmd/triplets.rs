@@ -1,7 +1,5 @@
 //! `nrw-etl triplets`: arguments → `nrw_pipeline::triplets`, and the table's summary, printed.
 
-use std::path::PathBuf;
-
 use clap::Args;
 use nrw_pipeline::triplets::TripletsConfig;
 
@@ -11,7 +9,7 @@ use crate::error::Result;
 #[derive(Debug, Args)]
 pub struct TripletsArgs {
     /// Dataset folder with descriptors (run `nrw-etl style` first)
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Neighbours per anchor, nearest and furthest (the paper: 20)
     #[arg(long, default_value_t = 20)]
     pub k: usize,

@@ -1,7 +1,5 @@
 //! `nrw-etl verify`: a dataset against its manifest, after a copy or before training.
 
-use std::path::PathBuf;
-
 use clap::Args;
 
 use super::Bars;
@@ -28,7 +26,7 @@ Example, after copying a dataset:
 )]
 pub struct VerifyArgs {
     /// Dataset folder or object-store URL (s3://, gs://, az://)
-    pub dataset: PathBuf,
+    pub dataset: nrw_dataset::Location,
     /// Print the report as JSON on stdout
     #[arg(long)]
     pub json: bool,
@@ -39,7 +37,7 @@ pub struct VerifyArgs {
 
 /// Run `verify`; returns whether the dataset matched its manifest.
 pub fn run(args: &VerifyArgs) -> Result<bool> {
-    let store = nrw_dataset::Store::open_path(&args.dataset)?;
+    let store = nrw_dataset::Store::open(&args.dataset)?;
     let r = nrw_pipeline::verify::verify(&store, &Bars::new(args.quiet))?;
     for m in &r.mismatches {
         eprintln!(

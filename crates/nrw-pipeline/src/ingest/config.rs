@@ -18,7 +18,7 @@ pub struct IngestConfig {
     /// Scene folder (COLMAP layout) or a model folder itself.
     pub scene: PathBuf,
     /// Dataset folder to write.
-    pub out: PathBuf,
+    pub out: nrw_dataset::Location,
     /// Photo folder [default: images/ next to the model].
     pub images: Option<PathBuf>,
     /// Model encoding to read [default: bin when present].
@@ -57,7 +57,7 @@ pub struct IngestConfig {
 
 impl IngestConfig {
     /// The paper's settings for a scene and a dataset folder.
-    pub fn new(scene: impl Into<PathBuf>, out: impl Into<PathBuf>) -> IngestConfig {
+    pub fn new(scene: impl Into<PathBuf>, out: impl Into<nrw_dataset::Location>) -> IngestConfig {
         IngestConfig {
             scene: scene.into(),
             out: out.into(),

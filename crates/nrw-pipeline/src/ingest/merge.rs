@@ -115,7 +115,7 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         dataset.delete(stale)?;
         warnings.push(format!(
             "{}: removed (stale after a new ingest); run `nrw-etl triplets` again",
-            dataset.name(stale).display()
+            dataset.name(stale)
         ));
     }
     let manifest = Manifest {

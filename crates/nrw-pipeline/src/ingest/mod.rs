@@ -254,7 +254,7 @@ fn after_group(cfg: &IngestConfig, ran: usize, todo: usize) -> Result<()> {
 pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> Result<UnitSummary> {
     let t0 = Instant::now();
     let mut p = prepare(cfg, unit)?;
-    let store = &Store::open_path(&cfg.out)?;
+    let store = &Store::open(&cfg.out)?;
     let ids: Vec<u32> = p.rec.images.keys().copied().collect();
     let stage = IngestStage { cfg, store, p: &p };
     let d = crate::stage::drive(
@@ -269,7 +269,7 @@ pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> R
     p.record.seconds = t0.elapsed().as_secs_f64();
     crate::stage::record_unit::<IngestStage>(store, unit, &p.record)?;
     Ok(UnitSummary {
-        dataset: store.root().display().to_string(),
+        dataset: store.root().to_string(),
         unit,
         groups_owned: d.owned,
         groups_total: p.record.groups,
@@ -313,7 +313,7 @@ pub struct IngestSummary {
 pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSummary> {
     let t0 = Instant::now();
     check_config(cfg)?;
-    let store = &Store::open_path(&cfg.out)?;
+    let store = &Store::open(&cfg.out)?;
     let (u, f) =
         crate::stage::whole::<IngestStage, _>(store, || ingest_unit(cfg, Unit::WHOLE, progress))?;
     Ok(IngestSummary {

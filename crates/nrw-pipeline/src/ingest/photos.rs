@@ -108,7 +108,7 @@ pub(super) fn photo_sizes(
 
 pub(super) fn unreadable_error(path: &Path, problem: String) -> PipelineError {
     nrw_dataset::DatasetError::Unreadable {
-        path: path.to_path_buf(),
+        path: path.into(),
         problem,
     }
     .into()

@@ -1,8 +1,6 @@
 //! One view: its photo, render, depth, labels and verdict, encoded into a shard row; and
 //! one group of views, written as a shard and recorded.
 
-use std::path::Path;
-
 use image::RgbImage;
 use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
@@ -46,10 +44,13 @@ pub(super) fn outcome(
 
 /// The outcome of a view whose photo or label map cannot be decoded: the verdict's value is
 /// the file's size in bytes (0 for an empty file), the detail the decoder's message.
-pub(super) fn unreadable(path: &Path, problem: String) -> ImageOutcome {
+pub(super) fn unreadable(path: &nrw_dataset::Location, problem: String) -> ImageOutcome {
     ImageOutcome {
         verdict: nrw_dataset::VERDICT_UNREADABLE.into(),
-        verdict_value: std::fs::metadata(path).map_or(0.0, |m| m.len() as f64),
+        verdict_value: path
+            .local()
+            .and_then(|p| std::fs::metadata(p).ok())
+            .map_or(0.0, |m| m.len() as f64),
         empty_ratio: None,
         render_size: None,
         shard: None,
@@ -126,7 +127,10 @@ pub(super) fn process(
     // Every image's path was checked (name, links) when its size was read in `photo_sizes`.
     let photo_path = p.photos_dir.join(&img.name);
     if let Some(problem) = p.unreadable.get(&image_id) {
-        return Ok((unreadable(&photo_path, problem.clone()), None));
+        return Ok((
+            unreadable(&photo_path.clone().into(), problem.clone()),
+            None,
+        ));
     }
     let size = p.photos[&image_id];
     if let Some(v) = cfg.filters.check_size(size.0 as u64, size.1 as u64) {

@@ -18,6 +18,8 @@ mod memory;
 mod nerfstudio;
 #[path = "nerfw.rs"]
 mod nerfw;
+#[path = "support/npy.rs"]
+mod npy;
 #[path = "paper_code.rs"]
 mod paper_code;
 #[path = "support/python.rs"]

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use nrw_colmap::dense::DenseMap;
 
+use super::npy::write_npy_shape_f32;
 use super::python_has;
 
 /// A map whose every value names its pixel and channel, so any transposition shows.
@@ -24,23 +25,12 @@ fn numbered(width: usize, height: usize, channels: usize) -> DenseMap {
 /// The map as a NumPy `.npy` (float32, height × width [× channels], C order), as the
 /// script's `read_array` returns it (one channel squeezed away).
 fn npy(m: &DenseMap, path: &Path) {
-    let shape = if m.channels == 1 {
-        format!("({}, {})", m.height, m.width)
+    let shape: &[usize] = if m.channels == 1 {
+        &[m.height, m.width]
     } else {
-        format!("({}, {}, {})", m.height, m.width, m.channels)
+        &[m.height, m.width, m.channels]
     };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut b = b"\x93NUMPY\x01\x00".to_vec();
-    b.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    b.extend_from_slice(header.as_bytes());
-    m.data
-        .iter()
-        .for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
-    std::fs::write(path, b).unwrap();
+    write_npy_shape_f32(path, &m.data, shape);
 }
 
 fn script(args: &[&Path]) -> std::process::Output {

@@ -18,7 +18,13 @@ use syn::visit::Visit;
 /// The crates from the bottom layer up: a crate's `[dependencies]` may name only crates of
 /// layers below its own (dev-dependencies are free: tests may use anything).
 const LAYERS: &[&[&str]] = &[
-    &["nrw-colmap", "nrw-knn", "nrw-style", "nrw-segment"],
+    &[
+        "nrw-colmap",
+        "nrw-knn",
+        "nrw-style",
+        "nrw-segment",
+        "nrw-stereo",
+    ],
     &["nrw-dataset", "nrw-render"],
     &["nrw-synth", "nrw-export"],
     &["nrw-qa", "nrw-trainer", "nrw-py"],

@@ -8,6 +8,8 @@ mod bad_inputs;
 mod clean;
 #[path = "colmap_dense.rs"]
 mod colmap_dense;
+#[path = "densify.rs"]
+mod densify;
 #[path = "golden.rs"]
 mod golden;
 #[path = "jpeg.rs"]

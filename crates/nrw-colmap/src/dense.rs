@@ -272,6 +272,118 @@ pub fn fusion_cfg(names: &[String], file: &Path) -> Result<String> {
     Ok(out)
 }
 
+/// The pass a depth or normal map comes from, as COLMAP names the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MapPass {
+    /// Photo-consistency alone (`NAME.photometric.bin`).
+    Photometric,
+    /// With the geometric-consistency pass (`NAME.geometric.bin`).
+    Geometric,
+}
+
+impl MapPass {
+    /// The word COLMAP puts in the file name.
+    pub fn name(self) -> &'static str {
+        match self {
+            MapPass::Photometric => "photometric",
+            MapPass::Geometric => "geometric",
+        }
+    }
+}
+
+/// Which map of a view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MapKind {
+    /// Depth along the camera's z, 1 channel (`stereo/depth_maps/`).
+    Depth,
+    /// Unit normal in camera coordinates, 3 channels (`stereo/normal_maps/`).
+    Normal,
+    /// Ours, not COLMAP's: the mean NCC of the source views that agree with the kept depth
+    /// and their count, 2 channels, 0 where no depth (`stereo/confidence_maps/`).
+    Confidence,
+}
+
+impl MapKind {
+    /// The folder under `stereo/`.
+    pub fn folder(self) -> &'static str {
+        match self {
+            MapKind::Depth => "depth_maps",
+            MapKind::Normal => "normal_maps",
+            MapKind::Confidence => "confidence_maps",
+        }
+    }
+}
+
+/// COLMAP's dense workspace: one place that says where each of its files lives. Image
+/// names become paths only through [`crate::names::join_checked`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Workspace {
+    pub root: std::path::PathBuf,
+}
+
+impl Workspace {
+    /// The workspace at `root`.
+    pub fn new(root: &Path) -> Workspace {
+        Workspace {
+            root: root.to_path_buf(),
+        }
+    }
+
+    /// `images/`: the undistorted photos.
+    pub fn images(&self) -> std::path::PathBuf {
+        self.root.join("images")
+    }
+
+    /// `sparse/`: the undistorted model.
+    pub fn sparse(&self) -> std::path::PathBuf {
+        self.root.join("sparse")
+    }
+
+    /// `images/NAME`.
+    pub fn image(&self, name: &str) -> std::result::Result<std::path::PathBuf, String> {
+        crate::names::join_checked(&self.images(), name)
+    }
+
+    /// `stereo/`.
+    pub fn stereo(&self) -> std::path::PathBuf {
+        self.root.join("stereo")
+    }
+
+    /// `stereo/{depth,normal,confidence}_maps/NAME.{photometric,geometric}.bin`.
+    pub fn map(
+        &self,
+        kind: MapKind,
+        pass: MapPass,
+        name: &str,
+    ) -> std::result::Result<std::path::PathBuf, String> {
+        crate::names::check_name(name).map_err(|p| format!("{name:?} {p}"))?;
+        Ok(self
+            .stereo()
+            .join(kind.folder())
+            .join(format!("{name}.{}.bin", pass.name())))
+    }
+
+    /// `stereo/patch-match.cfg`.
+    pub fn patch_match_cfg(&self) -> std::path::PathBuf {
+        self.stereo().join("patch-match.cfg")
+    }
+
+    /// `stereo/fusion.cfg`.
+    pub fn fusion_cfg(&self) -> std::path::PathBuf {
+        self.stereo().join("fusion.cfg")
+    }
+
+    /// `fused.ply`.
+    pub fn fused_ply(&self) -> std::path::PathBuf {
+        self.root.join("fused.ply")
+    }
+
+    /// `fused.ply.vis`.
+    pub fn fused_vis(&self) -> std::path::PathBuf {
+        self.root.join("fused.ply.vis")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -58,6 +58,10 @@ pub fn flag(s: nrw_pipeline::Setting) -> &'static str {
         S::ExportSemantics => "--no-semantics",
         S::Entries => "--entries",
         S::FollowOutsideLinks => "--follow-outside-links",
+        S::DenseOut => "--out",
+        S::MaxSources => "--max-sources",
+        S::MaxImageSize => "--max-image-size",
+        S::Stereo => "--iterations/--window-radius/--scales",
     }
 }
 

@@ -35,6 +35,9 @@ enum Command {
     Demo(cmd::demo::DemoArgs),
     /// Generate a synthetic COLMAP scene with ground truth from a spec (scenes/*.toml)
     Synth(cmd::synth::SynthArgs),
+    /// Dense depth maps and a fused cloud from a sparse scene (CPU multi-view stereo), in
+    /// COLMAP's dense workspace, so ingest finds SCENE/dense/fused.ply
+    Densify(cmd::densify::DensifyArgs),
     /// Summarise a COLMAP model (counts, camera models, reprojection errors) or a dataset (verdicts, split)
     Inspect(cmd::inspect::InspectArgs),
     /// Render every registered photo's view, apply the filters, write shards, scene tables and manifest.json.
@@ -100,6 +103,7 @@ fn main() -> std::process::ExitCode {
     let result = match &cli.command {
         Command::Demo(a) => done(cmd::demo::run(a)),
         Command::Synth(a) => done(cmd::synth::run(a)),
+        Command::Densify(a) => done(cmd::densify::run(a)),
         Command::Inspect(a) => done(cmd::inspect::run(a)),
         Command::Split(a) => done(cmd::split::run(a)),
         Command::Segment(a) => done(cmd::segment::run(a)),

@@ -134,11 +134,19 @@ pub enum Setting {
     Entries,
     /// Whether photo names may resolve through links out of the photo folder.
     FollowOutsideLinks,
+    /// Where densify writes its dense workspace.
+    DenseOut,
+    /// Source views stereo matches each view with.
+    MaxSources,
+    /// The longer side densify's undistorted views are capped at.
+    MaxImageSize,
+    /// The PatchMatch kernel's settings (iterations, window, scales).
+    Stereo,
 }
 
 impl Setting {
     /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 25] = [
+    pub const ALL: [Setting; 29] = [
         Setting::RowsPerShard,
         Setting::Radius,
         Setting::MaxEmpty,
@@ -164,6 +172,10 @@ impl Setting {
         Setting::ExportSemantics,
         Setting::Entries,
         Setting::FollowOutsideLinks,
+        Setting::DenseOut,
+        Setting::MaxSources,
+        Setting::MaxImageSize,
+        Setting::Stereo,
     ];
 
     /// The setting's key: `stage.field` as a pipeline file or a library caller names it.
@@ -194,6 +206,10 @@ impl Setting {
             Setting::ExportSemantics => "export.semantics",
             Setting::Entries => "corpus.entries",
             Setting::FollowOutsideLinks => "follow_outside_links",
+            Setting::DenseOut => "densify.out",
+            Setting::MaxSources => "densify.max_sources",
+            Setting::MaxImageSize => "densify.max_image_size",
+            Setting::Stereo => "densify.stereo",
         }
     }
 }

@@ -8,6 +8,7 @@
 //! units into the same bytes a single process writes.
 
 pub mod corpus;
+pub mod densify;
 pub mod error;
 pub mod export;
 pub mod finalize;

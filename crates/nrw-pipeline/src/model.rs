@@ -36,6 +36,24 @@ pub fn undistort_model(
     Ok(distorted)
 }
 
+/// The photo resampled from its own camera `from` to the undistorted PINHOLE camera `to`
+/// (a photo stored at another size than its camera's, same aspect ratio, is brought to the
+/// camera's size first).
+pub fn undistorted_photo(
+    photo: &image::RgbImage,
+    from: &nrw_colmap::Camera,
+    to: &nrw_colmap::Camera,
+) -> image::RgbImage {
+    let photo = nrw_dataset::codec::resize_photo(photo, from.width as u32, from.height as u32);
+    let src = nrw_render::Rgb8 {
+        width: photo.width(),
+        height: photo.height(),
+        data: photo.into_raw(),
+    };
+    let out = nrw_render::undistort_photo(&src, from, to);
+    image::RgbImage::from_raw(out.width, out.height, out.data).expect("width × height × 3 bytes")
+}
+
 /// The undistorter's options as the unit record and manifest keep them.
 pub fn undistort_record(o: &UndistortOptions) -> nrw_dataset::provenance::UndistortRecord {
     nrw_dataset::provenance::UndistortRecord {

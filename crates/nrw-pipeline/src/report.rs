@@ -301,9 +301,52 @@ pub fn synth(s: &nrw_synth::SynthReport) -> Report {
     r
 }
 
+/// What densify made: views with depth, the verdicts of the others, the cloud, the time.
+pub fn densify(d: &crate::densify::DensifyReport) -> Report {
+    use crate::densify::ViewVerdict;
+    let mut r = Report::default();
+    let (mut no_source, mut no_range, mut unreadable) = (0, 0, Vec::new());
+    for v in &d.views {
+        match &v.verdict {
+            ViewVerdict::Densified { .. } => {}
+            ViewVerdict::NoSourceView => no_source += 1,
+            ViewVerdict::NoDepthRange => no_range += 1,
+            ViewVerdict::Unreadable(why) => unreadable.push(format!("  {}: {why}", v.name)),
+        }
+    }
+    let pixels: usize = d
+        .views
+        .iter()
+        .map(|v| match v.verdict {
+            ViewVerdict::Densified { pixels } => pixels,
+            _ => 0,
+        })
+        .sum();
+    r.err(format!(
+        "densified {} of {} views ({} depth pixels kept); {} without a source view, {} seeing no sparse point, {} unreadable",
+        d.densified(),
+        d.views.len(),
+        pixels,
+        no_source,
+        no_range,
+        unreadable.len()
+    ));
+    for line in unreadable {
+        r.err(line);
+    }
+    let [u, p, g, f] = d.seconds;
+    r.err(format!(
+        "fused {} points; {u:.1} s undistorting, {p:.1} s photometric, {g:.1} s geometric, {f:.1} s fusing",
+        d.points
+    ));
+    r.out(d.out.join("fused.ply").display().to_string());
+    r
+}
+
 /// A finished stage of a pipeline run, as its own command reports it.
 pub fn stage(dataset: &Location, done: StageDone) -> Report {
     match done {
+        StageDone::Densify(d) => densify(d),
         StageDone::Ingest(s) => ingest(s),
         StageDone::Split(s) => Report(vec![Line::Out(format!(
             "split {}: {} train, {} val",

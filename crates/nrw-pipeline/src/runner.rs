@@ -20,12 +20,59 @@ use crate::Progress;
 #[serde(deny_unknown_fields)]
 pub struct Pipeline {
     pub name: String,
+    pub densify: Option<DensifyTable>,
     pub ingest: Option<IngestTable>,
     pub split: Option<SplitTable>,
     pub style: Option<StyleTable>,
     pub triplets: Option<TripletsTable>,
     pub export: Option<ExportTable>,
     pub qa: Option<QaTable>,
+}
+
+/// `[densify]`: multi-view stereo into SCENE/dense before ingest, when the scene has no dense
+/// cloud yet (an existing SCENE/dense is used as it is unless `overwrite`); a setting left
+/// out is densify's default (`DensifyConfig::new`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DensifyTable {
+    /// Longer side of the undistorted views (0: the photos' own size).
+    pub max_image_size: u64,
+    pub max_sources: usize,
+    pub iterations: usize,
+    pub window_radius: usize,
+    pub scales: usize,
+    pub geometric: bool,
+    /// Replace an existing SCENE/dense.
+    pub overwrite: bool,
+}
+
+impl Default for DensifyTable {
+    fn default() -> Self {
+        let c = crate::densify::DensifyConfig::new(Path::new(""));
+        DensifyTable {
+            max_image_size: c.max_image_size.unwrap_or(0),
+            max_sources: c.max_sources,
+            iterations: c.stereo.iterations,
+            window_radius: c.stereo.window_radius,
+            scales: c.stereo.scales,
+            geometric: c.geometric,
+            overwrite: false,
+        }
+    }
+}
+
+/// Densify's settings from `[densify]` (or the command line's, which take the same fields).
+pub fn densify_config(d: &DensifyTable, scene: &Path) -> crate::densify::DensifyConfig {
+    let mut c = crate::densify::DensifyConfig::new(scene);
+    c.max_image_size = (d.max_image_size > 0).then_some(d.max_image_size);
+    c.max_sources = d.max_sources;
+    c.stereo.iterations = d.iterations;
+    c.stereo.window_radius = d.window_radius;
+    c.stereo.sigma_spatial = d.window_radius as f64;
+    c.stereo.scales = d.scales;
+    c.geometric = d.geometric;
+    c.overwrite = d.overwrite;
+    c
 }
 
 /// `[ingest]`: render and filter; a setting left out is the paper's (`IngestConfig::new`).
@@ -178,6 +225,7 @@ impl Pipeline {
     pub fn demo(weights: bool) -> Pipeline {
         Pipeline {
             name: "demo".into(),
+            densify: None,
             ingest: Some(IngestTable {
                 semantics: Some(nrw_synth::truth::SEMANTICS.into()),
                 ..IngestTable::default()
@@ -203,6 +251,7 @@ impl Pipeline {
 /// A stage the runner finished, with its summary (for the caller to show).
 #[derive(Debug)]
 pub enum StageDone<'a> {
+    Densify(&'a crate::densify::DensifyReport),
     Ingest(&'a IngestSummary),
     Split(&'a SplitSummary),
     Style(&'a StyleSummary),
@@ -328,6 +377,21 @@ pub fn run(
         export: None,
         report: None,
     };
+    if let Some(d) = &p.densify {
+        let has_cloud = nrw_colmap::Scene::find(scene)
+            .ok()
+            .and_then(|s| s.dense_cloud())
+            .is_some();
+        if has_cloud && !d.overwrite {
+            progress.warn(&format!(
+                "pipeline {}: the scene has a dense cloud already; densify skipped (overwrite = true in [densify] replaces it)",
+                p.name
+            ));
+        } else {
+            let r = crate::densify::densify(&densify_config(d, scene), progress)?;
+            done(StageDone::Densify(&r));
+        }
+    }
     if let Some(c) = &ingest {
         let s = crate::ingest::ingest(c, progress)?;
         done(StageDone::Ingest(&s));
@@ -464,11 +528,32 @@ mod tests {
     }
 
     #[test]
+    fn a_densify_table_of_one_setting_takes_densifys_defaults() {
+        let p: Pipeline =
+            toml::from_str("name = \"x\"\n[densify]\nmax_image_size = 320\n").unwrap();
+        let d = p.densify.unwrap();
+        let c = densify_config(&d, Path::new("s"));
+        let defaults = crate::densify::DensifyConfig::new(Path::new("s"));
+        assert_eq!(c.max_image_size, Some(320));
+        assert_eq!(
+            (c.max_sources, c.geometric, c.overwrite, &c.stereo),
+            (defaults.max_sources, true, false, &defaults.stereo)
+        );
+        let none: Pipeline =
+            toml::from_str("name = \"x\"\n[densify]\nmax_image_size = 0\n").unwrap();
+        assert_eq!(
+            densify_config(&none.densify.unwrap(), Path::new("s")).max_image_size,
+            None
+        );
+    }
+
+    #[test]
     fn a_table_of_one_setting_takes_the_papers_others() {
         let p: Pipeline = toml::from_str(
             "name = \"x\"\n[ingest]\nmax_empty = 0.99\n[split]\nseed = 3\n[style]\n[triplets]\n[export]\nsemantics = false\n",
         )
         .unwrap();
+        assert!(p.densify.is_none(), "no [densify] table, no densify");
         let (i, paper) = (p.ingest.unwrap(), IngestConfig::new("", ""));
         assert_eq!(i.max_empty, 0.99);
         assert_eq!(

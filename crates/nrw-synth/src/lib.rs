@@ -33,7 +33,7 @@ pub use render::Counters;
 pub use spec::{Appearance, SceneSpec, MAX_POINTS};
 
 use crate::cameras::Shot;
-use crate::geometry::{albedo, hash64, to_srgb8, Landmark, SurfacePoint};
+use crate::geometry::{hash64, to_srgb8, Landmark, SurfacePoint};
 use crate::look::{gauss, Look};
 use crate::render::{render, Person};
 
@@ -198,7 +198,8 @@ fn observe<R: Rng>(
 /// Generate the scene a spec describes into `out`; `progress` is called once per finished photo.
 pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> Result<SynthReport> {
     spec.validate("scene spec")?;
-    let landmark = Landmark::new(&spec.geometry);
+    let mut landmark = Landmark::new(&spec.geometry);
+    landmark.texture = spec.effects.texture;
     let fx = &spec.effects;
     let ext = if fx.jpeg_quality.is_some() {
         "jpg"
@@ -336,7 +337,7 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
             if pid != NO_POINT3D {
                 let f = &features[*k];
                 let p = points.entry(pid).or_insert_with(|| {
-                    let a = albedo(f.material, f.p, f.normal);
+                    let a = landmark.albedo(f.material, f.p, f.normal);
                     Point3D {
                         id: pid,
                         xyz: f.p + origin,
@@ -401,7 +402,7 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
             dense
                 .iter()
                 .map(|s| {
-                    let a = albedo(s.material, s.p, s.normal);
+                    let a = landmark.albedo(s.material, s.p, s.normal);
                     [to_srgb8(a.x), to_srgb8(a.y), to_srgb8(a.z)]
                 })
                 .collect(),

@@ -10,7 +10,7 @@ use rand::Rng;
 use serde::Serialize;
 
 use crate::cameras::Shot;
-use crate::geometry::{albedo, hash64, to_srgb8, Landmark, Material, ADE_PERSON, ADE_SKY};
+use crate::geometry::{hash64, to_srgb8, Landmark, Material, ADE_PERSON, ADE_SKY};
 use crate::look::Look;
 
 /// How many times each simulation stage ran (pixels, rays or photos).
@@ -237,7 +237,7 @@ pub fn render(
                     out.depth[i] = (t * ray.z) as f32;
                     out.semantics[i] = class;
                     let alb = match material {
-                        Some(m) => albedo(m, p, n),
+                        Some(m) => landmark.albedo(m, p, n),
                         None => person_color,
                     };
                     let mut c = alb * ambient;

@@ -139,6 +139,9 @@ pub struct EffectsSpec {
     /// multi-view-stereo clutter `ingest --denoise` removes); they are the file's last
     /// vertices, counted in ground_truth/outliers.json.
     pub outliers: Option<f64>,
+    /// Fine surface texture (stone grain, brick and pavement wear) as a relative albedo
+    /// variation, e.g. 0.3: what multi-view stereo matches on; simulated only when present.
+    pub texture: Option<f64>,
 }
 
 /// A time of day.
@@ -266,6 +269,7 @@ impl SceneSpec {
             ("haze", e.haze),
             ("transients", e.transients),
             ("noise", e.noise),
+            ("texture", e.texture),
         ] {
             if v.is_some_and(|v| !(v >= 0.0 && v.is_finite())) {
                 return bad(

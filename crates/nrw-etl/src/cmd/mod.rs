@@ -3,6 +3,7 @@
 
 pub mod corpus;
 pub mod demo;
+pub mod densify;
 pub mod export;
 pub mod finalize;
 pub mod ingest;

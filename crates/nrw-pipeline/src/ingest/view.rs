@@ -98,24 +98,6 @@ pub(super) fn label_pngs(
     ))
 }
 
-/// The photo resampled from its own camera `from` to the undistorted PINHOLE camera `to`
-/// (a photo stored at another size than its camera's, same aspect ratio, is brought to the
-/// camera's size first).
-pub(super) fn undistorted_photo(
-    photo: &RgbImage,
-    from: &nrw_colmap::Camera,
-    to: &nrw_colmap::Camera,
-) -> RgbImage {
-    let photo = resize_photo(photo, from.width as u32, from.height as u32);
-    let src = nrw_render::Rgb8 {
-        width: photo.width(),
-        height: photo.height(),
-        data: photo.into_raw(),
-    };
-    let out = nrw_render::undistort_photo(&src, from, to);
-    RgbImage::from_raw(out.width, out.height, out.data).expect("width × height × 3 bytes")
-}
-
 /// Render one image and, if kept, encode its row.
 pub(super) fn process(
     cfg: &IngestConfig,
@@ -154,7 +136,9 @@ pub(super) fn process(
     let decoded = load_photo(&photo_path)
         .map_err(PipelineError::from)
         .map(|photo| match &p.distorted {
-            Some(originals) => undistorted_photo(&photo, &originals[&img.camera_id], cam),
+            Some(originals) => {
+                crate::model::undistorted_photo(&photo, &originals[&img.camera_id], cam)
+            }
             None => photo,
         })
         .and_then(|photo| {

@@ -1,0 +1,77 @@
+//! `nrw-etl densify`: multi-view stereo and fusion on the CPU, writing COLMAP's dense
+//! workspace (`SCENE/dense`) so that `ingest SCENE` renders the dense cloud.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::Bars;
+use crate::error::Result;
+
+/// Arguments of `densify`.
+#[derive(Debug, Args)]
+#[command(after_help = "Examples:
+  nrw-etl densify ../shared/data/sacre_coeur --out /tmp/sacre_coeur_dense
+  nrw-etl densify /tmp/scene                   # writes /tmp/scene/dense, then:
+  nrw-etl ingest /tmp/scene --out /tmp/ds      # finds /tmp/scene/dense/fused.ply
+
+The workspace is COLMAP's: `colmap stereo_fusion --workspace_path DIR --input_type geometric`
+reads it unchanged. stereo/confidence_maps/NAME.geometric.bin (ours) holds, per pixel, the mean
+NCC of the source views that agree with the kept depth and their count (0, 0 where no depth).")]
+pub struct DensifyArgs {
+    /// The scene folder (sparse model in sparse/0 or sparse/, photos in images/)
+    pub scene: PathBuf,
+    /// Where to write the dense workspace [default: SCENE/dense]
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace an existing workspace at the output folder (never replaced otherwise)
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Longer side of the undistorted views, in pixels; 0 keeps the photos' size
+    #[arg(long, default_value_t = nrw_pipeline::densify::DEFAULT_MAX_IMAGE_SIZE)]
+    pub max_image_size: u64,
+    /// Source views each view is matched with (the most overlapping, at least 1° apart)
+    #[arg(long, default_value_t = nrw_pipeline::densify::DEFAULT_MAX_SOURCES)]
+    pub max_sources: usize,
+    /// Red-black PatchMatch sweeps per scale
+    #[arg(long, default_value_t = 5)]
+    pub iterations: usize,
+    /// Half the matching window's side, in pixels (sampled every second pixel)
+    #[arg(long, default_value_t = 5)]
+    pub window_radius: usize,
+    /// Coarse-to-fine levels (1: full size only; each level halves the image)
+    #[arg(long, default_value_t = 2)]
+    pub scales: usize,
+    /// Skip the geometric-consistency pass (faster, noisier: photometric maps are fused)
+    #[arg(long)]
+    pub no_geometric: bool,
+    /// The photo folder, if not the scene's images/
+    #[arg(long)]
+    pub images: Option<PathBuf>,
+    /// Let photo names resolve through symbolic links out of the photo folder
+    #[arg(long)]
+    pub follow_outside_links: bool,
+    /// Hide progress bars
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Run `densify`.
+pub fn run(args: &DensifyArgs) -> Result<()> {
+    let table = nrw_pipeline::runner::DensifyTable {
+        max_image_size: args.max_image_size,
+        max_sources: args.max_sources,
+        iterations: args.iterations,
+        window_radius: args.window_radius,
+        scales: args.scales,
+        geometric: !args.no_geometric,
+        overwrite: args.overwrite,
+    };
+    let mut cfg = nrw_pipeline::runner::densify_config(&table, &args.scene);
+    cfg.out = args.out.clone();
+    cfg.images = args.images.clone();
+    cfg.follow_outside_links = args.follow_outside_links;
+    let report = nrw_pipeline::densify::densify(&cfg, &Bars::new(args.quiet))?;
+    super::print_report(&nrw_pipeline::report::densify(&report));
+    Ok(())
+}

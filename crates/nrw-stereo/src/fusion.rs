@@ -1,0 +1,224 @@
+//! COLMAP 3.8's stereo fusion (`StereoFusion`): starting from each unfused pixel of each
+//! image in order, a depth-first walk over the pixels its point projects to in the
+//! overlapping images gathers the pixels that agree with the first one (reprojection error,
+//! relative depth, normal angle); a walk of at least `min_num_pixels` becomes one point at the
+//! per-coordinate median, with the median normal and colour, seen by the images it visited.
+//!
+//! Differences from COLMAP, each deliberate: positions and projections in f64 (COLMAP's are
+//! f32), pixel centres at +0.5 (the model's convention; COLMAP's fusion uses (col, row)).
+
+use std::collections::BTreeSet;
+
+use glam::DVec3;
+
+use crate::view::Pinhole;
+
+/// COLMAP's `StereoFusionOptions` that this fusion reads, with COLMAP's defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FusionOptions {
+    /// Least pixels fused into a point (5).
+    pub min_num_pixels: usize,
+    /// Most pixels fused into a point (10000).
+    pub max_num_pixels: usize,
+    /// Deepest walk (100).
+    pub max_traversal_depth: usize,
+    /// Largest reprojection error, px (2).
+    pub max_reproj_error: f64,
+    /// Largest relative depth difference (0.01).
+    pub max_depth_error: f64,
+    /// Largest normal angle, degrees (10).
+    pub max_normal_error_deg: f64,
+}
+
+impl Default for FusionOptions {
+    fn default() -> Self {
+        FusionOptions {
+            min_num_pixels: 5,
+            max_num_pixels: 10_000,
+            max_traversal_depth: 100,
+            max_reproj_error: 2.0,
+            max_depth_error: 0.01,
+            max_normal_error_deg: 10.0,
+        }
+    }
+}
+
+/// One image's maps as fusion reads them.
+#[derive(Debug, Clone)]
+pub struct FusionInput<'a> {
+    pub lens: Pinhole,
+    /// World (scene-local) → camera.
+    pub rotation: glam::DMat3,
+    pub translation: DVec3,
+    pub width: usize,
+    pub height: usize,
+    /// Depth per pixel (0 = none), row-major.
+    pub depth: &'a [f32],
+    /// Unit normal per pixel in camera coordinates.
+    pub normal: &'a [[f32; 3]],
+    /// 8-bit RGB per pixel.
+    pub rgb: &'a [u8],
+    /// The images (indices into the input list) a walk may step into from this one.
+    pub overlapping: Vec<usize>,
+}
+
+/// The fused cloud: positions in the scene-local frame, unit normals, colours, and for each
+/// point the images (input indices, ascending) whose pixels it fused.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FusedCloud {
+    pub positions: Vec<DVec3>,
+    pub normals: Vec<[f32; 3]>,
+    pub colors: Vec<[u8; 3]>,
+    pub visibility: Vec<Vec<u32>>,
+}
+
+/// The angle (radians) between two vectors, from atan2 (exact for nearly parallel ones).
+pub(crate) fn angle_between(a: DVec3, b: DVec3) -> f64 {
+    let angle = a.cross(b).length().atan2(a.dot(b));
+    angle.min(std::f64::consts::PI - angle)
+}
+
+/// COLMAP's `internal::Median`: the middle element, or the mean of the two middle ones.
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_unstable_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len().is_multiple_of(2) {
+        (values[mid - 1] + values[mid]) / 2.0
+    } else {
+        values[mid]
+    }
+}
+
+/// The pixels gathered by one walk.
+#[derive(Default)]
+struct Cluster {
+    x: Vec<f64>,
+    y: Vec<f64>,
+    z: Vec<f64>,
+    n: [Vec<f64>; 3],
+    rgb: [Vec<f64>; 3],
+    seen: BTreeSet<u32>,
+}
+
+/// Fuse the images' maps into one cloud, COLMAP's way.
+pub fn fuse(images: &[FusionInput], opts: &FusionOptions) -> FusedCloud {
+    let mut fused: Vec<Vec<bool>> = images
+        .iter()
+        .map(|im| vec![false; im.width * im.height])
+        .collect();
+    let min_cos_normal = opts.max_normal_error_deg.to_radians().cos();
+    let max_sq_reproj = opts.max_reproj_error * opts.max_reproj_error;
+    let mut out = FusedCloud::default();
+    let mut queue: Vec<(usize, usize, usize, usize)> = Vec::new();
+    for (start, im) in images.iter().enumerate() {
+        for row in 0..im.height {
+            for col in 0..im.width {
+                if fused[start][row * im.width + col] {
+                    continue;
+                }
+                queue.clear();
+                queue.push((start, row, col, 0));
+                let mut cluster = Cluster::default();
+                let mut reference: Option<(DVec3, DVec3)> = None;
+                while let Some((i, r, c, depth_level)) = queue.pop() {
+                    let img = &images[i];
+                    let p = r * img.width + c;
+                    if fused[i][p] {
+                        continue;
+                    }
+                    let d = img.depth[p] as f64;
+                    if d.is_nan() || d <= 0.0 {
+                        continue;
+                    }
+                    if let Some((ref_point, _)) = reference {
+                        let proj = img.rotation * ref_point + img.translation;
+                        if ((proj.z - d) / d).abs() > opts.max_depth_error {
+                            continue;
+                        }
+                        let u = img.lens.project(proj);
+                        let (dc, dr) = (u.x - (c as f64 + 0.5), u.y - (r as f64 + 0.5));
+                        if dc * dc + dr * dr > max_sq_reproj {
+                            continue;
+                        }
+                    }
+                    let nc = img.normal[p];
+                    let normal = img.rotation.transpose()
+                        * DVec3::new(nc[0] as f64, nc[1] as f64, nc[2] as f64);
+                    if let Some((_, ref_normal)) = reference {
+                        if ref_normal.dot(normal) < min_cos_normal {
+                            continue;
+                        }
+                    }
+                    let cam = img.lens.pixel_ray(c, r) * d;
+                    let xyz = img.rotation.transpose() * (cam - img.translation);
+                    fused[i][p] = true;
+                    cluster.x.push(xyz.x);
+                    cluster.y.push(xyz.y);
+                    cluster.z.push(xyz.z);
+                    for k in 0..3 {
+                        cluster.n[k].push(normal[k]);
+                        cluster.rgb[k].push(img.rgb[3 * p + k] as f64);
+                    }
+                    cluster.seen.insert(i as u32);
+                    if reference.is_none() {
+                        reference = Some((xyz, normal));
+                    }
+                    if cluster.x.len() >= opts.max_num_pixels {
+                        break;
+                    }
+                    let next_level = depth_level + 1;
+                    if next_level >= opts.max_traversal_depth {
+                        continue;
+                    }
+                    for &j in &img.overlapping {
+                        let next = &images[j];
+                        let proj = next.rotation * xyz + next.translation;
+                        if proj.z <= 0.0 {
+                            continue;
+                        }
+                        let u = next.lens.project(proj);
+                        // The pixel whose centre is nearest (centres at +0.5).
+                        let (nc, nr) = (u.x.floor(), u.y.floor());
+                        if nc < 0.0
+                            || nr < 0.0
+                            || nc >= next.width as f64
+                            || nr >= next.height as f64
+                        {
+                            continue;
+                        }
+                        queue.push((j, nr as usize, nc as usize, next_level));
+                    }
+                }
+                push_point(&mut out, cluster, opts);
+            }
+        }
+    }
+    out
+}
+
+/// A walk's point, if it gathered enough pixels and its normals do not cancel.
+fn push_point(out: &mut FusedCloud, mut cl: Cluster, opts: &FusionOptions) {
+    if cl.x.len() < opts.min_num_pixels.max(1) {
+        return;
+    }
+    let n = DVec3::new(
+        median(&mut cl.n[0]),
+        median(&mut cl.n[1]),
+        median(&mut cl.n[2]),
+    );
+    let norm = n.length();
+    if norm < f32::EPSILON as f64 {
+        return;
+    }
+    let n = n / norm;
+    out.positions.push(DVec3::new(
+        median(&mut cl.x),
+        median(&mut cl.y),
+        median(&mut cl.z),
+    ));
+    out.normals.push([n.x as f32, n.y as f32, n.z as f32]);
+    let colour = |v: &mut Vec<f64>| median(v).round().clamp(0.0, 255.0) as u8;
+    let [r, g, b] = &mut cl.rgb;
+    out.colors.push([colour(r), colour(g), colour(b)]);
+    out.visibility.push(cl.seen.into_iter().collect());
+}

@@ -147,6 +147,8 @@ struct Rel<'a> {
     t: DVec3,
     /// The source's centre in reference-camera coordinates.
     centre: DVec3,
+    /// The source's K, which every homography into it starts with.
+    k: DMat3,
     depth: Option<&'a [f32]>,
 }
 
@@ -159,6 +161,8 @@ struct Problem<'a> {
     window: Vec<(f64, f64, f64)>,
     range: (f64, f64),
     geometric: bool,
+    /// The reference's K⁻¹, which every homography ends with.
+    k_inv: DMat3,
 }
 
 /// The reference window around one pixel: centred grey values and bilateral weights, one
@@ -193,6 +197,7 @@ impl<'a> Problem<'a> {
                     r,
                     t,
                     centre: -(r.transpose() * t),
+                    k: s.view.lens.matrix(),
                     depth: s.depth,
                 }
             })
@@ -214,6 +219,7 @@ impl<'a> Problem<'a> {
             window,
             range,
             geometric,
+            k_inv: reference.lens.inverse(),
         }
     }
 
@@ -305,7 +311,7 @@ impl<'a> Problem<'a> {
             return None;
         }
         let tn = DMat3::from_cols(src.t * (n.x / dp), src.t * (n.y / dp), src.t * (n.z / dp));
-        Some(src.view.lens.matrix() * (src.r + tn) * self.reference.lens.inverse())
+        Some(src.k * (src.r + tn) * self.k_inv)
     }
 
     /// The forward-backward reprojection error (px) of the reference point `point` through
@@ -683,23 +689,31 @@ pub fn photometric(
         return None;
     }
     let view_salt = salt(reference);
-    let levels = opts.scales.max(1);
-    // The pyramid, coarsest last: level k halves the image k times.
-    let mut pyramid: Vec<(StereoView, Vec<StereoView>)> = vec![(
-        reference.clone(),
-        sources.iter().map(|s| s.view.clone()).collect(),
-    )];
-    for _ in 1..levels {
-        let (r, s) = pyramid.last().expect("one level");
+    // The coarser levels, finest first: level k halves the image k times. The full-size
+    // level is the caller's views themselves.
+    let mut coarse: Vec<(StereoView, Vec<StereoView>)> = Vec::new();
+    for _ in 1..opts.scales.max(1) {
+        let (r, s) = match coarse.last() {
+            Some((r, s)) => (r, s.iter().collect::<Vec<_>>()),
+            None => (reference, sources.iter().map(|s| s.view).collect()),
+        };
         if r.image.width < 32 || r.image.height < 32 {
             break;
         }
-        pyramid.push((r.halved(), s.iter().map(StereoView::halved).collect()));
+        coarse.push((r.halved(), s.into_iter().map(StereoView::halved).collect()));
     }
+    let levels = coarse
+        .iter()
+        .rev()
+        .map(|(r, s)| (r, s.iter().collect::<Vec<_>>()))
+        .chain(std::iter::once((
+            reference,
+            sources.iter().map(|s| s.view).collect(),
+        )));
     let mut state: Option<Hypotheses> = None;
-    for (r, s) in pyramid.iter().rev() {
+    for (r, s) in levels {
         let srcs: Vec<Source> = s
-            .iter()
+            .into_iter()
             .map(|v| Source {
                 view: v,
                 depth: None,

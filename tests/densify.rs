@@ -9,11 +9,11 @@ use glam::DVec3;
 use nrw_colmap::dense::{DenseMap, MapKind, MapPass, Workspace};
 
 use super::shared::shared;
-use super::{fails, files, nrw, ok};
+use super::{assert_same_files, fails, files, nrw, ok};
 
 /// The textured scene of scenes/textured.toml at test size (`count` photos, shorter side
 /// 240–280 px), its true surface moved to `dense_truth/` so densify writes `dense/`.
-fn textured_scene(dir: &Path, count: usize) -> PathBuf {
+pub(crate) fn textured_scene(dir: &Path, count: usize) -> PathBuf {
     let spec = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/textured.toml"),
     )
@@ -44,7 +44,12 @@ struct Cam {
 }
 
 fn cams(scene: &Path) -> Vec<Cam> {
-    let rec = nrw_colmap::read_model(&scene.join("sparse/0"), None).unwrap();
+    model_cams(&scene.join("sparse/0"))
+}
+
+/// The views of a PINHOLE model (a synthetic scene's, a workspace's undistorted one).
+fn model_cams(model: &Path) -> Vec<Cam> {
+    let rec = nrw_colmap::read_model(model, None).unwrap();
     rec.images
         .values()
         .map(|im| {
@@ -263,12 +268,12 @@ fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_
             .unwrap_or("")
     );
 
-    colmap_fuses_the_same_cloud(&ws, &fused, &cams);
+    colmap_fuses_the_same_cloud(&ws, &fused, &cams, 5);
 }
 
 /// COLMAP 3.8's `stereo_fusion --input_type geometric` over our workspace: its cloud and ours
 /// agree (the share of each within 1% of depth of the other's points).
-fn colmap_fuses_the_same_cloud(ws: &Workspace, ours: &[DVec3], cams: &[Cam]) {
+fn colmap_fuses_the_same_cloud(ws: &Workspace, ours: &[DVec3], cams: &[Cam], min_pixels: usize) {
     if !colmap_present() {
         return;
     }
@@ -278,6 +283,7 @@ fn colmap_fuses_the_same_cloud(ws: &Workspace, ours: &[DVec3], cams: &[Cam]) {
         .arg(&ws.root)
         .args(["--input_type", "geometric", "--output_path"])
         .arg(&out)
+        .args(["--StereoFusion.min_num_pixels", &min_pixels.to_string()])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -448,24 +454,171 @@ fn sfm_agreement(ws: &Workspace) -> (f64, usize) {
     )
 }
 
+/// Densify a real scene into `dense` (`--max-image-size size`, `--min-num-pixels m`); then
+/// the SfM agreement and COLMAP's fusion of our maps against our cloud. The SfM median.
+fn densify_real_scene(scene: &Path, dense: &Path, size: u32, m: usize) -> f64 {
+    let name = scene.file_name().unwrap().to_str().unwrap();
+    ok(&[
+        "densify",
+        scene.to_str().unwrap(),
+        "-q",
+        "--max-image-size",
+        &size.to_string(),
+        "--min-num-pixels",
+        &m.to_string(),
+        "--out",
+        dense.to_str().unwrap(),
+    ]);
+    let ws = Workspace::new(dense);
+    let (median, n) = sfm_agreement(&ws);
+    eprintln!(
+        "{name} at {size} px: median relative depth difference {median:.5} at {n} SfM observations"
+    );
+    assert!(
+        n > 500,
+        "{name}: only {n} SfM observations fall on a kept depth"
+    );
+    assert!(median <= 0.01, "{name}: median {median}");
+    let fused = nrw_colmap::read_ply(&ws.fused_ply()).unwrap().positions;
+    colmap_fuses_the_same_cloud(&ws, &fused, &model_cams(&ws.sparse()), m);
+    median
+}
+
 #[test]
-fn densify_agrees_with_the_sfm_points_of_a_real_internet_collection() {
+fn densify_agrees_with_the_sfm_points_and_colmap_on_sceaux_castle() {
+    let Some(data) = shared("data/sceaux_castle") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    // The scene has a dense/ of its own (pairwise OpenCV stereo): densify writes elsewhere.
+    densify_real_scene(&data, &tmp.path().join("dense"), 320, 5);
+}
+
+#[test]
+fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
     let Some(data) = shared("data/sacre_coeur") else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
     let dense = tmp.path().join("dense");
-    ok(&[
-        "densify",
-        data.to_str().unwrap(),
-        "-q",
-        "--max-image-size",
-        "320",
-        "--out",
-        dense.to_str().unwrap(),
-    ]);
-    let (median, n) = sfm_agreement(&Workspace::new(&dense));
-    eprintln!("sacre_coeur at 320 px: median relative depth difference {median:.5} at {n} SfM observations");
-    assert!(n > 500, "only {n} SfM observations fall on a kept depth");
-    assert!(median <= 0.01, "median {median}");
+    // Ten photos: a wall three of them see makes no point at COLMAP's 5 pixels, hence 2.
+    densify_real_scene(&data, &dense, 480, 2);
+    let ingest = |points: Option<&Path>, out: &str| {
+        let out = tmp.path().join(out);
+        let mut args = vec![
+            "ingest",
+            data.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if let Some(p) = points {
+            args.extend(["--points", p.to_str().unwrap()]);
+        }
+        let o = nrw(&args);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        let line = err
+            .lines()
+            .find(|l| l.starts_with("ingested"))
+            .map(String::from);
+        (o.status.code(), line.unwrap_or(err))
+    };
+    // At the paper's settings (85% empty, 450 px): the sparse model keeps no view (exit 3).
+    let (code, sparse) = ingest(None, "sparse_ds");
+    assert_eq!(code, Some(3), "{sparse}");
+    let (code, dense_line) = ingest(Some(&dense.join("fused.ply")), "dense_ds");
+    assert_eq!(code, Some(0), "{dense_line}");
+    let kept: usize = dense_line
+        .split(", ")
+        .find_map(|part| part.strip_suffix(" kept"))
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no kept count in: {dense_line}"));
+    eprintln!("sacre_coeur after densify: {dense_line}");
+    assert!(kept >= 1, "{dense_line}");
+}
+
+#[test]
+fn densify_units_and_finalize_give_the_bytes_of_one_process_and_a_stopped_unit_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = textured_scene(tmp.path(), 4);
+    let (whole, split) = (tmp.path().join("whole"), tmp.path().join("split"));
+    let args = |out: &Path, extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = ["densify", scene.to_str().unwrap(), "-q"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        a.extend(["--max-image-size", "96", "--out"].map(String::from));
+        a.push(out.to_str().unwrap().to_string());
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let run = |out: &Path, extra: &[&str]| nrw(&super::strs(&args(out, extra)));
+    let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    ok(&super::strs(&args(&whole, &[])));
+
+    // Finalize before any unit, and a geometric unit before the photometric pass: refused.
+    let e = fails(&super::strs(&args(&split, &["--finalize"])));
+    assert!(e.contains("holds no densify work"), "{e}");
+    let e = fails(&super::strs(&args(
+        &split,
+        &["--unit", "0/2", "--pass", "geometric"],
+    )));
+    assert!(
+        e.contains("photometric.bin")
+            && e.contains("is missing: the photometric pass has not finished view"),
+        "{e}"
+    );
+
+    // Unit 0/2 of the photometric pass stops after one view (as a kill would), then resumes.
+    let o = run(
+        &split,
+        &[
+            "--unit",
+            "0/2",
+            "--pass",
+            "photometric",
+            "--stop-after-views",
+            "1",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    let o = run(&split, &["--unit", "0/2", "--pass", "photometric"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("2 of 4 views; 1 matched, 1 found done"),
+        "{}",
+        stderr(&o)
+    );
+    // A unit with other settings is refused, naming the setting.
+    let e = fails(&super::strs(&args(
+        &split,
+        &[
+            "--unit",
+            "1/2",
+            "--pass",
+            "photometric",
+            "--window-radius",
+            "3",
+        ],
+    )));
+    assert!(e.contains("stereo.window_radius = 5 (this run: 3)"), "{e}");
+    for pass in ["photometric", "geometric"] {
+        let first = if pass == "photometric" { 1 } else { 0 };
+        for i in first..2 {
+            let unit = format!("{i}/2");
+            ok(&super::strs(&args(
+                &split,
+                &["--unit", &unit, "--pass", pass],
+            )));
+        }
+    }
+    let e = stderr(&run(&split, &["--finalize"]));
+    assert!(e.contains("densified 4 of 4 views"), "{e}");
+    assert_same_files(
+        &files(&whole),
+        &files(&split),
+        "2 units + finalize vs one process",
+    );
+    // The workspace records its settings, and nothing of the build is left behind.
+    assert!(whole.join("densify.json").is_file());
+    assert!(!tmp.path().join(".split.partial").exists());
 }

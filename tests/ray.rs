@@ -25,10 +25,22 @@ const SMALL_INGEST: [&str; 6] = [
 
 /// Run the driver's test script into `out` (a folder or URL); returns its stdout.
 fn driver(scene: &str, out: &str, args: &[&str], env: &[(&str, String)]) -> String {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/test_driver.py");
+    let fixed = [scene, out, env!("CARGO_BIN_EXE_nrw-etl")];
+    python_script(
+        "pipelines/ray/test_driver.py",
+        &[&fixed[..], args].concat(),
+        env,
+    )
+}
+
+/// Run a Python script of the repository with Ray's usage reporting off; its stdout, after
+/// asserting it succeeded.
+fn python_script(script: &str, args: &[&str], env: &[(&str, String)]) -> String {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(script);
     let o = Command::new("python3")
         .arg(&script)
-        .args([scene, out, env!("CARGO_BIN_EXE_nrw-etl")])
         .args(args)
         .envs(env.iter().map(|(k, v)| (*k, v.clone())))
         .env("RAY_USAGE_STATS_ENABLED", "0")
@@ -82,6 +94,38 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
         &without_qa(files(&one)),
         &without_qa(files(&ray)),
         "one process vs the Ray driver",
+    );
+}
+
+#[test]
+fn densify_as_ray_units_on_two_nodes_gives_the_workspace_of_one_process() {
+    if !python_has("import ray") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = super::densify::textured_scene(tmp.path(), 4);
+    let s = scene.to_str().unwrap();
+    let one = tmp.path().join("one");
+    let settings = ["--max-image-size", "96"];
+    ok(&[
+        &["densify", s, "-q", "--out", one.to_str().unwrap()][..],
+        &settings,
+    ]
+    .concat());
+    let fixed = [s, env!("CARGO_BIN_EXE_nrw-etl"), "3"];
+    let stdout = python_script(
+        "tests/ray_densify.py",
+        &[&fixed[..], &settings].concat(),
+        &[],
+    );
+    assert!(
+        stdout.contains("densify, geometric pass: 3 units"),
+        "{stdout}"
+    );
+    assert_same_files(
+        &files(&one),
+        &files(&scene.join("dense")),
+        "one process vs densify's units on Ray",
     );
 }
 

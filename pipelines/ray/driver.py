@@ -11,6 +11,11 @@ recorded and the others go on. Then OUT/corpus.parquet indexes them, one row per
 where its dataset and report are, counts and verdicts, or its error (schemas/corpus.toml;
 pyarrow.parquet.read_table or DuckDB's read_parquet read it).
 
+With --densify, the scene is densified first (multi-view stereo into SCENE/dense, which ingest
+then renders): `nrw-etl densify --unit i/N --pass photometric` on N tasks, then the same with
+`--pass geometric`, then `densify --finalize` (fusion, on one node); the scene folder must be
+on a shared file system. A scene that has SCENE/dense/fused.ply already is not densified again.
+
 Steps: `nrw-etl ingest --unit i/N` on N tasks (retried when a task or its node dies; a
 retried unit resumes where it stopped), `nrw-etl finalize`, `split`, `style --unit i/N`
 on N tasks, `finalize`, `triplets`, `qa`. Every task calls the `nrw-etl` binary, which
@@ -87,12 +92,30 @@ def one(binary, args, env, task_log=None):
     return ray.get(nrw_task.remote(binary, args, env, task_log))
 
 
+def densify(scene, n, binary="nrw-etl", densify_args=(), env=None, log=print, task_log=None):
+    """Multi-view stereo into the scene's dense workspace: both passes as N work units each,
+    then fusion as one task; the bytes of `nrw-etl densify SCENE` in one process. Returns
+    finalize's summary."""
+    env = dict(env or {})
+    base = ["densify", scene, *densify_args]
+    for p in ("photometric", "geometric"):
+        log(f"densify, {p} pass: {n} units")
+        units(binary, [*base, "--pass", p], n, env, task_log)
+    return one(binary, [*base, "--finalize", "--quiet"], env, task_log)
+
+
 def run(scene, out, n, binary="nrw-etl", val=100, k=20, tier="vgg16-512", weights=None,
-        ingest_args=(), env=None, style=True, log=print, task_log=None):
+        ingest_args=(), env=None, style=True, log=print, task_log=None, densify_args=None):
     """The whole pipeline on the connected Ray cluster; returns the report's location.
     `task_log`: a file every node can append to (a shared file system) where each task
-    attempt records its node, command and exit code, as JSON lines."""
+    attempt records its node, command and exit code, as JSON lines. `densify_args` (a list,
+    possibly empty): densify the scene first, with these arguments."""
     env = dict(env or {})
+    if densify_args is not None:
+        if os.path.exists(os.path.join(scene, "dense", "fused.ply")) and "--overwrite" not in densify_args:
+            log("densify skipped: the scene has dense/fused.ply already (--densify-arg=--overwrite replaces it)")
+        else:
+            log(densify(scene, n, binary, densify_args, env, log, task_log) or "densified")
     log(f"ingest: {n} units")
     units(binary, ["ingest", scene, "--out", out, *ingest_args], n, env, task_log)
     log(one(binary, ["finalize", out], env, task_log) or "finalized ingest")
@@ -183,6 +206,10 @@ def main(argv=None):
     p.add_argument("--tier", default="vgg16-512", help="style tier (color-stats needs no weights)")
     p.add_argument("--weights", default=None, help="VGG16 safetensors, readable on every node")
     p.add_argument("--ingest-arg", action="append", default=[], help="extra ingest argument (repeat)")
+    p.add_argument("--densify", action="store_true",
+                   help="densify the scene first (multi-view stereo into SCENE/dense, on a shared file system)")
+    p.add_argument("--densify-arg", action="append", default=[],
+                   help="extra densify argument (repeat), e.g. --densify-arg=--max-image-size=640")
     p.add_argument("--task-log", default=None,
                    help="append each task attempt (node, command, exit code) to this file, as JSON lines")
     a = p.parse_args(argv)
@@ -192,7 +219,7 @@ def main(argv=None):
     ray.init(address=a.address)
     n = a.units or max(1, int(ray.cluster_resources().get("CPU", 1)))
     settings = dict(val=a.val, k=a.k, tier=a.tier, weights=a.weights, ingest_args=a.ingest_arg,
-                    task_log=a.task_log)
+                    task_log=a.task_log, densify_args=a.densify_arg if a.densify else None)
     if a.scenes:
         run_corpus(scene_list(a.scenes), a.out, n, a.binary, a.parallel, **settings)
     else:

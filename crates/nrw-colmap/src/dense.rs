@@ -382,6 +382,12 @@ impl Workspace {
     pub fn fused_vis(&self) -> std::path::PathBuf {
         self.root.join("fused.ply.vis")
     }
+
+    /// `densify.json`: not COLMAP's; nrw-etl's record of the settings a workspace is built
+    /// with and of the photos it could not read, so work units and resumed runs agree.
+    pub fn settings(&self) -> std::path::PathBuf {
+        self.root.join("densify.json")
+    }
 }
 
 #[cfg(test)]

@@ -62,6 +62,7 @@ pub fn flag(s: nrw_pipeline::Setting) -> &'static str {
         S::MaxSources => "--max-sources",
         S::MaxImageSize => "--max-image-size",
         S::Stereo => "--iterations/--window-radius/--scales",
+        S::MinNumPixels => "--min-num-pixels",
     }
 }
 

@@ -16,7 +16,7 @@ use nrw_stereo::{FusionOptions, GrayImage, Hypotheses, PatchMatchOptions, Pinhol
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result, Setting};
-use crate::Progress;
+use crate::{Progress, Unit};
 
 /// The longer side the undistorted views are capped at by default (about 0.5 MP at 4:3):
 /// stereo's time grows with the pixels.
@@ -47,6 +47,8 @@ pub struct DensifyConfig {
     pub follow_outside_links: bool,
     pub stereo: PatchMatchOptions,
     pub fusion: FusionOptions,
+    /// Stop a pass after this many views, as an interruption would (for resume tests).
+    pub stop_after_views: Option<usize>,
 }
 
 impl DensifyConfig {
@@ -63,6 +65,7 @@ impl DensifyConfig {
             follow_outside_links: false,
             stereo: PatchMatchOptions::default(),
             fusion: FusionOptions::default(),
+            stop_after_views: None,
         }
     }
 }
@@ -90,14 +93,14 @@ pub struct ViewOutcome {
     pub verdict: ViewVerdict,
 }
 
-/// What densify did.
+/// What densify did (the whole stage, or `finalize` after its work units).
 #[derive(Debug, Clone)]
 pub struct DensifyReport {
     pub out: PathBuf,
     pub views: Vec<ViewOutcome>,
     pub points: usize,
-    /// Seconds of each phase: undistortion, photometric, geometric, fusion.
-    pub seconds: [f64; 4],
+    /// Seconds of each phase this process ran: undistortion, photometric, geometric, fusion.
+    pub seconds: [Option<f64>; 4],
 }
 
 impl DensifyReport {
@@ -108,6 +111,22 @@ impl DensifyReport {
             .filter(|v| matches!(v.verdict, ViewVerdict::Densified { .. }))
             .count()
     }
+}
+
+/// What one work unit of a stereo pass did.
+#[derive(Debug, Clone)]
+pub struct UnitReport {
+    /// The folder the units build the workspace in (published by `finalize`).
+    pub staging: PathBuf,
+    pub pass: MapPass,
+    pub unit: Unit,
+    /// Views this unit owns, of all views with sources.
+    pub owned: usize,
+    pub planned: usize,
+    /// Views matched by this run, and views found done by an earlier (interrupted) one.
+    pub computed: usize,
+    pub resumed: usize,
+    pub seconds: f64,
 }
 
 /// A view of the undistorted model as densify handles it.
@@ -121,14 +140,176 @@ struct Entry {
     height: usize,
 }
 
-/// Run densify.
+/// The settings a workspace is built with: every unit and a resumed run must share them.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+struct Settings {
+    tool_version: String,
+    max_image_size: Option<u64>,
+    max_sources: usize,
+    geometric: bool,
+    stereo: PatchMatchOptions,
+    fusion: FusionOptions,
+}
+
+impl Settings {
+    fn of(cfg: &DensifyConfig) -> Settings {
+        Settings {
+            tool_version: env!("CARGO_PKG_VERSION").to_string(),
+            max_image_size: cfg.max_image_size,
+            max_sources: cfg.max_sources,
+            geometric: cfg.geometric,
+            stereo: cfg.stereo.clone(),
+            fusion: cfg.fusion.clone(),
+        }
+    }
+}
+
+/// `densify.json`: the settings, and the photos undistortion could not read (name → why).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct Record {
+    settings: Settings,
+    unreadable: BTreeMap<String, String>,
+}
+
+/// Which part of densify an invocation does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    Whole,
+    Unit,
+    Finalize,
+}
+
+/// A workspace being built: the model, the views and the plan every step derives alike.
+struct Prepared {
+    rec: Reconstruction,
+    out: PathBuf,
+    staging: PathBuf,
+    ws: Workspace,
+    entries: Vec<Entry>,
+    plan: Vec<Plan>,
+    /// The verdict of each view stereo does not run on (`None` for planned views).
+    verdicts: Vec<Option<ViewVerdict>>,
+    undistort_seconds: Option<f64>,
+}
+
+/// Run densify whole in one process: both stereo passes and fusion. A staging folder left by
+/// an interrupted run with the same settings is resumed (its finished views kept).
 pub fn densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<DensifyReport> {
+    let prep = prepare(cfg, Step::Whole, progress)?;
+    let mut seconds = [prep.undistort_seconds, None, None, None];
+    for (k, pass) in [MapPass::Photometric, MapPass::Geometric]
+        .into_iter()
+        .enumerate()
+    {
+        let timer = std::time::Instant::now();
+        run_pass(&prep, cfg, pass, Unit::WHOLE, progress)?;
+        seconds[1 + k] = Some(timer.elapsed().as_secs_f64());
+    }
+    let mut report = finish(&prep, cfg, progress)?;
+    report.seconds = [seconds[0], seconds[1], seconds[2], report.seconds[3]];
+    Ok(report)
+}
+
+/// Run one work unit of a stereo pass: the views it owns (the k-th view with sources, in
+/// image-id order, belongs to unit k mod N). Every unit of the photometric pass must finish
+/// before any of the geometric pass starts; `finalize_densify` then fuses. A rerun skips the
+/// views an earlier run finished, and any split gives the bytes of one process.
+pub fn densify_unit(
+    cfg: &DensifyConfig,
+    pass: MapPass,
+    unit: Unit,
+    progress: &dyn Progress,
+) -> Result<UnitReport> {
+    let timer = std::time::Instant::now();
+    let prep = prepare(cfg, Step::Unit, progress)?;
+    let (owned, computed, resumed) = run_pass(&prep, cfg, pass, unit, progress)?;
+    Ok(UnitReport {
+        staging: prep.staging,
+        pass,
+        unit,
+        owned,
+        planned: prep.plan.len(),
+        computed,
+        resumed,
+        seconds: timer.elapsed().as_secs_f64(),
+    })
+}
+
+/// Fuse the maps every unit wrote and move the finished workspace into place.
+pub fn finalize_densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<DensifyReport> {
+    let prep = prepare(cfg, Step::Finalize, progress)?;
+    finish(&prep, cfg, progress)
+}
+
+/// Load and undistort the model, claim the output folder, and make sure the staging
+/// workspace holds the undistorted views under these settings (undistorting them if not).
+fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<Prepared> {
     check(cfg)?;
     let (scene, mut rec) = crate::model::load_model(&cfg.scene, None)?;
     let out = cfg.out.clone().unwrap_or_else(|| scene.dir.join("dense"));
     claim(&out, cfg.overwrite)?;
-    let photos_dir = cfg
-        .images
+    let options = UndistortOptions {
+        max_image_size: cfg.max_image_size,
+        ..UndistortOptions::default()
+    };
+    let distorted = crate::model::undistort_model(&mut rec, &options, &scene.model_dir)?;
+    let staging = staging_dir(&out);
+    let ws = Workspace::new(&staging);
+    let entries = entries(&rec);
+    let settings = Settings::of(cfg);
+    let record = match (read_record(&ws)?, step) {
+        (Some(r), _) if r.settings == settings => Some(r),
+        (Some(r), Step::Whole) => {
+            drop(r);
+            None
+        }
+        (Some(r), _) => return Err(settings_differ(&ws, &r.settings, &settings)),
+        (None, Step::Finalize) => {
+            return Err(PipelineError::input(
+                &staging,
+                "holds no densify work: run `densify --unit I/N --pass photometric`, then `--pass geometric`, before finalize",
+            ))
+        }
+        (None, _) => None,
+    };
+    let mut undistort_seconds = None;
+    let unreadable = match record {
+        Some(r) => r.unreadable,
+        None => {
+            // A whole run starts over; units share the folder, so they only add to it.
+            if step == Step::Whole && staging.exists() {
+                std::fs::remove_dir_all(&staging).map_err(|e| PipelineError::io(&staging, e))?;
+            }
+            let timer = std::time::Instant::now();
+            let photos = photos_dir(cfg, &scene)?;
+            let unreadable =
+                undistort_views(&ws, cfg, &photos, &rec, &distorted, &entries, progress)?;
+            let text = serde_json::to_string_pretty(&Record {
+                settings,
+                unreadable: unreadable.clone(),
+            })
+            .expect("densify's record serialises");
+            nrw_dataset::atomic::write_bytes_atomic(&ws.settings(), text.as_bytes())?;
+            undistort_seconds = Some(timer.elapsed().as_secs_f64());
+            unreadable
+        }
+    };
+    let (plan, verdicts) = plan(cfg, &rec, &entries, &unreadable);
+    Ok(Prepared {
+        rec,
+        out,
+        staging,
+        ws,
+        entries,
+        plan,
+        verdicts,
+        undistort_seconds,
+    })
+}
+
+/// The photo folder: `--images`, else the scene's own.
+fn photos_dir(cfg: &DensifyConfig, scene: &nrw_colmap::Scene) -> Result<PathBuf> {
+    cfg.images
         .clone()
         .or_else(|| scene.images_dir())
         .ok_or_else(|| {
@@ -144,70 +325,131 @@ pub fn densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<DensifyRe
                         .join(", ")
                 ),
             )
-        })?;
-    let options = UndistortOptions {
-        max_image_size: cfg.max_image_size,
-        ..UndistortOptions::default()
-    };
-    let distorted = crate::model::undistort_model(&mut rec, &options, &scene.model_dir)?;
-    let staging = staging_dir(&out);
-    if staging.exists() {
-        std::fs::remove_dir_all(&staging).map_err(|e| PipelineError::io(&staging, e))?;
-    }
-    let ws = Workspace::new(&staging);
-    std::fs::create_dir_all(ws.sparse()).map_err(|e| PipelineError::io(ws.sparse(), e))?;
-    nrw_colmap::write_model(&rec, &ws.sparse(), Format::Binary)
-        .map_err(|e| PipelineError::io(ws.sparse(), e))?;
+        })
+}
 
-    let mut timer = std::time::Instant::now();
-    let mut seconds = [0.0; 4];
-    let mut lap = |i: usize, timer: &mut std::time::Instant| {
-        seconds[i] = timer.elapsed().as_secs_f64();
-        *timer = std::time::Instant::now();
-    };
-    let entries = entries(&rec);
+/// Undistort every photo into `images/` and write the undistorted model into `sparse/`;
+/// the photos that could not be read, with why.
+fn undistort_views(
+    ws: &Workspace,
+    cfg: &DensifyConfig,
+    photos: &Path,
+    rec: &Reconstruction,
+    distorted: &BTreeMap<u32, nrw_colmap::Camera>,
+    entries: &[Entry],
+    progress: &dyn Progress,
+) -> Result<BTreeMap<String, String>> {
+    std::fs::create_dir_all(ws.sparse()).map_err(|e| PipelineError::io(ws.sparse(), e))?;
+    nrw_colmap::write_model(rec, &ws.sparse(), Format::Binary)
+        .map_err(|e| PipelineError::io(ws.sparse(), e))?;
     progress.start("undistorting", entries.len() as u64, "photos");
     let written: Vec<std::result::Result<(), String>> = entries
         .par_iter()
         .map(|e| {
-            let r = write_view(
-                &ws,
-                &photos_dir,
-                cfg.follow_outside_links,
-                &rec,
-                &distorted,
-                e,
-            );
+            let r = write_view(ws, photos, cfg.follow_outside_links, rec, distorted, e);
             progress.inc(1);
             r
         })
         .collect();
     progress.finish();
-    lap(0, &mut timer);
+    Ok(entries
+        .iter()
+        .zip(written)
+        .filter_map(|(e, w)| w.err().map(|why| (e.name.clone(), why)))
+        .collect())
+}
 
+/// The workspace's record, if it has one.
+fn read_record(ws: &Workspace) -> Result<Option<Record>> {
+    let path = ws.settings();
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(PipelineError::io(&path, e)),
+    };
+    serde_json::from_str(&text).map(Some).map_err(|e| {
+        PipelineError::input(
+            &path,
+            format!("is not densify's record ({e}); delete the folder to start over"),
+        )
+    })
+}
+
+/// The error for a unit whose settings are not the workspace's: names the first that differs.
+fn settings_differ(ws: &Workspace, have: &Settings, want: &Settings) -> PipelineError {
+    let flat = |s: &Settings| {
+        let mut out = BTreeMap::new();
+        flatten(
+            "",
+            &serde_json::to_value(s).expect("settings serialise"),
+            &mut out,
+        );
+        out
+    };
+    let (have, want) = (flat(have), flat(want));
+    let null = serde_json::Value::Null;
+    let differ: Vec<String> = want
+        .iter()
+        .filter(|(k, v)| have.get(*k) != Some(*v))
+        .map(|(k, v)| format!("{k} = {} (this run: {v})", have.get(k).unwrap_or(&null)))
+        .collect();
+    PipelineError::input(
+        ws.settings(),
+        format!(
+            "the workspace is being built with {}: run every unit and finalize with the same settings, or delete the folder to start over",
+            differ.join(", ")
+        ),
+    )
+}
+
+/// A JSON object's leaves by dotted key.
+fn flatten(prefix: &str, v: &serde_json::Value, out: &mut BTreeMap<String, serde_json::Value>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, v) in m {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(&key, v, out);
+            }
+        }
+        _ => {
+            out.insert(prefix.to_string(), v.clone());
+        }
+    }
+}
+
+/// The views stereo runs on (with their sources and depth range), and the verdict of every
+/// other view.
+fn plan(
+    cfg: &DensifyConfig,
+    rec: &Reconstruction,
+    entries: &[Entry],
+    unreadable: &BTreeMap<String, String>,
+) -> (Vec<Plan>, Vec<Option<ViewVerdict>>) {
     let sources = nrw_colmap::overlap::source_images(
-        &rec,
+        rec,
         cfg.max_sources,
         nrw_colmap::overlap::DEFAULT_MIN_ANGLE_DEG,
     );
-    let ranges = nrw_colmap::overlap::depth_ranges(&rec);
+    let ranges = nrw_colmap::overlap::depth_ranges(rec);
     let index: BTreeMap<u32, usize> = entries
         .iter()
         .enumerate()
         .map(|(i, e)| (e.image_id, i))
         .collect();
-    let readable = |id: &u32| index.get(id).is_some_and(|&i| written[i].is_ok());
-    let mut verdicts: Vec<ViewVerdict> = written
-        .iter()
-        .map(|w| match w {
-            Ok(()) => ViewVerdict::NoSourceView,
-            Err(e) => ViewVerdict::Unreadable(e.clone()),
-        })
-        .collect();
-    // Each view that can be matched, with its sources (indices into `entries`) and range.
-    let mut plan: Vec<Step> = Vec::new();
+    let readable = |id: &u32| {
+        index
+            .get(id)
+            .is_some_and(|&i| !unreadable.contains_key(&entries[i].name))
+    };
+    let mut plan = Vec::new();
+    let mut verdicts = Vec::with_capacity(entries.len());
     for (i, e) in entries.iter().enumerate() {
-        if written[i].is_err() {
+        if let Some(why) = unreadable.get(&e.name) {
+            verdicts.push(Some(ViewVerdict::Unreadable(why.clone())));
             continue;
         }
         let srcs: Vec<usize> = sources[&e.image_id]
@@ -215,47 +457,116 @@ pub fn densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<DensifyRe
             .filter(|id| readable(id))
             .map(|id| index[id])
             .collect();
-        match ranges[&e.image_id] {
-            _ if srcs.is_empty() => verdicts[i] = ViewVerdict::NoSourceView,
-            None => verdicts[i] = ViewVerdict::NoDepthRange,
-            Some(range) => plan.push((i, srcs, range)),
-        }
+        verdicts.push(match ranges[&e.image_id] {
+            _ if srcs.is_empty() => Some(ViewVerdict::NoSourceView),
+            None => Some(ViewVerdict::NoDepthRange),
+            Some(range) => {
+                plan.push((i, srcs, range));
+                None
+            }
+        });
     }
+    (plan, verdicts)
+}
 
-    let first = if cfg.geometric {
-        MapPass::Photometric
-    } else {
-        MapPass::Geometric
+/// Run one stereo pass over the views `unit` owns; (owned, computed, found done).
+fn run_pass(
+    prep: &Prepared,
+    cfg: &DensifyConfig,
+    pass: MapPass,
+    unit: Unit,
+    progress: &dyn Progress,
+) -> Result<(usize, usize, usize)> {
+    if pass == MapPass::Geometric && !cfg.geometric {
+        // Without a geometric pass the photometric one writes the final maps.
+        return Ok((0, 0, 0));
+    }
+    let owned: Vec<&Plan> = prep
+        .plan
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| unit.owns(*k))
+        .map(|(_, p)| p)
+        .collect();
+    let what = match pass {
+        MapPass::Photometric => "photometric stereo",
+        MapPass::Geometric => "geometric stereo",
     };
-    progress.start("photometric stereo", plan.len() as u64, "views");
-    for step in &plan {
-        if let Some(v) = photometric_view(&ws, &entries, step, cfg, first)? {
-            verdicts[step.0] = v;
+    progress.start(what, owned.len() as u64, "views");
+    let (mut computed, mut resumed) = (0, 0);
+    for p in &owned {
+        if pass_done(prep, cfg, p, pass)? {
+            resumed += 1;
+        } else {
+            match pass {
+                MapPass::Photometric => photometric_view(&prep.ws, &prep.entries, p, cfg)?,
+                MapPass::Geometric => geometric_view(&prep.ws, &prep.entries, p, cfg)?,
+            }
+            computed += 1;
+            if cfg.stop_after_views == Some(computed) {
+                progress.finish();
+                return Err(PipelineError::Interrupted(format!(
+                    "stopped after {computed} views of unit {unit}'s {} pass (--stop-after-views); run it again to resume",
+                    pass.name()
+                )));
+            }
         }
         progress.inc(1);
     }
     progress.finish();
-    lap(1, &mut timer);
-    if cfg.geometric {
-        progress.start("geometric stereo", plan.len() as u64, "views");
-        for step in &plan {
-            verdicts[step.0] = geometric_view(&ws, &entries, step, cfg, first)?;
-            progress.inc(1);
+    Ok((owned.len(), computed, resumed))
+}
+
+/// The map file a view's pass writes last (each file is written atomically, so it marks the
+/// pass done).
+fn last_map(ws: &Workspace, cfg: &DensifyConfig, name: &str, pass: MapPass) -> Result<PathBuf> {
+    match pass {
+        MapPass::Photometric if cfg.geometric => {
+            map_path(ws, MapKind::Normal, MapPass::Photometric, name)
         }
-        progress.finish();
+        _ => map_path(ws, MapKind::Confidence, MapPass::Geometric, name),
     }
-    lap(2, &mut timer);
+}
 
-    write_cfgs(&ws, &entries, &plan)?;
-    progress.start("fusing", plan.len() as u64, "views");
-    let points = fuse(&ws, &rec, &entries, &plan, &cfg.fusion)?;
+fn pass_done(prep: &Prepared, cfg: &DensifyConfig, p: &Plan, pass: MapPass) -> Result<bool> {
+    Ok(last_map(&prep.ws, cfg, &prep.entries[p.0].name, pass)?.exists())
+}
+
+/// Fuse the final maps, write the configs, publish the workspace; the report.
+fn finish(prep: &Prepared, cfg: &DensifyConfig, progress: &dyn Progress) -> Result<DensifyReport> {
+    let last = if cfg.geometric {
+        MapPass::Geometric
+    } else {
+        MapPass::Photometric
+    };
+    for p in &prep.plan {
+        if !pass_done(prep, cfg, p, last)? {
+            return Err(PipelineError::input(
+                last_map(&prep.ws, cfg, &prep.entries[p.0].name, last)?,
+                format!(
+                    "is missing: the {} pass has not finished view {} (run every unit of `densify --unit I/N --pass {}` first)",
+                    last.name(),
+                    prep.entries[p.0].name,
+                    last.name()
+                ),
+            ));
+        }
+    }
+    let timer = std::time::Instant::now();
+    write_cfgs(&prep.ws, &prep.entries, &prep.plan)?;
+    progress.start("fusing", prep.plan.len() as u64, "views");
+    let (points, pixels) = fuse(&prep.ws, &prep.rec, &prep.entries, &prep.plan, &cfg.fusion)?;
     progress.finish();
-    lap(3, &mut timer);
-
-    publish(&staging, &out)?;
+    let fusing = timer.elapsed().as_secs_f64();
+    publish(&prep.staging, &prep.out)?;
+    let mut verdicts = prep.verdicts.clone();
+    for (p, pixels) in prep.plan.iter().zip(pixels) {
+        verdicts[p.0] = Some(ViewVerdict::Densified { pixels });
+    }
     Ok(DensifyReport {
-        out,
-        views: entries
+        out: prep.out.clone(),
+        views: prep
+            .entries
             .iter()
             .zip(verdicts)
             .map(|(e, verdict)| ViewOutcome {
@@ -263,42 +574,40 @@ pub fn densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<DensifyRe
                 name: e.name.clone(),
                 width: e.width as u64,
                 height: e.height as u64,
-                verdict,
+                verdict: verdict.expect("every view is planned or has a verdict"),
             })
             .collect(),
         points,
-        seconds,
+        seconds: [None, None, None, Some(fusing)],
     })
 }
 
 /// A view to match: its index in the entries, its sources' indices, its depth range.
-type Step = (usize, Vec<usize>, (f64, f64));
+type Plan = (usize, Vec<usize>, (f64, f64));
 
 /// A reference view and its sources, read back from the workspace.
 fn load_views(
     ws: &Workspace,
     entries: &[Entry],
-    step: &Step,
+    p: &Plan,
 ) -> Result<(StereoView, Vec<StereoView>)> {
-    let reference = load_view(ws, &entries[step.0])?;
-    let sources = step
-        .1
-        .iter()
-        .map(|&j| load_view(ws, &entries[j]))
-        .collect::<Result<Vec<_>>>()?;
+    let reference = load_view(ws, &entries[p.0])?;
+    let sources =
+        p.1.iter()
+            .map(|&j| load_view(ws, &entries[j]))
+            .collect::<Result<Vec<_>>>()?;
     Ok((reference, sources))
 }
 
 /// The photometric pass over one view: its unfiltered hypotheses written for the geometric
-/// pass, or (without one) its filtered maps and verdict.
+/// pass, or (without one) its filtered, final maps.
 fn photometric_view(
     ws: &Workspace,
     entries: &[Entry],
-    step: &Step,
+    p: &Plan,
     cfg: &DensifyConfig,
-    pass: MapPass,
-) -> Result<Option<ViewVerdict>> {
-    let (reference, views) = load_views(ws, entries, step)?;
+) -> Result<()> {
+    let (reference, views) = load_views(ws, entries, p)?;
     let s: Vec<nrw_stereo::Source> = views
         .iter()
         .map(|v| nrw_stereo::Source {
@@ -306,32 +615,38 @@ fn photometric_view(
             depth: None,
         })
         .collect();
-    let state = nrw_stereo::photometric(&reference, &s, step.2, &cfg.stereo)
+    let state = nrw_stereo::photometric(&reference, &s, p.2, &cfg.stereo)
         .expect("a planned view has sources and a range");
-    let name = &entries[step.0].name;
+    let name = &entries[p.0].name;
     if cfg.geometric {
-        write_hypotheses(ws, name, pass, &state)?;
-        return Ok(None);
+        return write_hypotheses(ws, name, MapPass::Photometric, &state);
     }
-    let maps = nrw_stereo::filter(&reference, &s, step.2, &state, false, &cfg.stereo);
-    write_maps(ws, name, MapPass::Geometric, &maps)?;
-    Ok(Some(densified(&maps)))
+    let maps = nrw_stereo::filter(&reference, &s, p.2, &state, false, &cfg.stereo);
+    write_maps(ws, name, MapPass::Geometric, &maps)
+}
+
+/// A photometric map the geometric pass reads, or an error saying that pass has not
+/// finished it.
+fn photometric_map(ws: &Workspace, kind: MapKind, name: &str) -> Result<DenseMap> {
+    let path = map_path(ws, kind, MapPass::Photometric, name)?;
+    if !path.exists() {
+        return Err(PipelineError::input(
+            &path,
+            format!(
+                "is missing: the photometric pass has not finished view {name} (every unit of `densify --unit I/N --pass photometric` must finish before the geometric pass)"
+            ),
+        ));
+    }
+    read_map(ws, kind, MapPass::Photometric, name)
 }
 
 /// The geometric pass over one view, from its and its sources' photometric maps.
-fn geometric_view(
-    ws: &Workspace,
-    entries: &[Entry],
-    step: &Step,
-    cfg: &DensifyConfig,
-    photometric: MapPass,
-) -> Result<ViewVerdict> {
-    let (reference, views) = load_views(ws, entries, step)?;
-    let depths = step
-        .1
-        .iter()
-        .map(|&j| read_map(ws, MapKind::Depth, photometric, &entries[j].name))
-        .collect::<Result<Vec<_>>>()?;
+fn geometric_view(ws: &Workspace, entries: &[Entry], p: &Plan, cfg: &DensifyConfig) -> Result<()> {
+    let (reference, views) = load_views(ws, entries, p)?;
+    let depths =
+        p.1.iter()
+            .map(|&j| photometric_map(ws, MapKind::Depth, &entries[j].name))
+            .collect::<Result<Vec<_>>>()?;
     let s: Vec<nrw_stereo::Source> = views
         .iter()
         .zip(&depths)
@@ -340,12 +655,11 @@ fn geometric_view(
             depth: Some(&d.data),
         })
         .collect();
-    let name = &entries[step.0].name;
-    let start = read_hypotheses(ws, name, photometric)?;
-    let state = nrw_stereo::geometric(&reference, &s, step.2, start, &cfg.stereo);
-    let maps = nrw_stereo::filter(&reference, &s, step.2, &state, true, &cfg.stereo);
-    write_maps(ws, name, MapPass::Geometric, &maps)?;
-    Ok(densified(&maps))
+    let name = &entries[p.0].name;
+    let start = read_hypotheses(ws, name)?;
+    let state = nrw_stereo::geometric(&reference, &s, p.2, start, &cfg.stereo);
+    let maps = nrw_stereo::filter(&reference, &s, p.2, &state, true, &cfg.stereo);
+    write_maps(ws, name, MapPass::Geometric, &maps)
 }
 
 fn check(cfg: &DensifyConfig) -> Result<()> {
@@ -357,6 +671,12 @@ fn check(cfg: &DensifyConfig) -> Result<()> {
                 cfg.max_sources,
                 nrw_stereo::patchmatch::MAX_SOURCES
             ),
+        ));
+    }
+    if cfg.fusion.min_num_pixels == 0 {
+        return Err(PipelineError::config(
+            Setting::MinNumPixels,
+            "is 0; a fused point needs at least 1 pixel (COLMAP's default is 5)",
         ));
     }
     if cfg.max_image_size == Some(0) {
@@ -568,9 +888,9 @@ fn write_hypotheses(ws: &Workspace, name: &str, pass: MapPass, h: &Hypotheses) -
     write_depth_normal(ws, name, pass, (h.width, h.height), &h.depth, &h.normal)
 }
 
-fn read_hypotheses(ws: &Workspace, name: &str, pass: MapPass) -> Result<Hypotheses> {
-    let d = read_map(ws, MapKind::Depth, pass, name)?;
-    let n = read_map(ws, MapKind::Normal, pass, name)?;
+fn read_hypotheses(ws: &Workspace, name: &str) -> Result<Hypotheses> {
+    let d = photometric_map(ws, MapKind::Depth, name)?;
+    let n = photometric_map(ws, MapKind::Normal, name)?;
     Ok(Hypotheses {
         width: d.width,
         height: d.height,
@@ -593,14 +913,8 @@ fn write_maps(ws: &Workspace, name: &str, pass: MapPass, m: &nrw_stereo::StereoM
     write_map(ws, MapKind::Confidence, pass, name, &confidence)
 }
 
-fn densified(m: &nrw_stereo::StereoMaps) -> ViewVerdict {
-    ViewVerdict::Densified {
-        pixels: m.depth.iter().filter(|d| **d > 0.0).count(),
-    }
-}
-
 /// `patch-match.cfg` (each view and the sources it was matched with) and `fusion.cfg`.
-fn write_cfgs(ws: &Workspace, entries: &[Entry], plan: &[Step]) -> Result<()> {
+fn write_cfgs(ws: &Workspace, entries: &[Entry], plan: &[Plan]) -> Result<()> {
     let pm: Vec<(String, Vec<String>)> = plan
         .iter()
         .map(|(i, s, _)| {
@@ -626,9 +940,9 @@ fn fuse(
     ws: &Workspace,
     rec: &Reconstruction,
     entries: &[Entry],
-    plan: &[Step],
+    plan: &[Plan],
     opts: &FusionOptions,
-) -> Result<usize> {
+) -> Result<(usize, Vec<usize>)> {
     let mut depths = Vec::with_capacity(plan.len());
     let mut normals = Vec::with_capacity(plan.len());
     let mut colours = Vec::with_capacity(plan.len());
@@ -693,5 +1007,9 @@ fn fuse(
         &ws.fused_vis(),
         &nrw_colmap::dense::visibility_to_bytes(&vis),
     )?;
-    Ok(cloud.positions.len())
+    let pixels = depths
+        .iter()
+        .map(|d| d.iter().filter(|z| **z > 0.0).count())
+        .collect();
+    Ok((cloud.positions.len(), pixels))
 }

@@ -142,11 +142,13 @@ pub enum Setting {
     MaxImageSize,
     /// The PatchMatch kernel's settings (iterations, window, scales).
     Stereo,
+    /// The fewest pixels fusion merges into a point.
+    MinNumPixels,
 }
 
 impl Setting {
     /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 29] = [
+    pub const ALL: [Setting; 30] = [
         Setting::RowsPerShard,
         Setting::Radius,
         Setting::MaxEmpty,
@@ -176,6 +178,7 @@ impl Setting {
         Setting::MaxSources,
         Setting::MaxImageSize,
         Setting::Stereo,
+        Setting::MinNumPixels,
     ];
 
     /// The setting's key: `stage.field` as a pipeline file or a library caller names it.
@@ -210,6 +213,7 @@ impl Setting {
             Setting::MaxSources => "densify.max_sources",
             Setting::MaxImageSize => "densify.max_image_size",
             Setting::Stereo => "densify.stereo",
+            Setting::MinNumPixels => "densify.min_num_pixels",
         }
     }
 }

@@ -334,12 +334,34 @@ pub fn densify(d: &crate::densify::DensifyReport) -> Report {
     for line in unreadable {
         r.err(line);
     }
-    let [u, p, g, f] = d.seconds;
-    r.err(format!(
-        "fused {} points; {u:.1} s undistorting, {p:.1} s photometric, {g:.1} s geometric, {f:.1} s fusing",
-        d.points
-    ));
+    let phases: Vec<String> = ["undistorting", "photometric", "geometric", "fusing"]
+        .iter()
+        .zip(d.seconds)
+        .filter_map(|(what, s)| s.map(|s| format!("{s:.1} s {what}")))
+        .collect();
+    r.err(format!("fused {} points; {}", d.points, phases.join(", ")));
     r.out(d.out.join("fused.ply").display().to_string());
+    r
+}
+
+/// One work unit of a densify pass: what it owned, ran and found done.
+pub fn densify_unit(u: &crate::densify::UnitReport) -> Report {
+    let mut r = Report::default();
+    r.err(format!(
+        "densify unit {} ({} pass): {} of {} views; {} matched, {} found done; {:.1} s",
+        u.unit,
+        u.pass.name(),
+        u.owned,
+        u.planned,
+        u.computed,
+        u.resumed,
+        u.seconds
+    ));
+    r.err(match u.pass {
+        nrw_colmap::dense::MapPass::Photometric => "next, once every unit of this pass has run: the units of `--pass geometric` (or, with --no-geometric, `--finalize`)",
+        nrw_colmap::dense::MapPass::Geometric => "next, once every unit of this pass has run: `densify SCENE --finalize` fuses the maps and publishes the workspace",
+    }.to_string());
+    r.out(u.staging.display().to_string());
     r
 }
 

@@ -42,6 +42,8 @@ pub struct DensifyTable {
     pub window_radius: usize,
     pub scales: usize,
     pub geometric: bool,
+    /// The fewest pixels fusion merges into a point (COLMAP's `min_num_pixels`, 5).
+    pub min_num_pixels: usize,
     /// Replace an existing SCENE/dense.
     pub overwrite: bool,
 }
@@ -56,6 +58,7 @@ impl Default for DensifyTable {
             window_radius: c.stereo.window_radius,
             scales: c.stereo.scales,
             geometric: c.geometric,
+            min_num_pixels: c.fusion.min_num_pixels,
             overwrite: false,
         }
     }
@@ -71,6 +74,7 @@ pub fn densify_config(d: &DensifyTable, scene: &Path) -> crate::densify::Densify
     c.stereo.sigma_spatial = d.window_radius as f64;
     c.stereo.scales = d.scales;
     c.geometric = d.geometric;
+    c.fusion.min_num_pixels = d.min_num_pixels;
     c.overwrite = d.overwrite;
     c
 }

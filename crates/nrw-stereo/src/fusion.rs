@@ -14,7 +14,7 @@ use glam::DVec3;
 use crate::view::Pinhole;
 
 /// COLMAP's `StereoFusionOptions` that this fusion reads, with COLMAP's defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FusionOptions {
     /// Least pixels fused into a point (5).
     pub min_num_pixels: usize,

@@ -26,7 +26,7 @@ pub const MAX_COST: f32 = 2.0;
 
 /// The kernel's settings; the defaults are COLMAP 3.8's `PatchMatchOptions` where COLMAP has
 /// the setting, and Gipuma's otherwise.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PatchMatchOptions {
     /// Half the window's side in pixels (COLMAP: 5).
     pub window_radius: usize,
@@ -126,18 +126,12 @@ pub struct StereoMaps {
 /// A pixel's new hypothesis: depth, normal, cost, selected views.
 type Update = (f32, [f32; 3], f32, u32);
 
-/// The neighbours a pixel takes hypotheses from: odd Manhattan distances, so a pixel never
-/// reads one of its own colour.
-const NEIGHBOURS: [(isize, isize); 8] = [
-    (-1, 0),
-    (1, 0),
-    (0, -1),
-    (0, 1),
-    (-5, 0),
-    (5, 0),
-    (0, -5),
-    (0, 5),
-];
+/// The four directions a pixel takes hypotheses from.
+const DIRECTIONS: [(isize, isize); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
+
+/// The distances along a direction a neighbour is picked from: odd, so a pixel never reads
+/// one of its own colour.
+const NEIGHBOUR_STEPS: [isize; 3] = [1, 3, 5];
 
 /// A source as the kernel uses it: its pose relative to the reference.
 struct Rel<'a> {
@@ -167,14 +161,57 @@ struct Problem<'a> {
 
 /// The reference window around one pixel: centred grey values and bilateral weights, one
 /// array per field (the warp loop runs over them in f32).
+/// The sample arrays are padded to a multiple of [`LANES`] with weight 0 (and a real
+/// sample's offset, so a padded sample is never outside when the real ones are inside).
 struct Patch {
     dx: Vec<f32>,
     dy: Vec<f32>,
     w: Vec<f32>,
-    /// Grey values minus their weighted mean.
-    a: Vec<f32>,
+    /// Weight × (grey value minus the weighted mean).
+    wa: Vec<f32>,
     sum_w: f64,
     var: f64,
+}
+
+/// Window samples handled at once by the NCC's loops (a multiple of `LANES`).
+const CHUNK: usize = 64;
+
+/// Independent partial sums the NCC keeps (8 f32: one AVX register, two SSE ones).
+const LANES: usize = 8;
+
+/// A homography applied to window offsets around one pixel: base + dx · hx + dy · hy (f32).
+struct Warp {
+    base: glam::Vec3,
+    hx: glam::Vec3,
+    hy: glam::Vec3,
+}
+
+impl Warp {
+    /// The source image coordinates (pixel centres at integers) of each offset, into `xs`,
+    /// `ys`; whether every sample lies in front of the source and within [0, last].
+    fn samples(
+        &self,
+        dx: &[f32],
+        dy: &[f32],
+        last: (f32, f32),
+        xs: &mut [f32],
+        ys: &mut [f32],
+    ) -> bool {
+        let (b, hx, hy) = (self.base, self.hx, self.hy);
+        let mut inside = true;
+        for k in 0..xs.len() {
+            let (dx, dy) = (dx[k], dy[k]);
+            let pz = b.z + hx.z * dx + hy.z * dy;
+            let inv = 1.0 / pz;
+            let sx = (b.x + hx.x * dx + hy.x * dy) * inv - 0.5;
+            let sy = (b.y + hx.y * dx + hy.y * dy) * inv - 0.5;
+            // NaN fails every comparison, so it counts as outside.
+            inside &= (pz > 0.0) & (sx >= 0.0) & (sy >= 0.0) & (sx <= last.0) & (sy <= last.1);
+            xs[k] = sx;
+            ys[k] = sy;
+        }
+        inside
+    }
 }
 
 impl<'a> Problem<'a> {
@@ -232,7 +269,7 @@ impl<'a> Problem<'a> {
             dx: Vec::with_capacity(n),
             dy: Vec::with_capacity(n),
             w: Vec::with_capacity(n),
-            a: Vec::with_capacity(n),
+            wa: Vec::with_capacity(n),
             sum_w: 0.0,
             var: 0.0,
         };
@@ -255,10 +292,17 @@ impl<'a> Problem<'a> {
         let mean = sum_a / p.sum_w;
         for (a, w) in values.iter().zip(&p.w) {
             let c = a - mean;
-            p.a.push(c as f32);
+            p.wa.push(*w * c as f32);
             p.var += *w as f64 * c * c;
         }
         p.var /= p.sum_w;
+        let (dx0, dy0) = (p.dx.first().copied(), p.dy.first().copied());
+        while !p.w.len().is_multiple_of(LANES) {
+            p.dx.push(dx0.unwrap_or(0.0));
+            p.dy.push(dy0.unwrap_or(0.0));
+            p.w.push(0.0);
+            p.wa.push(0.0);
+        }
         p
     }
 
@@ -269,36 +313,59 @@ impl<'a> Problem<'a> {
     fn ncc_cost(&self, patch: &Patch, src: &Rel, h: &DMat3, x: usize, y: usize) -> f64 {
         // H · (cx + dx, cy + dy, 1) = base + dx · H₀ + dy · H₁.
         let base = (*h * DVec3::new(x as f64 + 0.5, y as f64 + 0.5, 1.0)).as_vec3();
-        let (hx, hy) = (h.x_axis.as_vec3(), h.y_axis.as_vec3());
+        let warp = Warp {
+            base,
+            hx: h.x_axis.as_vec3(),
+            hy: h.y_axis.as_vec3(),
+        };
         let img = &src.view.image;
-        let (last_x, last_y) = ((img.width - 1) as f32, (img.height - 1) as f32);
-        let (mut s_b, mut s_bb, mut s_ab) = (0.0f32, 0.0f32, 0.0f32);
-        for i in 0..patch.w.len() {
-            let (dx, dy) = (patch.dx[i], patch.dy[i]);
-            let pz = base.z + hx.z * dx + hy.z * dy;
-            if pz <= 0.0 {
+        let last = ((img.width - 1) as f32, (img.height - 1) as f32);
+        // Sums in LANES independent lanes, added up in lane order at the end: a fixed order
+        // (the same bits on every machine and thread count) that the compiler vectorises.
+        let (mut s_b, mut s_bb, mut s_ab) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        let (mut xs, mut ys, mut bs) = ([0.0f32; CHUNK], [0.0f32; CHUNK], [0.0f32; CHUNK]);
+        for start in (0..patch.w.len()).step_by(CHUNK) {
+            let end = (start + CHUNK).min(patch.w.len());
+            let len = end - start;
+            // Three loops: the warp of a chunk of samples (no branch, so it vectorises), the
+            // bilinear reads (independent, so they overlap), the weighted sums (vectorised).
+            let inside = warp.samples(
+                &patch.dx[start..end],
+                &patch.dy[start..end],
+                last,
+                &mut xs[..len],
+                &mut ys[..len],
+            );
+            if !inside {
                 return MAX_COST as f64;
             }
-            let inv = 1.0 / pz;
-            let sx = (base.x + hx.x * dx + hy.x * dy) * inv - 0.5;
-            let sy = (base.y + hx.y * dx + hy.y * dy) * inv - 0.5;
-            if !(sx >= 0.0 && sy >= 0.0 && sx <= last_x && sy <= last_y) {
-                return MAX_COST as f64;
+            for k in 0..len {
+                bs[k] = img.bilinear_f32(xs[k], ys[k]);
             }
-            let b = img.bilinear_f32(sx, sy);
-            let w = patch.w[i];
-            s_b += w * b;
-            s_bb += w * b * b;
-            s_ab += w * patch.a[i] * b;
+            let (w, wa) = (&patch.w[start..end], &patch.wa[start..end]);
+            for ((b, w), wa) in bs[..len]
+                .chunks_exact(LANES)
+                .zip(w.chunks_exact(LANES))
+                .zip(wa.chunks_exact(LANES))
+            {
+                for l in 0..LANES {
+                    let wb = w[l] * b[l];
+                    s_b[l] += wb;
+                    s_bb[l] += wb * b[l];
+                    s_ab[l] += wa[l] * b[l];
+                }
+            }
         }
+        let lanes = |s: [f32; LANES]| s.iter().fold(0.0f64, |acc, v| acc + *v as f64);
+        let (s_b, s_bb, s_ab) = (lanes(s_b), lanes(s_bb), lanes(s_ab));
         let sum_w = patch.sum_w;
-        let mean_b = s_b as f64 / sum_w;
-        let var_b = s_bb as f64 / sum_w - mean_b * mean_b;
+        let mean_b = s_b / sum_w;
+        let var_b = s_bb / sum_w - mean_b * mean_b;
         let min_var = self.opts.min_texture * self.opts.min_texture * 0.01;
         if var_b < min_var {
             return MAX_COST as f64;
         }
-        let ncc = (s_ab as f64 / sum_w) / (patch.var * var_b).sqrt();
+        let ncc = (s_ab / sum_w) / (patch.var * var_b).sqrt();
         (1.0 - ncc).clamp(0.0, MAX_COST as f64)
     }
 
@@ -470,10 +537,15 @@ impl<'a> Problem<'a> {
         let mask = if current.3 == 0 { all } else { current.3 };
         let ray = self.reference.lens.pixel_ray(x, y);
         let (d_cur, n_cur) = (current.0 as f64, to_d(current.1));
-        let start = if self.in_range(d_cur) {
-            self.subset_cost(&patch, x, y, d_cur, n_cur, mask)
-        } else {
+        // The current plane's cost over its selected views is the mean of its best `best_k`
+        // costs, which is the cost it was stored with (the selected views are its best
+        // `best_k + 1`): it is not computed again (precision given up: the stored f32).
+        let start = if !self.in_range(d_cur) {
             f64::INFINITY
+        } else if current.3 != 0 {
+            current.2 as f64
+        } else {
+            self.subset_cost(&patch, x, y, d_cur, n_cur, mask)
         };
         let mut best = (d_cur, n_cur, start);
         let mut changed = false;
@@ -487,15 +559,27 @@ impl<'a> Problem<'a> {
                 changed = true;
             }
         };
-        for (dx, dy) in NEIGHBOURS {
-            let (nx, ny) = (x as isize + dx, y as isize + dy);
-            if nx < 0 || ny < 0 || nx >= state.width as isize || ny >= state.height as isize {
-                continue;
+        for (dx, dy) in DIRECTIONS {
+            // ACMH's adaptive choice, reduced: of the direction's neighbours at odd
+            // distances, the one whose plane has the lowest cost (the nearest on a tie).
+            let mut pick: Option<(usize, usize, f32)> = None;
+            for step in NEIGHBOUR_STEPS {
+                let (nx, ny) = (x as isize + dx * step, y as isize + dy * step);
+                if nx < 0 || ny < 0 || nx >= state.width as isize || ny >= state.height as isize {
+                    break;
+                }
+                let (nx, ny) = (nx as usize, ny as usize);
+                let c = state.cost[ny * state.width + nx];
+                if pick.is_none_or(|p| c < p.2) {
+                    pick = Some((nx, ny, c));
+                }
             }
-            let j = ny as usize * state.width + nx as usize;
+            let Some((nx, ny, _)) = pick else {
+                continue;
+            };
+            let j = ny * state.width + nx;
             let n = to_d(state.normal[j]);
-            let plane_point =
-                self.reference.lens.pixel_ray(nx as usize, ny as usize) * state.depth[j] as f64;
+            let plane_point = self.reference.lens.pixel_ray(nx, ny) * state.depth[j] as f64;
             let denom = n.dot(ray);
             if denom >= -1e-12 {
                 continue;

@@ -101,8 +101,10 @@ impl GrayImage {
     /// [`GrayImage::bilinear`] in f32, for the stereo kernel's window warps.
     #[inline]
     pub fn bilinear_f32(&self, x: f32, y: f32) -> f32 {
-        let x0 = (x as usize).min(self.width.saturating_sub(2));
-        let y0 = (y as usize).min(self.height.saturating_sub(2));
+        // Through i32: the caller's range check keeps x, y far below 2³¹, and the 32-bit
+        // conversion is the cheaper one.
+        let x0 = (x as i32 as usize).min(self.width.saturating_sub(2));
+        let y0 = (y as i32 as usize).min(self.height.saturating_sub(2));
         let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
         let (fx, fy) = (x - x0 as f32, y - y0 as f32);
         let (r0, r1) = (y0 * self.width, y1 * self.width);

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
+use nrw_colmap::dense::MapPass;
 
 use super::Bars;
 use crate::error::Result;
@@ -17,7 +18,15 @@ use crate::error::Result;
 
 The workspace is COLMAP's: `colmap stereo_fusion --workspace_path DIR --input_type geometric`
 reads it unchanged. stereo/confidence_maps/NAME.geometric.bin (ours) holds, per pixel, the mean
-NCC of the source views that agree with the kept depth and their count (0, 0 where no depth).")]
+NCC of the source views that agree with the kept depth and their count (0, 0 where no depth).
+
+Work units (a cluster, a Slurm array; the scene folder on a shared file system): every unit
+of the photometric pass, then every unit of the geometric pass, then finalize, which fuses
+and publishes. Any split gives the bytes of one process; a rerun unit resumes.
+  for i in 0 1 2 3; do nrw-etl densify SCENE --unit $i/4 --pass photometric; done
+  for i in 0 1 2 3; do nrw-etl densify SCENE --unit $i/4 --pass geometric; done
+  nrw-etl densify SCENE --finalize
+(units, passes and finalize take the same settings; a unit that differs is refused)")]
 pub struct DensifyArgs {
     /// The scene folder (sparse model in sparse/0 or sparse/, photos in images/)
     pub scene: PathBuf,
@@ -42,6 +51,11 @@ pub struct DensifyArgs {
     /// Coarse-to-fine levels (1: full size only; each level halves the image)
     #[arg(long, default_value_t = 2)]
     pub scales: usize,
+    /// The fewest pixels (of different views) fusion merges into a point: COLMAP's
+    /// min_num_pixels. Fewer gives a denser, noisier cloud; with few photos of a scene, 2 or 3
+    /// keeps the walls that 5 drops
+    #[arg(long, default_value_t = 5)]
+    pub min_num_pixels: usize,
     /// Skip the geometric-consistency pass (faster, noisier: photometric maps are fused)
     #[arg(long)]
     pub no_geometric: bool,
@@ -51,6 +65,17 @@ pub struct DensifyArgs {
     /// Let photo names resolve through symbolic links out of the photo folder
     #[arg(long)]
     pub follow_outside_links: bool,
+    #[command(flatten)]
+    pub unit: super::UnitArgs,
+    /// The stereo pass a work unit runs (with --unit): photometric first, then geometric
+    #[arg(long, value_parser = ["photometric", "geometric"], requires = "unit")]
+    pub pass: Option<String>,
+    /// Fuse the maps the work units wrote and publish the workspace
+    #[arg(long, conflicts_with_all = ["unit", "pass"])]
+    pub finalize: bool,
+    /// Stop a pass after this many views, as an interruption would (for resume tests)
+    #[arg(long, hide = true)]
+    pub stop_after_views: Option<usize>,
     /// Hide progress bars
     #[arg(long, short)]
     pub quiet: bool,
@@ -65,13 +90,35 @@ pub fn run(args: &DensifyArgs) -> Result<()> {
         window_radius: args.window_radius,
         scales: args.scales,
         geometric: !args.no_geometric,
+        min_num_pixels: args.min_num_pixels,
         overwrite: args.overwrite,
     };
     let mut cfg = nrw_pipeline::runner::densify_config(&table, &args.scene);
     cfg.out = args.out.clone();
     cfg.images = args.images.clone();
     cfg.follow_outside_links = args.follow_outside_links;
-    let report = nrw_pipeline::densify::densify(&cfg, &Bars::new(args.quiet))?;
+    cfg.stop_after_views = args.stop_after_views;
+    let bars = Bars::new(args.quiet);
+    if let Some(unit) = args.unit.unit()? {
+        let pass = match args.pass.as_deref() {
+            Some("geometric") => MapPass::Geometric,
+            Some(_) => MapPass::Photometric,
+            None => {
+                return Err(crate::error::EtlError::Flag {
+                    flag: "--unit",
+                    problem: "needs --pass photometric or --pass geometric".into(),
+                })
+            }
+        };
+        let report = nrw_pipeline::densify::densify_unit(&cfg, pass, unit, &bars)?;
+        super::print_report(&nrw_pipeline::report::densify_unit(&report));
+        return Ok(());
+    }
+    let report = if args.finalize {
+        nrw_pipeline::densify::finalize_densify(&cfg, &bars)?
+    } else {
+        nrw_pipeline::densify::densify(&cfg, &bars)?
+    };
     super::print_report(&nrw_pipeline::report::densify(&report));
     Ok(())
 }

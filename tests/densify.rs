@@ -14,7 +14,12 @@ use super::{assert_same_files, fails, files, nrw, ok};
 /// The textured scene of scenes/textured.toml at test size (`count` photos, shorter side
 /// 240–280 px), its true surface moved to `dense_truth/` so densify writes `dense/`.
 pub(crate) fn textured_scene(dir: &Path, count: usize) -> PathBuf {
-    let spec = std::fs::read_to_string(
+    textured_scene_with(dir, count, &[])
+}
+
+/// [`textured_scene`] with more replacements in its spec (`from`, `to`).
+fn textured_scene_with(dir: &Path, count: usize, edits: &[(&str, &str)]) -> PathBuf {
+    let mut spec = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/textured.toml"),
     )
     .unwrap()
@@ -22,6 +27,11 @@ pub(crate) fn textured_scene(dir: &Path, count: usize) -> PathBuf {
     .replace("min_size = 300", "min_size = 240")
     .replace("max_size = 360", "max_size = 280")
     .replace("points = 100000", "points = 400000");
+    for (from, to) in edits {
+        assert!(spec.contains(from), "{from}");
+        spec = spec.replace(from, to);
+    }
+    std::fs::create_dir_all(dir).unwrap();
     let spec_path = dir.join("textured.toml");
     std::fs::write(&spec_path, spec).unwrap();
     let scene = dir.join("scene");
@@ -156,8 +166,9 @@ fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_
     let ws = Workspace::new(&scene.join("dense"));
     let cams = cams(&scene);
 
-    // Depth maps: the share of pixels carrying a geometric depth within 1% of the truth.
-    let (mut kept, mut good) = (0usize, 0usize);
+    // Depth maps: the share of pixels carrying a geometric depth within 1% of the truth;
+    // sky (rays that miss the geometry) gets no depth rather than a wrong one.
+    let (mut kept, mut good, mut sky, mut sky_depth) = (0usize, 0usize, 0usize, 0usize);
     for c in &cams {
         let d = read_map(&ws, MapKind::Depth, &c.name);
         let t = truth_depth(&scene, &c.name);
@@ -166,6 +177,10 @@ fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_
             if *dv > 0.0 && *tv > 0.0 {
                 kept += 1;
                 good += (((dv - tv) / tv).abs() <= 0.01) as usize;
+            }
+            if *tv <= 0.0 {
+                sky += 1;
+                sky_depth += (*dv > 0.0) as usize;
             }
         }
         // Confidence: 2 channels, both zero exactly where no depth was kept.
@@ -183,6 +198,12 @@ fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_
     let share = good as f64 / kept as f64;
     eprintln!("densify: {kept} depth pixels, {share:.4} within 1% of the true depth");
     assert!(share >= 0.9, "only {share:.4} of {kept} depths within 1%");
+    let sky_share = sky_depth as f64 / sky.max(1) as f64;
+    eprintln!("sky: {sky_depth} of {sky} pixels got a depth ({sky_share:.4})");
+    assert!(
+        sky > 10_000 && sky_share <= 0.01,
+        "{sky_depth} of {sky} sky pixels have a depth"
+    );
 
     // The fused cloud against the true surface (ETH3D's counting at 1% of depth): accuracy
     // over fused points, completeness over true points that two views see.
@@ -621,4 +642,219 @@ fn densify_units_and_finalize_give_the_bytes_of_one_process_and_a_stopped_unit_r
     // The workspace records its settings, and nothing of the build is left behind.
     assert!(whole.join("densify.json").is_file());
     assert!(!tmp.path().join(".split.partial").exists());
+}
+
+/// A geometric depth map as a vector (0 where no depth).
+fn depths(ws: &Workspace, name: &str) -> Vec<f32> {
+    read_map(ws, MapKind::Depth, name).data
+}
+
+#[test]
+fn densify_far_from_the_origin_gives_the_maps_of_the_same_scene_at_the_origin() {
+    let tmp = tempfile::tempdir().unwrap();
+    let near = textured_scene(&tmp.path().join("near"), 3);
+    let far = textured_scene_with(
+        &tmp.path().join("far"),
+        3,
+        &[(
+            "[geometry]",
+            "[geometry]\norigin = [5000000.0, 5000000.0, 120.0]",
+        )],
+    );
+    for scene in [&near, &far] {
+        ok(&["densify", scene.to_str().unwrap(), "-q"]);
+    }
+    let (a, b) = (
+        Workspace::new(&near.join("dense")),
+        Workspace::new(&far.join("dense")),
+    );
+    // The same hypotheses to the last bits of f32: a pixel at a filter's threshold may flip.
+    let (mut worst, mut kept, mut flipped, mut moved) = (0.0f64, 0usize, 0usize, 0usize);
+    for c in cams(&near) {
+        let (da, db) = (depths(&a, &c.name), depths(&b, &c.name));
+        for (x, y) in da.iter().zip(&db) {
+            kept += (*x > 0.0) as usize;
+            flipped += ((*x > 0.0) != (*y > 0.0)) as usize;
+            if *x > 0.0 && *y > 0.0 {
+                let r = ((x - y) / x).abs() as f64;
+                worst = worst.max(r);
+                moved += (r > 1e-6) as usize;
+            }
+        }
+    }
+    eprintln!("5,000 km from the origin: {flipped} of {kept} kept pixels differ; of the rest, {moved} by more than 1e-6 relative (at most {worst:.2e})");
+    assert!(
+        flipped * 1000 <= kept && moved * 1000 <= kept,
+        "{flipped}, {moved} of {kept}"
+    );
+    let count = |ws: &Workspace| {
+        nrw_colmap::read_ply(&ws.fused_ply())
+            .unwrap()
+            .positions
+            .len()
+    };
+    let (na, nb) = (count(&a), count(&b));
+    assert!(na.abs_diff(nb) * 100 <= na, "fused {na} vs {nb} points");
+    // The far cloud is the near one moved by the offset (fusion walks may part at a pixel
+    // that flipped, so a point may move within its cluster).
+    let offset = DVec3::new(5_000_000.0, 5_000_000.0, 120.0);
+    let moved_back: Vec<DVec3> = nrw_colmap::read_ply(&b.fused_ply())
+        .unwrap()
+        .positions
+        .iter()
+        .map(|p| *p - offset)
+        .collect();
+    let near_cloud = nrw_colmap::read_ply(&a.fused_ply()).unwrap().positions;
+    let same = share_near(&moved_back, &near_cloud, 0.01, &cams(&near));
+    eprintln!("{same:.4} of the far cloud's points lie within 1% of depth of the near cloud's");
+    assert!(same >= 0.99, "{same}");
+}
+
+#[test]
+fn densify_of_fisheye_photos_works_on_their_undistorted_views() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = textured_scene_with(
+        tmp.path(),
+        4,
+        &[(
+            "model = \"PINHOLE\"",
+            "model = \"OPENCV_FISHEYE\"\ndistortion = 2.0",
+        )],
+    );
+    let dense = tmp.path().join("dense");
+    ok(&[
+        "densify",
+        scene.to_str().unwrap(),
+        "-q",
+        "--out",
+        dense.to_str().unwrap(),
+    ]);
+    let ws = Workspace::new(&dense);
+    // Each undistorted pixel's depth against the truth where its point falls in the fisheye
+    // photo (same pose; the scene's own OPENCV_FISHEYE camera projects it).
+    let original = nrw_colmap::read_model(&scene.join("sparse/0"), None).unwrap();
+    let mut rel = Vec::new();
+    for c in model_cams(&ws.sparse()) {
+        let im = original
+            .images
+            .values()
+            .find(|im| im.name == c.name)
+            .unwrap();
+        let fisheye = &original.cameras[&im.camera_id];
+        assert_eq!(fisheye.model.name(), "OPENCV_FISHEYE");
+        let truth = truth_depth(&scene, &c.name);
+        let d = depths(&ws, &c.name);
+        for (k, z) in d.iter().enumerate().filter(|(_, z)| **z > 0.0) {
+            let (col, row) = ((k % c.size.0) as f64 + 0.5, (k / c.size.0) as f64 + 0.5);
+            let ray = DVec3::new((col - c.k[2]) / c.k[0], (row - c.k[3]) / c.k[1], 1.0);
+            let Some(uv) = fisheye.img_from_cam(ray * *z as f64) else {
+                continue;
+            };
+            let (u, v) = (uv.x.floor(), uv.y.floor());
+            if u < 0.0 || v < 0.0 || u >= truth.width as f64 || v >= truth.height as f64 {
+                continue;
+            }
+            let t = truth.data[v as usize * truth.width + u as usize] as f64;
+            if t > 0.0 {
+                rel.push(((*z as f64 - t) / t).abs());
+            }
+        }
+    }
+    rel.sort_by(f64::total_cmp);
+    let median = rel[rel.len() / 2];
+    let within = |x: f64| rel.iter().filter(|r| **r <= x).count() as f64 / rel.len() as f64;
+    eprintln!(
+        "fisheye: {} depth pixels, median relative error {median:.4}; {:.3} within 1%, {:.3} within 5%",
+        rel.len(),
+        within(0.01),
+        within(0.05)
+    );
+    // The fisheye views' focal is a third of the pinhole scene's (half the short side spans
+    // 63°–77°), so a pixel's depth precision is about three times coarser: the bar is 3%.
+    assert!(rel.len() > 20_000, "{} depth pixels", rel.len());
+    assert!(
+        median <= 0.03 && within(0.05) >= 0.8,
+        "median {median}, {} within 5%",
+        within(0.05)
+    );
+}
+
+#[test]
+fn duplicate_photos_and_a_tiny_baseline_are_never_each_others_source() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = textured_scene(tmp.path(), 3);
+    let model = scene.join("sparse/0");
+    let mut rec = nrw_colmap::read_model(&model, None).unwrap();
+    let first = rec.images.values().next().unwrap().clone();
+    let next_id = rec.images.keys().max().unwrap() + 1;
+    // A duplicate of the first photo (same pixels, same pose) and a copy moved 2 mm.
+    for (k, (name, shift)) in [("dup.png", 0.0), ("tiny.png", 0.002)]
+        .into_iter()
+        .enumerate()
+    {
+        let mut im = first.clone();
+        im.id = next_id + k as u32;
+        im.name = name.into();
+        let r = glam::DMat3::from_quat(im.cam_from_world.rotation);
+        im.cam_from_world.translation -= r * DVec3::new(shift, 0.0, 0.0);
+        for (idx, p) in im.points2d.iter().enumerate() {
+            if let Some(pt) = rec.points.get_mut(&p.point3d_id) {
+                pt.track.push(nrw_colmap::TrackElement {
+                    image_id: im.id,
+                    point2d_idx: idx as u32,
+                });
+            }
+        }
+        let images = scene.join("images");
+        std::fs::copy(images.join(&first.name), images.join(name)).unwrap();
+        rec.images.insert(im.id, im);
+    }
+    nrw_colmap::write_model(&rec, &model, nrw_colmap::Format::Binary).unwrap();
+    let dense = tmp.path().join("dense");
+    let o = nrw(&[
+        "densify",
+        scene.to_str().unwrap(),
+        "-q",
+        "--out",
+        dense.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("densified 5 of 5 views"), "{err}");
+    let ws = Workspace::new(&dense);
+    let cfg = std::fs::read_to_string(ws.patch_match_cfg()).unwrap();
+    let lines: Vec<&str> = cfg.lines().collect();
+    let twins = [first.name.as_str(), "dup.png", "tiny.png"];
+    for pair in lines.chunks(2) {
+        let Some(other) = twins
+            .iter()
+            .filter(|t| twins.contains(&pair[0]) && **t != pair[0])
+            .find(|t| pair[1].split(", ").any(|s| s == **t))
+        else {
+            continue;
+        };
+        panic!("{} was matched with {other}: {}", pair[0], pair[1]);
+    }
+    // Each twin's depth is as good as the original's: its truth is the first photo's.
+    let truth = truth_depth(&scene, &first.name);
+    for name in twins {
+        let d = depths(&ws, name);
+        let kept: Vec<(f32, f32)> = d
+            .iter()
+            .zip(&truth.data)
+            .filter(|(a, t)| **a > 0.0 && **t > 0.0)
+            .map(|(a, t)| (*a, *t))
+            .collect();
+        let good = kept
+            .iter()
+            .filter(|(a, t)| ((a - t) / t).abs() <= 0.01)
+            .count();
+        let share = good as f64 / kept.len().max(1) as f64;
+        eprintln!("{name}: {} depths, {share:.4} within 1%", kept.len());
+        assert!(
+            kept.len() > 5_000 && share >= 0.85,
+            "{name}: {share} of {}",
+            kept.len()
+        );
+    }
 }

@@ -802,6 +802,7 @@ fn encode(name: &str, img: &image::RgbImage) -> std::result::Result<Vec<u8>, Str
 fn load_view(ws: &Workspace, e: &Entry) -> Result<StereoView> {
     let rgb = load_rgb(ws, e)?;
     Ok(StereoView {
+        id: e.image_id as u64,
         image: GrayImage::from_rgb8(e.width, e.height, rgb.as_raw()),
         lens: e.lens,
         rotation: e.rotation,

@@ -757,8 +757,10 @@ fn upsampled(coarse: &Hypotheses, w: usize, h: usize) -> Hypotheses {
 
 /// A salt that keeps one view's random draws apart from another's.
 fn salt(reference: &StereoView) -> u64 {
-    (reference.translation.x.to_bits() ^ reference.translation.y.to_bits().rotate_left(21))
-        ^ reference.translation.z.to_bits().rotate_left(42)
+    reference
+        .id
+        .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        .rotate_left(29)
 }
 
 /// The photometric pass over one reference view: hypotheses at the full size (unfiltered,

@@ -153,6 +153,9 @@ impl GrayImage {
 /// frame (re-centred in f64 by the caller, so UTM-sized coordinates keep their digits).
 #[derive(Debug, Clone)]
 pub struct StereoView {
+    /// The view's identity (its image id): it seeds the view's random draws, so a view draws
+    /// the same numbers whatever frame its pose is given in.
+    pub id: u64,
     pub image: GrayImage,
     pub lens: Pinhole,
     pub rotation: DMat3,
@@ -171,6 +174,7 @@ impl StereoView {
         let sx = image.width as f64 / self.image.width as f64;
         let sy = image.height as f64 / self.image.height as f64;
         StereoView {
+            id: self.id,
             lens: self.lens.scaled(sx, sy),
             image,
             rotation: self.rotation,

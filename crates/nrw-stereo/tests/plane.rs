@@ -79,6 +79,7 @@ fn view(plane: &Plane, centre: DVec3) -> (StereoView, Vec<f64>) {
     };
     (
         StereoView {
+            id: (centre.x * 1000.0) as i64 as u64,
             image,
             lens: k,
             rotation,

@@ -1751,9 +1751,17 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         "{m}"
     );
     assert!(out.join("qa/report.html").is_file());
-    // sacre_coeur keeps nothing: exit 3, later stages skipped.
+    // sacre_coeur's sparse model keeps nothing: exit 3, later stages skipped. (The paper's
+    // [densify] left out: with it, tests/densify.rs shows views kept.)
+    let text = std::fs::read_to_string(&paper).unwrap();
+    let sparse = tmp.path().join("sparse.toml");
+    let (start, end) = (
+        text.find("[densify]").unwrap(),
+        text.find("[ingest]").unwrap(),
+    );
+    std::fs::write(&sparse, format!("{}{}", &text[..start], &text[end..])).unwrap();
     let o = run_pipeline(
-        &paper,
+        &sparse,
         "sacre_coeur",
         &tmp.path().join("sc"),
         &["--weights", weights],

@@ -490,6 +490,12 @@ fn densify_real_scene(scene: &Path, dense: &Path, size: u32, m: usize) -> f64 {
         "--out",
         dense.to_str().unwrap(),
     ]);
+    real_workspace_agrees(name, dense, size, m)
+}
+
+/// The SfM agreement of a real scene's workspace and COLMAP's fusion of its maps against its
+/// cloud; the SfM median.
+fn real_workspace_agrees(name: &str, dense: &Path, size: u32, m: usize) -> f64 {
     let ws = Workspace::new(dense);
     let (median, n) = sfm_agreement(&ws);
     eprintln!(
@@ -515,6 +521,22 @@ fn densify_agrees_with_the_sfm_points_and_colmap_on_sceaux_castle() {
     densify_real_scene(&data, &tmp.path().join("dense"), 320, 5);
 }
 
+/// `ingest SCENE` from its sparse model: the exit code and the summary line.
+fn nrw_ingest_sparse(scene: &Path, out: &Path) -> (Option<i32>, String) {
+    let o = nrw(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("ingested"))
+        .map(String::from);
+    (o.status.code(), line.unwrap_or(err))
+}
+
 #[test]
 fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
     let Some(data) = shared("data/sacre_coeur") else {
@@ -522,19 +544,29 @@ fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let dense = tmp.path().join("dense");
-    // Ten photos: a wall three of them see makes no point at COLMAP's 5 pixels, hence 2.
-    densify_real_scene(&data, &dense, 480, 2);
-    let ingest = |points: Option<&Path>, out: &str| {
+    // The paper pipeline's [densify] and [ingest] tables, with a smaller size and, for ten
+    // photos, 2 pixels a point (a wall three of them see makes no point at COLMAP's 5).
+    let paper = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/paper.toml"),
+    )
+    .unwrap();
+    let tables = &paper[paper.find("[densify]").unwrap()..paper.find("[split]").unwrap()];
+    assert!(tables.contains("max_image_size = 800") && tables.contains("min_num_pixels = 5"));
+    let pipeline = tmp.path().join("densify-ingest.toml");
+    let tables = tables
+        .replace("max_image_size = 800", "max_image_size = 480")
+        .replace("min_num_pixels = 5", "min_num_pixels = 2");
+    std::fs::write(&pipeline, format!("name = \"densify-ingest\"\n{tables}")).unwrap();
+    let run = |out: &str, extra: &[&str]| {
         let out = tmp.path().join(out);
         let mut args = vec![
-            "ingest",
+            "run",
+            pipeline.to_str().unwrap(),
             data.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
         ];
-        if let Some(p) = points {
-            args.extend(["--points", p.to_str().unwrap()]);
-        }
+        args.extend(extra);
         let o = nrw(&args);
         let err = String::from_utf8_lossy(&o.stderr).into_owned();
         let line = err
@@ -543,11 +575,17 @@ fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
             .map(String::from);
         (o.status.code(), line.unwrap_or(err))
     };
+    // The scene's dense/ is COLMAP's undistorter output without a cloud: densify would write
+    // there, so the run is refused, naming the way out.
+    let (code, refused) = run("refused", &[]);
+    assert_eq!(code, Some(1), "{refused}");
+    assert!(refused.contains("--dense-out"), "{refused}");
     // At the paper's settings (85% empty, 450 px): the sparse model keeps no view (exit 3).
-    let (code, sparse) = ingest(None, "sparse_ds");
+    let (code, sparse) = nrw_ingest_sparse(&data, &tmp.path().join("sparse_ds"));
     assert_eq!(code, Some(3), "{sparse}");
-    let (code, dense_line) = ingest(Some(&dense.join("fused.ply")), "dense_ds");
+    let (code, dense_line) = run("dense_ds", &["--dense-out", dense.to_str().unwrap()]);
     assert_eq!(code, Some(0), "{dense_line}");
+    real_workspace_agrees("sacre_coeur", &dense, 480, 2);
     let kept: usize = dense_line
         .split(", ")
         .find_map(|part| part.strip_suffix(" kept"))
@@ -632,12 +670,13 @@ fn densify_units_and_finalize_give_the_bytes_of_one_process_and_a_stopped_unit_r
             )));
         }
     }
-    let e = stderr(&run(&split, &["--finalize"]));
+    // Finalize with a fusion cache of no room (one view held at a time): the same cloud.
+    let e = stderr(&run(&split, &["--finalize", "--fusion-cache-mb", "0"]));
     assert!(e.contains("densified 4 of 4 views"), "{e}");
     assert_same_files(
         &files(&whole),
         &files(&split),
-        "2 units + finalize vs one process",
+        "2 units + finalize (cache of one view) vs one process",
     );
     // The workspace records its settings, and nothing of the build is left behind.
     assert!(whole.join("densify.json").is_file());

@@ -5,7 +5,8 @@
 //! and the fused cloud with its visibility (`fused.ply`, `fused.ply.vis`).
 //!
 //! Memory: stereo holds one reference view and its sources at a time (maps are written and
-//! read back per view); fusion holds every view's final maps and colours, as COLMAP's does.
+//! read back per view); fusion holds a cache of final maps and colours of a given size
+//! (COLMAP's `cache_size`) and one bit per pixel of every view.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -25,6 +26,9 @@ pub const DEFAULT_MAX_IMAGE_SIZE: u64 = 800;
 /// Source views matched per reference view by default (COLMAP's `__auto__, 20` takes 20;
 /// the cost of a view grows with the count, and Gipuma's best-3 rarely needs more than 8).
 pub const DEFAULT_MAX_SOURCES: usize = 8;
+
+/// Fusion's map cache by default, in MiB: about 100 views at 0.5 MP (19 bytes a pixel).
+pub const DEFAULT_FUSION_CACHE_MB: usize = 1024;
 
 /// What densify is asked to do.
 #[derive(Debug, Clone)]
@@ -47,6 +51,9 @@ pub struct DensifyConfig {
     pub follow_outside_links: bool,
     pub stereo: PatchMatchOptions,
     pub fusion: FusionOptions,
+    /// The most bytes of maps fusion holds at once (COLMAP's `cache_size`); the cloud does not
+    /// depend on it.
+    pub fusion_cache_bytes: usize,
     /// Stop a pass after this many views, as an interruption would (for resume tests).
     pub stop_after_views: Option<usize>,
 }
@@ -65,6 +72,7 @@ impl DensifyConfig {
             follow_outside_links: false,
             stereo: PatchMatchOptions::default(),
             fusion: FusionOptions::default(),
+            fusion_cache_bytes: DEFAULT_FUSION_CACHE_MB << 20,
             stop_after_views: None,
         }
     }
@@ -555,7 +563,14 @@ fn finish(prep: &Prepared, cfg: &DensifyConfig, progress: &dyn Progress) -> Resu
     let timer = std::time::Instant::now();
     write_cfgs(&prep.ws, &prep.entries, &prep.plan)?;
     progress.start("fusing", prep.plan.len() as u64, "views");
-    let (points, pixels) = fuse(&prep.ws, &prep.rec, &prep.entries, &prep.plan, &cfg.fusion)?;
+    let (points, pixels) = fuse(
+        &prep.ws,
+        &prep.rec,
+        &prep.entries,
+        &prep.plan,
+        &cfg.fusion,
+        cfg.fusion_cache_bytes,
+    )?;
     progress.finish();
     let fusing = timer.elapsed().as_secs_f64();
     publish(&prep.staging, &prep.out)?;
@@ -936,29 +951,58 @@ fn write_cfgs(ws: &Workspace, entries: &[Entry], plan: &[Plan]) -> Result<()> {
     Ok(())
 }
 
-/// Fuse the final maps into `fused.ply` and `fused.ply.vis`; the number of points.
+/// Reads a view's final (geometric) maps and colours from the workspace for fusion, and
+/// counts each view's depth pixels the first time it is read.
+struct WorkspaceMaps<'a> {
+    ws: &'a Workspace,
+    views: Vec<&'a Entry>,
+    pixels: Vec<Option<usize>>,
+}
+
+impl WorkspaceMaps<'_> {
+    /// A map of view `e`, refused unless it has the view's size and `channels`.
+    fn map(&self, kind: MapKind, e: &Entry, channels: usize) -> Result<DenseMap> {
+        let m = read_map(self.ws, kind, MapPass::Geometric, &e.name)?;
+        if (m.width, m.height, m.channels) != (e.width, e.height, channels) {
+            let path = map_path(self.ws, kind, MapPass::Geometric, &e.name)?;
+            return Err(PipelineError::input(
+                &path,
+                format!(
+                    "is {}x{}x{}, its view {}x{}x{channels}",
+                    m.width, m.height, m.channels, e.width, e.height
+                ),
+            ));
+        }
+        Ok(m)
+    }
+}
+
+impl nrw_stereo::MapReader for WorkspaceMaps<'_> {
+    type Error = PipelineError;
+
+    fn read(&mut self, view: usize) -> Result<nrw_stereo::FusionMaps> {
+        let e = self.views[view];
+        let depth = self.map(MapKind::Depth, e, 1)?.data;
+        let normal = self.map(MapKind::Normal, e, 3)?.data;
+        self.pixels[view].get_or_insert(depth.iter().filter(|z| **z > 0.0).count());
+        Ok(nrw_stereo::FusionMaps {
+            depth,
+            normal: normal.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            rgb: load_rgb(self.ws, e)?.into_raw(),
+        })
+    }
+}
+
+/// Fuse the final maps into `fused.ply` and `fused.ply.vis`, holding at most `cache_bytes` of
+/// maps; the number of points and each view's depth pixels.
 fn fuse(
     ws: &Workspace,
     rec: &Reconstruction,
     entries: &[Entry],
     plan: &[Plan],
     opts: &FusionOptions,
+    cache_bytes: usize,
 ) -> Result<(usize, Vec<usize>)> {
-    let mut depths = Vec::with_capacity(plan.len());
-    let mut normals = Vec::with_capacity(plan.len());
-    let mut colours = Vec::with_capacity(plan.len());
-    for (i, _, _) in plan {
-        let e = &entries[*i];
-        depths.push(read_map(ws, MapKind::Depth, MapPass::Geometric, &e.name)?.data);
-        let n = read_map(ws, MapKind::Normal, MapPass::Geometric, &e.name)?;
-        normals.push(
-            n.data
-                .chunks_exact(3)
-                .map(|c| [c[0], c[1], c[2]])
-                .collect::<Vec<_>>(),
-        );
-        colours.push(load_rgb(ws, e)?.into_raw());
-    }
     // The images a walk may step into: COLMAP's fusion takes the 50 most overlapping.
     let overlap = nrw_colmap::overlap::source_images(rec, 50, 0.0);
     let position: BTreeMap<u32, usize> = plan
@@ -966,20 +1010,16 @@ fn fuse(
         .enumerate()
         .map(|(k, (i, _, _))| (entries[*i].image_id, k))
         .collect();
-    let inputs: Vec<nrw_stereo::FusionInput> = plan
+    let views: Vec<nrw_stereo::FusionView> = plan
         .iter()
-        .enumerate()
-        .map(|(k, (i, _, _))| {
+        .map(|(i, _, _)| {
             let e = &entries[*i];
-            nrw_stereo::FusionInput {
+            nrw_stereo::FusionView {
                 lens: e.lens,
                 rotation: e.rotation,
                 translation: e.translation,
                 width: e.width,
                 height: e.height,
-                depth: &depths[k],
-                normal: &normals[k],
-                rgb: &colours[k],
                 overlapping: overlap[&e.image_id]
                     .iter()
                     .filter_map(|id| position.get(id).copied())
@@ -987,7 +1027,12 @@ fn fuse(
             }
         })
         .collect();
-    let cloud = nrw_stereo::fuse(&inputs, opts);
+    let mut reader = WorkspaceMaps {
+        ws,
+        views: plan.iter().map(|(i, _, _)| &entries[*i]).collect(),
+        pixels: vec![None; plan.len()],
+    };
+    let (cloud, _) = nrw_stereo::fuse(&views, &mut reader, cache_bytes, opts)?;
     // Visibility names images by their index in the workspace model (by id, as COLMAP reads it).
     let model_index: Vec<u32> = plan.iter().map(|(i, _, _)| *i as u32).collect();
     let origin = rec.scene_origin();
@@ -1008,9 +1053,7 @@ fn fuse(
         &ws.fused_vis(),
         &nrw_colmap::dense::visibility_to_bytes(&vis),
     )?;
-    let pixels = depths
-        .iter()
-        .map(|d| d.iter().filter(|z| **z > 0.0).count())
-        .collect();
+    // Every view starts walks, so every view was read.
+    let pixels = reader.pixels.iter().map(|p| p.unwrap_or(0)).collect();
     Ok((cloud.positions.len(), pixels))
 }

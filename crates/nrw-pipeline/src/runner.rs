@@ -44,6 +44,8 @@ pub struct DensifyTable {
     pub geometric: bool,
     /// The fewest pixels fusion merges into a point (COLMAP's `min_num_pixels`, 5).
     pub min_num_pixels: usize,
+    /// The most MiB of maps fusion holds at once (the cloud does not depend on it).
+    pub fusion_cache_mb: usize,
     /// Replace an existing SCENE/dense.
     pub overwrite: bool,
 }
@@ -59,9 +61,44 @@ impl Default for DensifyTable {
             scales: c.stereo.scales,
             geometric: c.geometric,
             min_num_pixels: c.fusion.min_num_pixels,
+            fusion_cache_mb: c.fusion_cache_bytes >> 20,
             overwrite: false,
         }
     }
+}
+
+/// `[densify]` before ingest: multi-view stereo into `dense` (SCENE/dense when `None`) unless
+/// that workspace has a cloud already (and `overwrite` is off). The cloud ingest should read
+/// when it is not the scene's own `dense/fused.ply`.
+fn densify_before_ingest(
+    p: &Pipeline,
+    d: &DensifyTable,
+    scene: &Path,
+    dense: Option<&Path>,
+    progress: &dyn Progress,
+    done: &mut dyn FnMut(StageDone),
+) -> Result<Option<PathBuf>> {
+    let cloud = match dense {
+        Some(dir) => {
+            Some(nrw_colmap::dense::Workspace::new(dir).fused_ply()).filter(|c| c.is_file())
+        }
+        None => nrw_colmap::Scene::find(scene)
+            .ok()
+            .and_then(|s| s.dense_cloud()),
+    };
+    if let Some(cloud) = cloud.as_ref().filter(|_| !d.overwrite) {
+        progress.warn(&format!(
+            "pipeline {}: densify skipped, {} is there already (overwrite = true in [densify] replaces it)",
+            p.name,
+            cloud.display()
+        ));
+    } else {
+        let mut cfg = densify_config(d, scene);
+        cfg.out = dense.map(Path::to_path_buf);
+        let r = crate::densify::densify(&cfg, progress)?;
+        done(StageDone::Densify(&r));
+    }
+    Ok(dense.map(|dir| nrw_colmap::dense::Workspace::new(dir).fused_ply()))
 }
 
 /// Densify's settings from `[densify]` (or the command line's, which take the same fields).
@@ -75,6 +112,7 @@ pub fn densify_config(d: &DensifyTable, scene: &Path) -> crate::densify::Densify
     c.stereo.scales = d.scales;
     c.geometric = d.geometric;
     c.fusion.min_num_pixels = d.min_num_pixels;
+    c.fusion_cache_bytes = d.fusion_cache_mb.saturating_mul(1 << 20);
     c.overwrite = d.overwrite;
     c
 }
@@ -351,9 +389,11 @@ fn style_config(s: &StyleTable, dataset: &Location, weights: Option<&Path>) -> R
 
 /// Run every stage `p` lists on `scene` into the dataset `out` (the export into
 /// `export_dir`, the report into out/qa). Settings are checked before the first stage runs.
+#[allow(clippy::too_many_arguments)] // each a place or a model the caller names
 pub fn run(
     p: &Pipeline,
     scene: &Path,
+    dense: Option<&Path>,
     out: &Location,
     export_dir: &Location,
     models: Models,
@@ -370,7 +410,7 @@ pub fn run(
         .export
         .as_ref()
         .map(|e| export_config(e, out, export_dir, segmented));
-    let ingest = p
+    let mut ingest = p
         .ingest
         .as_ref()
         .map(|i| ingest_config(i, scene, out, models))
@@ -382,18 +422,10 @@ pub fn run(
         report: None,
     };
     if let Some(d) = &p.densify {
-        let has_cloud = nrw_colmap::Scene::find(scene)
-            .ok()
-            .and_then(|s| s.dense_cloud())
-            .is_some();
-        if has_cloud && !d.overwrite {
-            progress.warn(&format!(
-                "pipeline {}: the scene has a dense cloud already; densify skipped (overwrite = true in [densify] replaces it)",
-                p.name
-            ));
-        } else {
-            let r = crate::densify::densify(&densify_config(d, scene), progress)?;
-            done(StageDone::Densify(&r));
+        if let Some(cloud) = densify_before_ingest(p, d, scene, dense, progress, done)? {
+            if let Some(c) = ingest.as_mut().filter(|c| c.points.is_none()) {
+                c.points = Some(cloud);
+            }
         }
     }
     if let Some(c) = &ingest {
@@ -493,6 +525,7 @@ pub fn demo(
     let out = run(
         &pipeline,
         &scene,
+        None,
         &dir.join("dataset").into(),
         &dir.join("export").into(),
         Models {

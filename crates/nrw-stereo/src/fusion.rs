@@ -6,8 +6,13 @@
 //!
 //! Differences from COLMAP, each deliberate: positions and projections in f64 (COLMAP's are
 //! f32), pixel centres at +0.5 (the model's convention; COLMAP's fusion uses (col, row)).
+//!
+//! Memory: maps are read through a [`MapReader`] into a least-recently-used cache of a given
+//! byte budget (COLMAP's `cache_size`), so fusion holds the cache, one bit per pixel of every
+//! view (fused or not) and the cloud it builds; the cloud is the same whatever the budget.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
+use std::rc::Rc;
 
 use glam::DVec3;
 
@@ -43,23 +48,137 @@ impl Default for FusionOptions {
     }
 }
 
-/// One image's maps as fusion reads them.
+/// Where a view sits and which views a walk may step into from it: what fusion knows of a
+/// view before it reads the view's maps.
 #[derive(Debug, Clone)]
-pub struct FusionInput<'a> {
+pub struct FusionView {
     pub lens: Pinhole,
     /// World (scene-local) → camera.
     pub rotation: glam::DMat3,
     pub translation: DVec3,
     pub width: usize,
     pub height: usize,
-    /// Depth per pixel (0 = none), row-major.
-    pub depth: &'a [f32],
-    /// Unit normal per pixel in camera coordinates.
-    pub normal: &'a [[f32; 3]],
-    /// 8-bit RGB per pixel.
-    pub rgb: &'a [u8],
-    /// The images (indices into the input list) a walk may step into from this one.
+    /// The views (indices into the view list) a walk may step into from this one.
     pub overlapping: Vec<usize>,
+}
+
+/// One view's final maps, read when a walk needs them and dropped when the cache is full.
+#[derive(Debug, Clone, Default)]
+pub struct FusionMaps {
+    /// Depth per pixel (0 = none), row-major.
+    pub depth: Vec<f32>,
+    /// Unit normal per pixel in camera coordinates.
+    pub normal: Vec<[f32; 3]>,
+    /// 8-bit RGB per pixel.
+    pub rgb: Vec<u8>,
+}
+
+impl FusionMaps {
+    /// The bytes these maps hold (what the cache budget counts).
+    pub fn bytes(&self) -> usize {
+        self.depth.len() * 4 + self.normal.len() * 12 + self.rgb.len()
+    }
+}
+
+/// Reads a view's maps on demand, so that fusion holds only the views its cache has room for.
+pub trait MapReader {
+    type Error;
+    /// The maps of view `view` (an index into the view list).
+    fn read(&mut self, view: usize) -> Result<FusionMaps, Self::Error>;
+}
+
+/// Maps already in memory (tests, small scenes): every read is a copy.
+impl MapReader for [FusionMaps] {
+    type Error = std::convert::Infallible;
+    fn read(&mut self, view: usize) -> Result<FusionMaps, Self::Error> {
+        Ok(self[view].clone())
+    }
+}
+
+/// What fusion's memory came to: map reads (a view read again was evicted in between) and the
+/// most map bytes held at once.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FusionStats {
+    pub reads: usize,
+    pub peak_bytes: usize,
+}
+
+/// The views' maps, least recently used dropped first when the next read would pass the budget
+/// (one view is always held, however small the budget).
+struct MapCache<'r, R: MapReader + ?Sized> {
+    reader: &'r mut R,
+    budget: usize,
+    held: BTreeMap<usize, (Rc<FusionMaps>, u64)>,
+    bytes: usize,
+    tick: u64,
+    stats: FusionStats,
+}
+
+impl<'r, R: MapReader + ?Sized> MapCache<'r, R> {
+    fn new(reader: &'r mut R, budget: usize) -> Self {
+        MapCache {
+            reader,
+            budget,
+            held: BTreeMap::new(),
+            bytes: 0,
+            tick: 0,
+            stats: FusionStats::default(),
+        }
+    }
+
+    /// View `view`'s maps, read if not held.
+    fn get(&mut self, view: usize) -> Result<Rc<FusionMaps>, R::Error> {
+        self.tick += 1;
+        if let Some((maps, used)) = self.held.get_mut(&view) {
+            *used = self.tick;
+            return Ok(maps.clone());
+        }
+        let maps = self.reader.read(view)?;
+        let size = maps.bytes();
+        while !self.held.is_empty() && self.bytes + size > self.budget {
+            self.evict_oldest();
+        }
+        self.stats.reads += 1;
+        self.bytes += size;
+        self.stats.peak_bytes = self.stats.peak_bytes.max(self.bytes);
+        let maps = Rc::new(maps);
+        self.held.insert(view, (maps.clone(), self.tick));
+        Ok(maps)
+    }
+
+    fn evict_oldest(&mut self) {
+        let oldest = self
+            .held
+            .iter()
+            .min_by_key(|(_, (_, used))| *used)
+            .map(|(k, _)| *k);
+        if let Some((maps, _)) = oldest.and_then(|k| self.held.remove(&k)) {
+            self.bytes -= maps.bytes();
+        }
+    }
+}
+
+/// One bit per pixel of every view: whether the pixel is fused already (what fusion keeps of
+/// all views at once).
+struct FusedBits(Vec<Vec<u64>>);
+
+impl FusedBits {
+    fn new(views: &[FusionView]) -> Self {
+        FusedBits(
+            views
+                .iter()
+                .map(|v| vec![0; (v.width * v.height).div_ceil(64)])
+                .collect(),
+        )
+    }
+
+    fn get(&self, view: usize, pixel: usize) -> bool {
+        self.0[view][pixel / 64] >> (pixel % 64) & 1 == 1
+    }
+
+    fn set(&mut self, view: usize, pixel: usize) {
+        self.0[view][pixel / 64] |= 1 << (pixel % 64);
+    }
 }
 
 /// The fused cloud: positions in the scene-local frame, unit normals, colours, and for each
@@ -100,100 +219,114 @@ struct Cluster {
     seen: BTreeSet<u32>,
 }
 
-/// Fuse the images' maps into one cloud, COLMAP's way.
-pub fn fuse(images: &[FusionInput], opts: &FusionOptions) -> FusedCloud {
-    let mut fused: Vec<Vec<bool>> = images
-        .iter()
-        .map(|im| vec![false; im.width * im.height])
-        .collect();
-    let min_cos_normal = opts.max_normal_error_deg.to_radians().cos();
-    let max_sq_reproj = opts.max_reproj_error * opts.max_reproj_error;
+/// Fuse the views' maps into one cloud, COLMAP's way, holding at most `cache_bytes` of maps
+/// (and one bit per pixel of every view): the cloud does not depend on the budget, only the
+/// reads do.
+pub fn fuse<R: MapReader + ?Sized>(
+    views: &[FusionView],
+    reader: &mut R,
+    cache_bytes: usize,
+    opts: &FusionOptions,
+) -> Result<(FusedCloud, FusionStats), R::Error> {
+    let mut fused = FusedBits::new(views);
+    let mut cache = MapCache::new(reader, cache_bytes);
     let mut out = FusedCloud::default();
     let mut queue: Vec<(usize, usize, usize, usize)> = Vec::new();
-    for (start, im) in images.iter().enumerate() {
-        for row in 0..im.height {
-            for col in 0..im.width {
-                if fused[start][row * im.width + col] {
+    for (start, view) in views.iter().enumerate() {
+        for row in 0..view.height {
+            for col in 0..view.width {
+                if fused.get(start, row * view.width + col) {
                     continue;
                 }
                 queue.clear();
                 queue.push((start, row, col, 0));
-                let mut cluster = Cluster::default();
-                let mut reference: Option<(DVec3, DVec3)> = None;
-                while let Some((i, r, c, depth_level)) = queue.pop() {
-                    let img = &images[i];
-                    let p = r * img.width + c;
-                    if fused[i][p] {
-                        continue;
-                    }
-                    let d = img.depth[p] as f64;
-                    if d.is_nan() || d <= 0.0 {
-                        continue;
-                    }
-                    if let Some((ref_point, _)) = reference {
-                        let proj = img.rotation * ref_point + img.translation;
-                        if ((proj.z - d) / d).abs() > opts.max_depth_error {
-                            continue;
-                        }
-                        let u = img.lens.project(proj);
-                        let (dc, dr) = (u.x - (c as f64 + 0.5), u.y - (r as f64 + 0.5));
-                        if dc * dc + dr * dr > max_sq_reproj {
-                            continue;
-                        }
-                    }
-                    let nc = img.normal[p];
-                    let normal = img.rotation.transpose()
-                        * DVec3::new(nc[0] as f64, nc[1] as f64, nc[2] as f64);
-                    if let Some((_, ref_normal)) = reference {
-                        if ref_normal.dot(normal) < min_cos_normal {
-                            continue;
-                        }
-                    }
-                    let cam = img.lens.pixel_ray(c, r) * d;
-                    let xyz = img.rotation.transpose() * (cam - img.translation);
-                    fused[i][p] = true;
-                    cluster.x.push(xyz.x);
-                    cluster.y.push(xyz.y);
-                    cluster.z.push(xyz.z);
-                    for k in 0..3 {
-                        cluster.n[k].push(normal[k]);
-                        cluster.rgb[k].push(img.rgb[3 * p + k] as f64);
-                    }
-                    cluster.seen.insert(i as u32);
-                    if reference.is_none() {
-                        reference = Some((xyz, normal));
-                    }
-                    if cluster.x.len() >= opts.max_num_pixels {
-                        break;
-                    }
-                    let next_level = depth_level + 1;
-                    if next_level >= opts.max_traversal_depth {
-                        continue;
-                    }
-                    for &j in &img.overlapping {
-                        let next = &images[j];
-                        let proj = next.rotation * xyz + next.translation;
-                        if proj.z <= 0.0 {
-                            continue;
-                        }
-                        let u = next.lens.project(proj);
-                        // The pixel whose centre is nearest (centres at +0.5).
-                        let (nc, nr) = (u.x.floor(), u.y.floor());
-                        if nc < 0.0
-                            || nr < 0.0
-                            || nc >= next.width as f64
-                            || nr >= next.height as f64
-                        {
-                            continue;
-                        }
-                        queue.push((j, nr as usize, nc as usize, next_level));
-                    }
-                }
+                let cluster = walk(views, &mut cache, &mut fused, &mut queue, opts)?;
                 push_point(&mut out, cluster, opts);
             }
         }
     }
-    out
+    Ok((out, cache.stats))
+}
+
+/// One depth-first walk from the pixel on the queue: the pixels that agree with the first.
+fn walk<R: MapReader + ?Sized>(
+    views: &[FusionView],
+    cache: &mut MapCache<R>,
+    fused: &mut FusedBits,
+    queue: &mut Vec<(usize, usize, usize, usize)>,
+    opts: &FusionOptions,
+) -> Result<Cluster, R::Error> {
+    let min_cos_normal = opts.max_normal_error_deg.to_radians().cos();
+    let max_sq_reproj = opts.max_reproj_error * opts.max_reproj_error;
+    let mut cluster = Cluster::default();
+    let mut reference: Option<(DVec3, DVec3)> = None;
+    while let Some((i, r, c, depth_level)) = queue.pop() {
+        let img = &views[i];
+        let p = r * img.width + c;
+        if fused.get(i, p) {
+            continue;
+        }
+        let maps = cache.get(i)?;
+        let d = maps.depth[p] as f64;
+        if d.is_nan() || d <= 0.0 {
+            continue;
+        }
+        if let Some((ref_point, _)) = reference {
+            let proj = img.rotation * ref_point + img.translation;
+            if ((proj.z - d) / d).abs() > opts.max_depth_error {
+                continue;
+            }
+            let u = img.lens.project(proj);
+            let (dc, dr) = (u.x - (c as f64 + 0.5), u.y - (r as f64 + 0.5));
+            if dc * dc + dr * dr > max_sq_reproj {
+                continue;
+            }
+        }
+        let nc = maps.normal[p];
+        let normal =
+            img.rotation.transpose() * DVec3::new(nc[0] as f64, nc[1] as f64, nc[2] as f64);
+        if let Some((_, ref_normal)) = reference {
+            if ref_normal.dot(normal) < min_cos_normal {
+                continue;
+            }
+        }
+        let cam = img.lens.pixel_ray(c, r) * d;
+        let xyz = img.rotation.transpose() * (cam - img.translation);
+        fused.set(i, p);
+        cluster.x.push(xyz.x);
+        cluster.y.push(xyz.y);
+        cluster.z.push(xyz.z);
+        for k in 0..3 {
+            cluster.n[k].push(normal[k]);
+            cluster.rgb[k].push(maps.rgb[3 * p + k] as f64);
+        }
+        cluster.seen.insert(i as u32);
+        if reference.is_none() {
+            reference = Some((xyz, normal));
+        }
+        if cluster.x.len() >= opts.max_num_pixels {
+            break;
+        }
+        let next_level = depth_level + 1;
+        if next_level >= opts.max_traversal_depth {
+            continue;
+        }
+        for &j in &img.overlapping {
+            let next = &views[j];
+            let proj = next.rotation * xyz + next.translation;
+            if proj.z <= 0.0 {
+                continue;
+            }
+            let u = next.lens.project(proj);
+            // The pixel whose centre is nearest (centres at +0.5).
+            let (nc, nr) = (u.x.floor(), u.y.floor());
+            if nc < 0.0 || nr < 0.0 || nc >= next.width as f64 || nr >= next.height as f64 {
+                continue;
+            }
+            queue.push((j, nr as usize, nc as usize, next_level));
+        }
+    }
+    Ok(cluster)
 }
 
 /// A walk's point, if it gathered enough pixels and its normals do not cancel.

@@ -16,7 +16,7 @@ pub mod patchmatch;
 mod rng;
 pub mod view;
 
-pub use fusion::{fuse, FusedCloud, FusionInput, FusionOptions};
+pub use fusion::{fuse, FusedCloud, FusionMaps, FusionOptions, FusionStats, FusionView, MapReader};
 pub use patchmatch::{
     filter, geometric, photometric, Hypotheses, PatchMatchOptions, Source, StereoMaps,
 };

@@ -3,8 +3,8 @@
 
 use glam::{DMat3, DVec3};
 use nrw_stereo::{
-    filter, fuse, geometric, photometric, FusionInput, FusionOptions, GrayImage, PatchMatchOptions,
-    Pinhole, Source, StereoView,
+    filter, fuse, geometric, photometric, FusionMaps, FusionOptions, FusionView, GrayImage,
+    PatchMatchOptions, Pinhole, Source, StereoView,
 };
 
 const W: usize = 120;
@@ -221,20 +221,36 @@ fn the_geometric_pass_keeps_what_agrees_and_fusion_puts_points_on_the_plane() {
                 .collect()
         })
         .collect();
-    let inputs: Vec<FusionInput> = (0..3)
-        .map(|i| FusionInput {
+    let inputs: Vec<FusionView> = (0..3)
+        .map(|i| FusionView {
             lens: views[i].lens,
             rotation: views[i].rotation,
             translation: views[i].translation,
             width: W,
             height: H,
-            depth: &maps[i].depth,
-            normal: &maps[i].normal,
-            rgb: &rgb[i],
             overlapping: others(i),
         })
         .collect();
-    let cloud = fuse(&inputs, &FusionOptions::default());
+    let mut all_maps: Vec<FusionMaps> = (0..3)
+        .map(|i| FusionMaps {
+            depth: maps[i].depth.clone(),
+            normal: maps[i].normal.clone(),
+            rgb: rgb[i].clone(),
+        })
+        .collect();
+    let opts = FusionOptions::default();
+    let (cloud, roomy) = fuse(&inputs, all_maps.as_mut_slice(), usize::MAX, &opts).unwrap();
+    assert_eq!(roomy.reads, 3, "a cache with room reads each view once");
+    // A cache with room for one view: the same cloud from more reads, never two views held.
+    let one_view = all_maps[0].bytes();
+    let (tight, stats) = fuse(&inputs, all_maps.as_mut_slice(), one_view, &opts).unwrap();
+    eprintln!(
+        "cache of one view: {} reads, peak {} bytes",
+        stats.reads, stats.peak_bytes
+    );
+    assert_eq!(tight, cloud);
+    assert!(stats.reads > 3, "{stats:?}");
+    assert_eq!(stats.peak_bytes, one_view);
     let n = DVec3::new(0.25, 0.1, 1.0).normalize();
     let off: Vec<f64> = cloud
         .positions

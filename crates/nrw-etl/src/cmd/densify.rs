@@ -56,6 +56,11 @@ pub struct DensifyArgs {
     /// keeps the walls that 5 drops
     #[arg(long, default_value_t = 5)]
     pub min_num_pixels: usize,
+    /// The most MiB of depth, normal and colour maps fusion holds at once (COLMAP's
+    /// cache_size): views beyond it are read again when a walk needs them. The cloud is the
+    /// same whatever the size; only the time is not
+    #[arg(long, default_value_t = nrw_pipeline::densify::DEFAULT_FUSION_CACHE_MB)]
+    pub fusion_cache_mb: usize,
     /// Skip the geometric-consistency pass (faster, noisier: photometric maps are fused)
     #[arg(long)]
     pub no_geometric: bool,
@@ -91,6 +96,7 @@ pub fn run(args: &DensifyArgs) -> Result<()> {
         scales: args.scales,
         geometric: !args.no_geometric,
         min_num_pixels: args.min_num_pixels,
+        fusion_cache_mb: args.fusion_cache_mb,
         overwrite: args.overwrite,
     };
     let mut cfg = nrw_pipeline::runner::densify_config(&table, &args.scene);

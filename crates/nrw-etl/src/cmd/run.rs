@@ -26,6 +26,11 @@ pub struct RunArgs {
     /// (mode and size from [ingest] segment_mode / segment_size) and the export includes them
     #[arg(long)]
     pub segment_weights: Option<PathBuf>,
+    /// Where a [densify] table writes its dense workspace when the scene folder cannot take
+    /// it (read-only, or a dense/ of COLMAP's undistorter without a cloud); ingest then
+    /// renders DIR/fused.ply [default: SCENE/dense]
+    #[arg(long, value_name = "DIR")]
+    pub dense_out: Option<PathBuf>,
 }
 
 /// Run `run`; returns whether any view was kept (the caller maps "none" to exit code 3).
@@ -34,6 +39,7 @@ pub fn run(args: &RunArgs) -> Result<bool> {
     let out = nrw_pipeline::runner::run(
         &p,
         &args.scene,
+        args.dense_out.as_deref(),
         &args.out,
         &args.out.join(nrw_dataset::EXPORT_DIR),
         nrw_pipeline::runner::Models {
@@ -48,7 +54,7 @@ pub fn run(args: &RunArgs) -> Result<bool> {
 }
 
 /// A run's settings come from its pipeline file, so an error names them by their keys there;
-/// only the models are flags of `run` itself.
+/// only the models and densify's workspace are flags of `run` itself.
 fn file_setting(e: nrw_pipeline::PipelineError) -> crate::error::EtlError {
     use nrw_pipeline::{PipelineError, Setting};
     match e {
@@ -56,6 +62,13 @@ fn file_setting(e: nrw_pipeline::PipelineError) -> crate::error::EtlError {
             setting: Setting::Weights | Setting::SegmentWeights,
             ..
         } => e.into(),
+        // The one setting of a run that is a flag of `run` itself: densify's workspace.
+        PipelineError::Config { setting, problem } => {
+            crate::error::EtlError::Pipeline(PipelineError::Config {
+                setting,
+                problem: problem.replace(&Setting::DenseOut.to_string(), "--dense-out"),
+            })
+        }
         e => crate::error::EtlError::Pipeline(e),
     }
 }

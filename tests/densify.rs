@@ -521,14 +521,9 @@ fn densify_agrees_with_the_sfm_points_and_colmap_on_sceaux_castle() {
     densify_real_scene(&data, &tmp.path().join("dense"), 320, 5);
 }
 
-/// `ingest SCENE` from its sparse model: the exit code and the summary line.
-fn nrw_ingest_sparse(scene: &Path, out: &Path) -> (Option<i32>, String) {
-    let o = nrw(&[
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+/// Run the binary: its exit code and the `ingested …` summary line (all of stderr if none).
+fn ingest_line(args: &[&str]) -> (Option<i32>, String) {
+    let o = nrw(args);
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     let line = err
         .lines()
@@ -567,13 +562,7 @@ fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
             out.to_str().unwrap(),
         ];
         args.extend(extra);
-        let o = nrw(&args);
-        let err = String::from_utf8_lossy(&o.stderr).into_owned();
-        let line = err
-            .lines()
-            .find(|l| l.starts_with("ingested"))
-            .map(String::from);
-        (o.status.code(), line.unwrap_or(err))
+        ingest_line(&args)
     };
     // The scene's dense/ is COLMAP's undistorter output without a cloud: densify would write
     // there, so the run is refused, naming the way out.
@@ -581,7 +570,13 @@ fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
     assert_eq!(code, Some(1), "{refused}");
     assert!(refused.contains("--dense-out"), "{refused}");
     // At the paper's settings (85% empty, 450 px): the sparse model keeps no view (exit 3).
-    let (code, sparse) = nrw_ingest_sparse(&data, &tmp.path().join("sparse_ds"));
+    let sparse_ds = tmp.path().join("sparse_ds");
+    let (code, sparse) = ingest_line(&[
+        "ingest",
+        data.to_str().unwrap(),
+        "--out",
+        sparse_ds.to_str().unwrap(),
+    ]);
     assert_eq!(code, Some(3), "{sparse}");
     let (code, dense_line) = run("dense_ds", &["--dense-out", dense.to_str().unwrap()]);
     assert_eq!(code, Some(0), "{dense_line}");

@@ -78,10 +78,9 @@ fn densify_before_ingest(
     progress: &dyn Progress,
     done: &mut dyn FnMut(StageDone),
 ) -> Result<Option<PathBuf>> {
-    let cloud = match dense {
-        Some(dir) => {
-            Some(nrw_colmap::dense::Workspace::new(dir).fused_ply()).filter(|c| c.is_file())
-        }
+    let own = dense.map(|dir| nrw_colmap::dense::Workspace::new(dir).fused_ply());
+    let cloud = match &own {
+        Some(path) => Some(path.clone()).filter(|c| c.is_file()),
         None => nrw_colmap::Scene::find(scene)
             .ok()
             .and_then(|s| s.dense_cloud()),
@@ -98,7 +97,7 @@ fn densify_before_ingest(
         let r = crate::densify::densify(&cfg, progress)?;
         done(StageDone::Densify(&r));
     }
-    Ok(dense.map(|dir| nrw_colmap::dense::Workspace::new(dir).fused_ply()))
+    Ok(own)
 }
 
 /// Densify's settings from `[densify]` (or the command line's, which take the same fields).

@@ -12,8 +12,12 @@ mod colmap_dense;
 mod densify;
 #[path = "golden.rs"]
 mod golden;
+#[path = "gsplat.rs"]
+mod gsplat;
 #[path = "jpeg.rs"]
 mod jpeg;
+#[path = "megadepth.rs"]
+mod megadepth;
 #[path = "memory.rs"]
 mod memory;
 #[path = "nerfstudio.rs"]

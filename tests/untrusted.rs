@@ -177,6 +177,8 @@ fn a_subfolder_name_works_end_to_end_in_every_export_layout() {
         ("files", "cam0/sub/0000/photo.png"),
         ("nerfw", "dense/images/cam0/sub/0000.png"),
         ("nerfstudio", "images/cam0/sub/0000.png"),
+        ("gsplat", "images_8/cam0/sub/0000.png"),
+        ("megadepth", "dense0/depths/cam0/sub/0000.h5"),
     ] {
         let exp = tmp.path().join(format!("x_{layout}"));
         assert_eq!(export(&out, layout, &exp), None, "{layout}");
@@ -288,7 +290,7 @@ pub(crate) const LAYOUTS: [&str; nrw_export::Layout::ALL.len()] = {
     names
 };
 /// The layouts whose file names come from the photos' names.
-const NAMED_LAYOUTS: [&str; 3] = ["files", "nerfw", "nerfstudio"];
+const NAMED_LAYOUTS: [&str; 5] = ["files", "nerfw", "nerfstudio", "gsplat", "megadepth"];
 
 #[test]
 fn hostile_names_in_a_dataset_reach_no_path_outside_any_export() {

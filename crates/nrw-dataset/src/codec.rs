@@ -182,6 +182,13 @@ pub fn encode_gray(name: &str, w: u32, h: u32, gray: &[u8]) -> Result<Vec<u8>> {
     png(name, w, h, gray, image::ExtendedColorType::L8)
 }
 
+/// PNG of 16-bit single-channel values (graphdeco's inverse-depth priors are 16-bit PNGs).
+pub fn encode_gray16(name: &str, w: u32, h: u32, values: &[u16]) -> Result<Vec<u8>> {
+    // The encoder takes 16-bit samples in native byte order and writes PNG's big-endian.
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    png(name, w, h, &bytes, image::ExtendedColorType::L16)
+}
+
 /// PNG of an RGB8 image.
 pub fn encode_rgb(name: &str, img: &RgbImage) -> Result<Vec<u8>> {
     png(

@@ -1,6 +1,8 @@
 //! Exports of a dataset as files other tools read: the paper's published code (`official`
 //! PNG folders and `tfrecord`), one folder per photo (`files`), NeRF-W's Phototourism layout
-//! (`nerfw`) and nerfstudio's `transforms.json` (`nerfstudio`).
+//! (`nerfw`), nerfstudio's `transforms.json` (`nerfstudio`) and the COLMAP folder the 3DGS
+//! family reads (`gsplat`: image, mask and depth pyramids, graphdeco's depth priors) and
+//! MegaDepth's (`megadepth`: depth `.h5`, the undistorted text model, D2-Net's `scene_info`).
 //!
 //! One entry point, [`export`]; one seam per layout, [`writer::LayoutWriter`] (the layouts of one
 //! file set per view share [`stream`]). Every file is claimed in a hidden staging folder
@@ -9,13 +11,19 @@
 
 pub mod error;
 pub mod files;
+pub mod gsplat;
+pub mod hdf5;
+pub mod inverse_depth;
 pub mod layout;
+pub mod megadepth;
 pub mod nerfstudio;
 pub mod nerfw;
+pub mod npz;
 pub mod official;
 pub mod paper;
 pub mod pickle;
 pub mod published;
+pub mod pyramid;
 pub mod record;
 pub mod staging;
 pub mod stream;
@@ -51,8 +59,10 @@ pub type DistRows = (
 pub struct Inputs<'a> {
     /// The official layout's `dist_NAME.pckl` (none: no pickle is written).
     pub dist: Option<DistMatrix<'a>>,
-    /// The scene's 3D points, which `nerfw` and `nerfstudio` carry.
+    /// The scene's 3D points, which `nerfw`, `nerfstudio` and `gsplat` carry.
     pub points: Option<&'a [ScenePoint]>,
+    /// The scene's model as ingested, whose tracks `megadepth` carries.
+    pub model: Option<&'a nrw_colmap::Reconstruction>,
 }
 
 /// Export `ds` as `cfg` says into `cfg.out` (a folder or an object-store URL), replacing an
@@ -100,5 +110,7 @@ fn writer_of(layout: Layout) -> &'static dyn writer::LayoutWriter {
         Layout::Files => &files::Files,
         Layout::Nerfw => &nerfw::NERFW,
         Layout::Nerfstudio => &nerfstudio::NERFSTUDIO,
+        Layout::Gsplat => &gsplat::Gsplat,
+        Layout::Megadepth => &megadepth::Megadepth,
     }
 }

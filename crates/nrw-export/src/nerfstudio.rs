@@ -136,23 +136,6 @@ fn stem(name: &str) -> String {
         .replace('\\', "/")
 }
 
-/// A little-endian float32 `.npy` of an h × w array.
-fn npy_f32(h: u32, w: u32, data: &[f32]) -> Vec<u8> {
-    let dict = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({h}, {w}), }}");
-    // Magic (6) + version (2) + length (2) + dict + padding + '\n' ≡ 0 (mod 64).
-    let unpadded = 10 + dict.len() + 1;
-    let pad = (64 - unpadded % 64) % 64;
-    let header = format!("{dict}{}\n", " ".repeat(pad));
-    let mut out = Vec::with_capacity(10 + header.len() + data.len() * 4);
-    out.extend_from_slice(b"\x93NUMPY\x01\x00");
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for v in data {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    out
-}
-
 /// One view's files and frame.
 fn frame(v: &ViewRow, staged: &Staged) -> Result<(String, Value)> {
     let s = stem(&v.name);
@@ -161,7 +144,10 @@ fn frame(v: &ViewRow, staged: &Staged) -> Result<(String, Value)> {
     let depth = v.depth()?;
     let scaled: Vec<f32> = depth.data.iter().map(|z| z * DEPTH_SCALE).collect();
     let depth_file = format!("depth/{s}.npy");
-    staged.write(&depth_file, &npy_f32(v.height, v.width, &scaled))?;
+    staged.write(
+        &depth_file,
+        &crate::npz::Array::f32(&[v.height as usize, v.width as usize], &scaled).npy(),
+    )?;
     let pose = transform_matrix(v.qvec, v.tvec).ok_or_else(|| ExportError::Value {
         path: v.name.clone().into(),
         record: format!("image {}", v.image_id),

@@ -46,7 +46,7 @@ pub fn file_name(view_name: &str) -> String {
 }
 
 /// The PINHOLE camera (id = image id) of a view at its stored size, or a refusal naming it.
-fn pinhole(v: &ViewRow) -> Result<Camera> {
+pub(crate) fn pinhole(v: &ViewRow) -> Result<Camera> {
     let p = &v.params;
     let params = match CameraModel::from_name(&v.model) {
         Some(CameraModel::Pinhole) if p.len() == 4 => p.clone(),
@@ -75,7 +75,7 @@ fn pinhole(v: &ViewRow) -> Result<Camera> {
 }
 
 /// The model image of a view (no 2D points).
-fn model_image(v: &ViewRow, file: &str) -> Result<Image> {
+pub(crate) fn model_image(v: &ViewRow, file: &str) -> Result<Image> {
     let (cam_from_world, norm) =
         Rigid3::from_colmap(v.qvec, v.tvec).ok_or_else(|| ExportError::Value {
             path: v.name.clone().into(),

@@ -94,6 +94,9 @@ pub struct ExportSummary {
     pub empty_splits: Vec<String>,
     /// `dist_<name>.pckl` when the dataset has official style descriptors.
     pub dist_pickle: Option<String>,
+    /// Where a known consumer's loader would misread this export, naming the loader and rule.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 impl ExportSummary {
@@ -111,6 +114,7 @@ impl ExportSummary {
             skipped: Vec::new(),
             empty_splits: Vec::new(),
             dist_pickle: None,
+            warnings: Vec::new(),
         }
     }
 

@@ -35,15 +35,17 @@ pub fn export(
     crate::timing::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-        let points = if cfg.layout.needs_points() {
-            Some(scene_points(store)?)
+        let model = if cfg.layout.needs_points() {
+            Some(scene_model(store)?)
         } else {
             None
         };
+        let points = model.as_ref().map(points_of);
         let dist = |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
         let inputs = nrw_export::Inputs {
             dist: Some(&dist),
             points: points.as_deref(),
+            model: model.as_ref(),
         };
         progress.start("export", total as u64, "views");
         let summary = nrw_export::export(&ds, cfg, &inputs, &|| progress.inc(1))?;
@@ -52,9 +54,9 @@ pub fn export(
     })
 }
 
-/// The 3D points of the model the dataset was ingested from (named in its manifest), after
-/// checking that the model files are the ones ingest read.
-pub fn scene_points(store: &nrw_dataset::Store) -> Result<Vec<nrw_export::ScenePoint>> {
+/// The model the dataset was ingested from (named in its manifest), after checking that the
+/// model files are the ones ingest read.
+pub fn scene_model(store: &nrw_dataset::Store) -> Result<nrw_colmap::Reconstruction> {
     let m = nrw_dataset::Manifest::read(store)?;
     let (rec, changed) = crate::model::reread_model(&m.scene, &m.inputs)?;
     if let Some(f) = changed {
@@ -64,8 +66,12 @@ pub fn scene_points(store: &nrw_dataset::Store) -> Result<Vec<nrw_export::SceneP
              manifest's): the exported points would not belong to the dataset's poses",
         ));
     }
-    Ok(rec
-        .points
+    Ok(rec)
+}
+
+/// A model's 3D points as the layouts carry them.
+pub fn points_of(rec: &nrw_colmap::Reconstruction) -> Vec<nrw_export::ScenePoint> {
+    rec.points
         .values()
         .map(|p| nrw_export::ScenePoint {
             id: p.id,
@@ -73,5 +79,5 @@ pub fn scene_points(store: &nrw_dataset::Store) -> Result<Vec<nrw_export::SceneP
             rgb: p.rgb,
             error: p.error,
         })
-        .collect())
+        .collect()
 }

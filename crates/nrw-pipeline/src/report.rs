@@ -127,6 +127,9 @@ pub fn export(dataset: &Location, out: &Location, s: &ExportSummary) -> Report {
             k.name, k.image_id, k.split, k.width, k.height, k.reason
         ));
     }
+    for w in &s.warnings {
+        r.err(format!("warning: {w}"));
+    }
     for e in &s.empty_splits {
         r.err(format!(
             "split {e} has no view: not written (the published code's {e} glob will find nothing; the split stage's {} N holds out N photos)",
@@ -479,6 +482,7 @@ mod tests {
             skipped: Vec::new(),
             empty_splits: Vec::new(),
             dist_pickle: Some("dist_n.pckl".into()),
+            warnings: Vec::new(),
         };
         let warned = |s: &ExportSummary| {
             export(&"d".into(), &"o".into(), s)

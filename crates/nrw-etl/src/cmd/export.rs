@@ -35,11 +35,16 @@ fn parse_crop(s: &str) -> std::result::Result<Crop, String> {
   nrw-etl export DATASET --no-semantics --out official   # then train with --use_semantic=False
   nrw-etl export DATASET --layout nerfw --out trevi_nerfw --name trevi   # nerf_pl / Ha-NeRF (ingest with --undistort)
   nrw-etl export DATASET --layout nerfstudio --out trevi_ns   # ns-train nerfacto --data trevi_ns
+  nrw-etl export DATASET --layout gsplat --out trevi_gs   # 3DGS: train.py -s trevi_gs -d depths; gsplat --data_factor 4
+  nrw-etl export DATASET --layout megadepth --name trevi --out md   # D2-Net: preprocess_scene.py --base_path md --scene_id trevi
 
 The official and tfrecord layouts follow google/neural_rerendering_in_the_wild: every channel
 is scaled by its loaders as x * 2/255 - 1, so depth is written as levels 1-255 (0 = empty) by
 the mapping --depth names; export.json records the mapping, its near and far, and the formula
-that recovers depth. Writing into an earlier export replaces it whole.")]
+that recovers depth. The gsplat and megadepth layouts need PINHOLE cameras (ingest with
+--undistort); see docs/gsplat-export.md and docs/megadepth-export.md for what each file holds and
+which value means \"ignore\". Where a known loader would misread an export, a warning names the
+loader and the rule (export.json lists them). Writing into an earlier export replaces it whole.")]
 pub struct ExportArgs {
     /// Dataset folder written by `ingest` (and `split`)
     pub dataset: nrw_dataset::Location,

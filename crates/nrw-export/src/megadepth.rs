@@ -1,0 +1,427 @@
+//! MegaDepth's layout, as D2-Net's `megadepth_utils/preprocess_scene.py` reads a scene and as
+//! matcher trainers (D2-Net, LoFTR and its family) read the `scene_info` it writes:
+//!
+//! ```text
+//! OUT/Undistorted_SfM/NAME/images/FILE                       photos (FILE = name with .png)
+//! OUT/Undistorted_SfM/NAME/sparse-txt/{cameras,images,points3D}.txt
+//! OUT/phoenix/S6/zl548/MegaDepth_v1/NAME/dense0/depths/STEM.h5   key `depth`, float32 h × w,
+//!                                                           z in model units, 0 = none
+//! OUT/scene_info/NAME.npz                                   what preprocess_scene.py writes
+//! ```
+//!
+//! The model is PINHOLE, one camera per image with the image's id (the script reads
+//! `params[0..4]` as fx, fy, cx, cy), the views' poses, and each view's SfM observations: the
+//! scene model's keypoints carried into the stored view through its camera (scaled, and
+//! undistorted when the dataset was), so tracks and depth maps share one image frame.
+//! `scene_info` follows the script line by line (see [`SceneInfo`]); every view has a depth
+//! file, so no entry is `None`.
+
+use std::collections::BTreeMap;
+
+use glam::{DVec2, DVec3};
+use nrw_colmap::{Camera, Point2D, Point3D, Reconstruction, TrackElement};
+use nrw_dataset::ViewRow;
+
+use crate::error::{ExportError, Result};
+use crate::npz::{self, Array};
+use crate::staging::Staged;
+use crate::writer::{Job, LayoutWriter};
+use crate::{ExportSummary, SplitExport};
+
+/// The script's rule for a depth file: under this size it is taken for a mask and the image
+/// is dropped (`file_size < 100 * 1024`).
+pub const D2NET_MIN_DEPTH_BYTES: usize = 100 * 1024;
+
+/// The MegaDepth layout.
+pub struct Megadepth;
+
+impl LayoutWriter for Megadepth {
+    fn check(&self, job: &Job) -> Result<()> {
+        scene_model(job).map(|_| ())?;
+        let name = &job.cfg.name;
+        if name.is_empty() || name.contains(['/', '\\']) || name.contains(char::is_whitespace) {
+            return Err(ExportError::refused(
+                &job.cfg.out,
+                format!(
+                    "the scene name {name:?} (`--name`) must be one folder name without spaces: \
+                     MegaDepth's paths and preprocess_scene.py's --scene_id take it as one"
+                ),
+            ));
+        }
+        if job.splits.iter().all(|(_, n)| *n == 0) {
+            return Err(ExportError::refused(&job.ds.dir, "the dataset has no view"));
+        }
+        Ok(())
+    }
+
+    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
+        let rec = scene_model(job)?;
+        let name = &job.cfg.name;
+        let mut views = BTreeMap::new();
+        for (split, n) in &job.splits {
+            if *n == 0 {
+                summary.empty_splits.push(split.clone());
+                continue;
+            }
+            let mut s = SplitExport::new(split);
+            for v in job.ds.iter_split(split)? {
+                let v = v?;
+                let view = write_view(&v, rec, name, staged)?;
+                s.image_ids.push(v.image_id);
+                s.names.push(v.name.clone());
+                s.files.push(view.image_path.clone());
+                views.insert(v.image_id, view);
+                (job.tick)();
+            }
+            summary.splits.push(s);
+        }
+        write_sparse_txt(&views, rec, name, staged)?;
+        let info = SceneInfo::of(&views, rec);
+        let npz = info.npz().ok_or_else(|| {
+            ExportError::refused(
+                &job.cfg.out,
+                "scene_info over 4 GiB needs ZIP64, not written",
+            )
+        })?;
+        staged.write(&format!("scene_info/{name}.npz"), &npz)?;
+        summary.warnings.extend(consumer_warnings(&views));
+        Ok(())
+    }
+}
+
+/// The scene model the dataset was ingested from, which carries the tracks.
+fn scene_model<'a>(job: &Job<'a>) -> Result<&'a Reconstruction> {
+    job.inputs.model.ok_or_else(|| {
+        ExportError::refused(
+            &job.cfg.out,
+            "the megadepth layout needs the scene's model (Inputs::model) for its tracks",
+        )
+    })
+}
+
+/// The folder of a scene's model and photos.
+fn sfm_dir(name: &str) -> String {
+    format!("Undistorted_SfM/{name}")
+}
+
+/// The folder of a scene's depth files.
+fn depth_dir(name: &str) -> String {
+    format!("phoenix/S6/zl548/MegaDepth_v1/{name}/dense0/depths")
+}
+
+/// One written view: what the model and `scene_info` need of it.
+struct View {
+    file: String,
+    image_path: String,
+    depth_path: String,
+    depth_bytes: usize,
+    camera: Camera,
+    /// The pose as written in images.txt: normalised (qw, qx, qy, qz) and t.
+    qvec: [f64; 4],
+    tvec: [f64; 3],
+    /// Observations in the stored view's pixels, in the scene model's keypoint order.
+    points2d: Vec<Point2D>,
+}
+
+/// Write one view's photo and depth file; its model entries.
+fn write_view(v: &ViewRow, rec: &Reconstruction, name: &str, staged: &Staged) -> Result<View> {
+    let file = crate::nerfw::file_name(&v.name);
+    if file.contains(char::is_whitespace) {
+        return Err(ExportError::Value {
+            path: v.name.clone().into(),
+            record: format!("image {}", v.image_id),
+            field: "name".into(),
+            problem: "contains white space: COLMAP's text model and preprocess_scene.py split \
+                      lines on spaces, so the name would be misread"
+                .into(),
+        });
+    }
+    let camera = crate::nerfw::pinhole(v)?;
+    let image_path = format!("{}/images/{file}", sfm_dir(name));
+    staged.write(&image_path, &v.photo_png)?;
+    let depth = v.depth()?;
+    let stem = file.rsplit_once('.').map_or(file.as_str(), |(s, _)| s);
+    let depth_path = format!("{}/{stem}.h5", depth_dir(name));
+    let h5 = crate::hdf5::float32_2d(
+        "depth",
+        depth.height as u64,
+        depth.width as u64,
+        &depth.data,
+    );
+    staged.write(&depth_path, &h5)?;
+    let image = crate::nerfw::model_image(v, &file)?;
+    Ok(View {
+        points2d: observations(v, rec, &camera)?,
+        qvec: image.cam_from_world.qvec(),
+        tvec: image.cam_from_world.translation.to_array(),
+        depth_bytes: h5.len(),
+        file,
+        image_path,
+        depth_path,
+        camera,
+    })
+}
+
+/// The scene model's observations of view `v`, carried into the stored view's pixels: each
+/// keypoint's ray through the photo's camera, projected by the stored camera. Keypoints
+/// without a ray (past a fisheye's fold) are dropped.
+fn observations(v: &ViewRow, rec: &Reconstruction, stored: &Camera) -> Result<Vec<Point2D>> {
+    let missing = |what: &str| ExportError::Value {
+        path: v.name.clone().into(),
+        record: format!("image {}", v.image_id),
+        field: "image_id".into(),
+        problem: format!("the scene model has no {what} for this view"),
+    };
+    let img = rec
+        .images
+        .get(&v.image_id)
+        .ok_or_else(|| missing("image"))?;
+    let photo = rec
+        .cameras
+        .get(&img.camera_id)
+        .ok_or_else(|| missing("camera"))?;
+    Ok(img
+        .points2d
+        .iter()
+        .filter(|p| p.point3d_id != nrw_colmap::NO_POINT3D)
+        .filter_map(|p| {
+            let ray = photo.cam_ray_from_img(p.xy)?;
+            let xy: DVec2 = stored.img_from_cam(ray)?;
+            Some(Point2D {
+                xy,
+                point3d_id: p.point3d_id,
+            })
+        })
+        .collect())
+}
+
+/// `sparse-txt`: the views' PINHOLE cameras and images with their observations, and the
+/// points they observe with tracks rebuilt from those observations.
+fn write_sparse_txt(
+    views: &BTreeMap<u32, View>,
+    rec: &Reconstruction,
+    name: &str,
+    staged: &Staged,
+) -> Result<()> {
+    let mut out = Reconstruction::default();
+    for (&id, v) in views {
+        out.cameras.insert(id, v.camera.clone());
+        let (cam_from_world, norm) =
+            nrw_colmap::Rigid3::from_colmap(v.qvec, v.tvec).expect("a pose read from the dataset");
+        out.images.insert(
+            id,
+            nrw_colmap::Image {
+                id,
+                name: v.file.clone(),
+                camera_id: id,
+                cam_from_world,
+                stored_quat_norm: norm,
+                points2d: v.points2d.clone(),
+            },
+        );
+        for (idx, p) in v.points2d.iter().enumerate() {
+            let point = out.points.entry(p.point3d_id).or_insert_with(|| {
+                let src = &rec.points[&p.point3d_id];
+                Point3D {
+                    track: Vec::new(),
+                    ..src.clone()
+                }
+            });
+            point.track.push(TrackElement {
+                image_id: id,
+                point2d_idx: idx as u32,
+            });
+        }
+    }
+    let dir = format!("{}/sparse-txt", sfm_dir(name));
+    for file in ["cameras.txt", "images.txt", "points3D.txt"] {
+        staged.claim(&format!("{dir}/{file}"))?;
+    }
+    let path = staged.dir().join(&dir);
+    nrw_colmap::write_model(&out, &path, nrw_colmap::Format::Text)
+        .map_err(|e| ExportError::io(&path, e))
+}
+
+/// MegaDepth's `scene_info`, computed as preprocess_scene.py computes it from the files this
+/// layout writes: K from PINHOLE params; R from the re-normalised quaternion by the script's
+/// formula; principal axis R[2]; w2c poses; normalised depth of an observed point
+/// `(R[2]·X + t_z) / ((fx + fy) / 2)`; `overlap[i, j] = |common points| / |points of i|`;
+/// `scale_ratio[i, j] = min over common points of max(nd_i / nd_j, nd_j / nd_i)` (−1 without
+/// common points, and on the diagonal with overlap); `angles = degrees(arccos(clip(a·b)))`.
+pub struct SceneInfo {
+    pub image_paths: Vec<String>,
+    pub depth_paths: Vec<String>,
+    pub intrinsics: Vec<[[f64; 3]; 3]>,
+    pub poses: Vec<[[f64; 4]; 4]>,
+    pub overlap: Vec<f64>,
+    pub scale_ratio: Vec<f64>,
+    pub angles: Vec<f64>,
+    pub n_points3d: Vec<i64>,
+}
+
+impl SceneInfo {
+    /// The scene info of the written views, in images.txt order (image id).
+    fn of(views: &BTreeMap<u32, View>, rec: &Reconstruction) -> SceneInfo {
+        let n = views.len();
+        let mut info = SceneInfo {
+            image_paths: Vec::with_capacity(n),
+            depth_paths: Vec::with_capacity(n),
+            intrinsics: Vec::with_capacity(n),
+            poses: Vec::with_capacity(n),
+            overlap: vec![-1.0; n * n],
+            scale_ratio: vec![-1.0; n * n],
+            angles: vec![0.0; n * n],
+            n_points3d: Vec::with_capacity(n),
+        };
+        let mut axes = Vec::with_capacity(n);
+        // Per point: (view index, normalised depth), in view order (a dict per view: the
+        // last observation of a point in a view wins, as in the script).
+        let mut seen: BTreeMap<u64, Vec<(usize, f64)>> = BTreeMap::new();
+        for (i, v) in views.values().enumerate() {
+            let p = &v.camera.params;
+            let (fx, fy, cx, cy) = (p[0], p[1], p[2], p[3]);
+            info.intrinsics
+                .push([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]);
+            let r = rotation(v.qvec);
+            let t = v.tvec;
+            let mut pose = [[0.0; 4]; 4];
+            for row in 0..3 {
+                pose[row][..3].copy_from_slice(&r[row]);
+                pose[row][3] = t[row];
+            }
+            pose[3][3] = 1.0;
+            info.poses.push(pose);
+            axes.push(DVec3::from_array(r[2]));
+            let mut own: BTreeMap<u64, f64> = BTreeMap::new();
+            for obs in &v.points2d {
+                let x = rec.points[&obs.point3d_id].xyz;
+                let z = r[2][0] * x.x + r[2][1] * x.y + r[2][2] * x.z + t[2];
+                own.insert(obs.point3d_id, z / (0.5 * (fx + fy)));
+            }
+            info.n_points3d.push(own.len() as i64);
+            for (id, nd) in own {
+                seen.entry(id).or_default().push((i, nd));
+            }
+            info.image_paths.push(v.image_path.clone());
+            info.depth_paths.push(v.depth_path.clone());
+        }
+        for i in 0..n {
+            for j in 0..n {
+                let d = axes[i].dot(axes[j]).clamp(-1.0, 1.0);
+                info.angles[i * n + j] = d.acos().to_degrees();
+            }
+        }
+        info.pairs(&seen);
+        info
+    }
+
+    /// Overlap and scale ratio of every pair of views, from the points they share.
+    fn pairs(&mut self, seen: &BTreeMap<u64, Vec<(usize, f64)>>) {
+        let n = self.n_points3d.len();
+        let mut common = vec![0u64; n * n];
+        let mut ratio = vec![f64::INFINITY; n * n];
+        for obs in seen.values() {
+            for (a, &(i, ni)) in obs.iter().enumerate() {
+                for &(j, nj) in &obs[a + 1..] {
+                    common[i * n + j] += 1;
+                    let r = (ni / nj).max(nj / ni);
+                    ratio[i * n + j] = ratio[i * n + j].min(r);
+                }
+            }
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                let c = common[i * n + j] as f64;
+                let share = |k: usize| match self.n_points3d[k] {
+                    0 => 0.0, // the script divides by zero here (see the export's warnings)
+                    m => c / m as f64,
+                };
+                self.overlap[i * n + j] = share(i);
+                self.overlap[j * n + i] = share(j);
+                if c > 0.0 {
+                    self.scale_ratio[i * n + j] = ratio[i * n + j];
+                    self.scale_ratio[j * n + i] = ratio[i * n + j];
+                }
+            }
+        }
+    }
+
+    /// The `.npz`, with the arrays `np.savez` makes of the script's lists.
+    fn npz(&self) -> Option<Vec<u8>> {
+        let n = self.n_points3d.len();
+        let flat = |m: &[[[f64; 3]; 3]]| m.iter().flatten().flatten().copied().collect::<Vec<_>>();
+        let poses: Vec<f64> = self.poses.iter().flatten().flatten().copied().collect();
+        npz::npz(&[
+            ("image_paths", Array::unicode(&self.image_paths).npy()),
+            ("depth_paths", Array::unicode(&self.depth_paths).npy()),
+            (
+                "intrinsics",
+                Array::f64(&[n, 3, 3], &flat(&self.intrinsics)).npy(),
+            ),
+            ("poses", Array::f64(&[n, 4, 4], &poses).npy()),
+            ("overlap_matrix", Array::f64(&[n, n], &self.overlap).npy()),
+            (
+                "scale_ratio_matrix",
+                Array::f64(&[n, n], &self.scale_ratio).npy(),
+            ),
+            ("angles", Array::f64(&[n, n], &self.angles).npy()),
+            ("n_points3D", Array::i64(&self.n_points3d).npy()),
+        ])
+    }
+}
+
+/// The rotation matrix of a quaternion as preprocess_scene.py builds it: re-normalised, then
+/// the explicit formula (not a library's), so the two agree to the last bits.
+fn rotation(q: [f64; 4]) -> [[f64; 3]; 3] {
+    let norm = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    let [w, x, y, z] = q.map(|c| c / norm);
+    [
+        [
+            1.0 - 2.0 * y * y - 2.0 * z * z,
+            2.0 * x * y - 2.0 * z * w,
+            2.0 * x * z + 2.0 * y * w,
+        ],
+        [
+            2.0 * x * y + 2.0 * z * w,
+            1.0 - 2.0 * x * x - 2.0 * z * z,
+            2.0 * y * z - 2.0 * x * w,
+        ],
+        [
+            2.0 * x * z - 2.0 * y * w,
+            2.0 * y * z + 2.0 * x * w,
+            1.0 - 2.0 * x * x - 2.0 * y * y,
+        ],
+    ]
+}
+
+/// Where D2-Net's script would silently misread or fail on this export.
+fn consumer_warnings(views: &BTreeMap<u32, View>) -> Vec<String> {
+    let mut out = Vec::new();
+    let small: Vec<&str> = views
+        .values()
+        .filter(|v| v.depth_bytes < D2NET_MIN_DEPTH_BYTES)
+        .map(|v| v.file.as_str())
+        .collect();
+    if let Some(first) = small.first() {
+        out.push(format!(
+            "D2-Net's preprocess_scene.py takes a depth file under 100 KiB for a mask and drops \
+             the image: {} view(s) (first {first}) are that small (render at a larger \
+             `ingest.min_dim`); this export's scene_info keeps them",
+            small.len()
+        ));
+    }
+    let blind: Vec<&str> = views
+        .values()
+        .filter(|v| v.points2d.is_empty())
+        .map(|v| v.file.as_str())
+        .collect();
+    if let Some(first) = blind.first() {
+        out.push(format!(
+            "D2-Net's preprocess_scene.py divides by a view's number of SfM points and fails \
+             (ZeroDivisionError) on {} view(s) with none (first {first}); this export's \
+             scene_info gives them overlap 0",
+            blind.len()
+        ));
+    }
+    out
+}

@@ -1,0 +1,171 @@
+//! `export --layout megadepth` read by its consumer: D2-Net's own
+//! `megadepth_utils/preprocess_scene.py` (../shared/consumers/d2-net, unmodified) run on the
+//! export writes a `scene_info` equal to the export's (paths, K, poses, overlap, scale ratios,
+//! angles, point counts), and h5py reads every depth `.h5` back as the dataset's depth, bit
+//! for bit.
+
+use std::path::Path;
+
+use nrw_dataset::reader::Dataset;
+
+use super::{npy, ok, python, shared};
+
+/// The scene name the export is made under (`--name`, D2-Net's `--scene_id`).
+const SCENE: &str = "synthetic0001";
+
+#[test]
+fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
+    let Some(d2net) = shared::shared("consumers/d2-net/preprocess_scene.py") else {
+        return;
+    };
+    if !python::python_has("import numpy, h5py, imagesize") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    // Views of 200 px and more: depth files over the script's 100 KiB mask threshold.
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(6, (200, 220), 60_000);
+    spec.cameras.model = "SIMPLE_RADIAL".into();
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let ds = tmp.path().join("ds");
+    ok(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        ds.to_str().unwrap(),
+        "--undistort",
+        "--min-photo-side",
+        "100",
+        "--min-dim",
+        "200",
+        "--max-empty",
+        "1.0",
+        "--quiet",
+    ]);
+    ok(&["split", ds.to_str().unwrap(), "--val", "1"]);
+    let out = tmp.path().join("md");
+    let o = ok(&[
+        "export",
+        ds.to_str().unwrap(),
+        "--layout",
+        "megadepth",
+        "--name",
+        SCENE,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.contains("warning"), "{o}");
+    let theirs_dir = tmp.path().join("theirs");
+    std::fs::create_dir_all(&theirs_dir).unwrap();
+    let run = std::process::Command::new("python3")
+        .arg(&d2net)
+        .args(["--base_path", out.to_str().unwrap(), "--scene_id", SCENE])
+        .args(["--output_path", theirs_dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let theirs = theirs_dir.join(format!("{SCENE}.npz"));
+    assert!(
+        theirs.is_file(),
+        "preprocess_scene.py wrote nothing: it found no scene"
+    );
+    let dump = tmp.path().join("dump");
+    std::fs::create_dir_all(&dump).unwrap();
+    let cmp = std::process::Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/megadepth_d2net.py"))
+        .arg(&theirs)
+        .arg(out.join(format!("scene_info/{SCENE}.npz")))
+        .arg(&out)
+        .arg(&dump)
+        .output()
+        .unwrap();
+    assert!(
+        cmp.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cmp.stderr)
+    );
+    let got: serde_json::Value = serde_json::from_slice(&cmp.stdout).unwrap();
+    for key in ["image_paths", "depth_paths"] {
+        assert_eq!(got[key][0], got[key][1], "{key}");
+    }
+    let d = Dataset::open(ds.as_path()).unwrap();
+    assert_eq!(got["image_paths"][0].as_array().unwrap().len(), d.len());
+    for (key, tol) in [
+        ("intrinsics", 0.0),
+        ("poses", 1e-15),
+        ("overlap_matrix", 0.0),
+        ("scale_ratio_matrix", 1e-12),
+        ("angles", 1e-5),
+        ("n_points3D", 0.0),
+    ] {
+        let k = &got[key];
+        assert_eq!(k["shape"][0], k["shape"][1], "{key}: {k}");
+        let diff = k["max_abs"].as_f64().unwrap();
+        assert!(diff <= tol, "{key}: theirs and ours differ by {diff}");
+    }
+    let pairs = got["overlap_matrix"]["valid_pairs"].as_u64().unwrap();
+    assert!(pairs > 0, "some views share points");
+    // Depth: h5py's reading of each file is the dataset's depth of that view.
+    let by_path: std::collections::BTreeMap<String, u32> = d
+        .splits()
+        .iter()
+        .flat_map(|(s, _)| d.ids(s).unwrap().to_vec())
+        .map(|id| {
+            let v = d.get(id).unwrap();
+            let stem = nrw_export::nerfw::file_name(&v.name);
+            let stem = stem.trim_end_matches(".png");
+            (
+                format!("phoenix/S6/zl548/MegaDepth_v1/{SCENE}/dense0/depths/{stem}.h5"),
+                id,
+            )
+        })
+        .collect();
+    for (i, dep) in got["depths"].as_array().unwrap().iter().enumerate() {
+        let v = d.get(by_path[dep["path"].as_str().unwrap()]).unwrap();
+        let depth = v.depth().unwrap();
+        assert_eq!(dep["shape"], serde_json::json!([v.height, v.width]));
+        assert_eq!(dep["dtype"], "float32");
+        let read = npy::read_npy_f64(&dump.join(format!("{i}.npy")));
+        let want: Vec<f64> = depth.data.iter().map(|z| *z as f64).collect();
+        assert!(read == want, "{}: depth differs", dep["path"]);
+    }
+    // The tracks: each observation carried into the stored (undistorted, scaled) view lands
+    // where the stored camera projects its point, within the model's own reprojection error.
+    let model = nrw_colmap::read_model(
+        &out.join(format!("Undistorted_SfM/{SCENE}/sparse-txt")),
+        None,
+    )
+    .unwrap();
+    let source = nrw_colmap::read_scene(&scene).unwrap();
+    let model_max = nrw_colmap::reprojection_stats(&source).max_px.unwrap();
+    let (mut n, mut worst) = (0usize, 0f64);
+    for img in model.images.values() {
+        let cam = &model.cameras[&img.camera_id];
+        assert_eq!(cam.model, nrw_colmap::CameraModel::Pinhole);
+        for p in &img.points2d {
+            let uv = cam
+                .img_from_cam(
+                    img.cam_from_world
+                        .transform(model.points[&p.point3d_id].xyz),
+                )
+                .unwrap();
+            worst = worst.max((uv - p.xy).length());
+            n += 1;
+        }
+    }
+    assert!(
+        n > 0 && worst <= model_max * 1.5,
+        "{n} observations, worst {worst} px vs the model's {model_max}"
+    );
+    eprintln!(
+        "D2-Net's scene_info of the export equals ours: {} views, {pairs} overlapping ordered \
+         pairs; angles within {:.1e}°, scale ratios within {:.1e}",
+        d.len(),
+        got["angles"]["max_abs"].as_f64().unwrap(),
+        got["scale_ratio_matrix"]["max_abs"].as_f64().unwrap()
+    );
+}

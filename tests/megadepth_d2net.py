@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 
 theirs = np.load(sys.argv[1], allow_pickle=True)
-ours = np.load(sys.argv[2], allow_pickle=False)
+ours = np.load(sys.argv[2], allow_pickle=True)
 export, dump = Path(sys.argv[3]), Path(sys.argv[4])
 out = {"keys_ours": sorted(ours.files), "keys_theirs": sorted(theirs.files)}
 for key in ("image_paths", "depth_paths"):
@@ -26,6 +26,21 @@ for key in ("intrinsics", "poses", "overlap_matrix", "scale_ratio_matrix", "angl
         "max_abs": float(np.max(np.abs(a.astype(np.float64) - b.astype(np.float64)))) if a.shape == b.shape and a.size else None,
         "valid_pairs": int(np.sum(b > 0)) if key in ("overlap_matrix", "scale_ratio_matrix") else None,
     }
+# The per-view dicts: same keys in the same (insertion) order, [x, y] lists equal, normalised
+# depths numpy float64 scalars within float tolerance.
+same_2d, nd_max, nd_types = True, 0.0, set()
+for a, b in zip(theirs["points3D_id_to_2D"], ours["points3D_id_to_2D"]):
+    same_2d &= list(a.items()) == list(b.items())
+for a, b in zip(theirs["points3D_id_to_ndepth"], ours["points3D_id_to_ndepth"]):
+    same_2d &= list(a.keys()) == list(b.keys())
+    nd_max = max([nd_max] + [abs(float(a[k]) - float(b[k])) for k in a])
+    nd_types |= {type(v).__name__ for v in b.values()}
+out["dicts"] = {
+    "same_2d_and_keys": bool(same_2d),
+    "ndepth_max_abs": nd_max,
+    "ndepth_types": sorted(nd_types),
+    "lengths": [len(theirs["points3D_id_to_2D"]), len(ours["points3D_id_to_2D"])],
+}
 depths = []
 for i, rel in enumerate(theirs["depth_paths"]):
     with h5py.File(export / str(rel), "r") as f:

@@ -24,6 +24,7 @@ use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
 use crate::npz::{self, Array};
+use crate::pickle::DictValue;
 use crate::staging::Staged;
 use crate::writer::{Job, LayoutWriter};
 use crate::{ExportSummary, SplitExport};
@@ -257,6 +258,11 @@ pub struct SceneInfo {
     pub scale_ratio: Vec<f64>,
     pub angles: Vec<f64>,
     pub n_points3d: Vec<i64>,
+    /// Per view, `{point id: [x, y]}` in the script's insertion order (first observation of a
+    /// point, last one's value).
+    pub points3d_id_to_2d: Vec<Vec<(u64, DictValue)>>,
+    /// Per view, `{point id: normalised depth}` in the same order.
+    pub points3d_id_to_ndepth: Vec<Vec<(u64, DictValue)>>,
 }
 
 impl SceneInfo {
@@ -272,6 +278,8 @@ impl SceneInfo {
             scale_ratio: vec![-1.0; n * n],
             angles: vec![0.0; n * n],
             n_points3d: Vec::with_capacity(n),
+            points3d_id_to_2d: Vec::with_capacity(n),
+            points3d_id_to_ndepth: Vec::with_capacity(n),
         };
         let mut axes = Vec::with_capacity(n);
         // Per point: (view index, normalised depth), in view order (a dict per view: the
@@ -292,16 +300,19 @@ impl SceneInfo {
             pose[3][3] = 1.0;
             info.poses.push(pose);
             axes.push(DVec3::from_array(r[2]));
-            let mut own: BTreeMap<u64, f64> = BTreeMap::new();
-            for obs in &v.points2d {
-                let x = rec.points[&obs.point3d_id].xyz;
+            let xy = first_seen_last_value(&v.points2d);
+            let mut nd = Vec::with_capacity(xy.len());
+            for &(id, _) in &xy {
+                let x = rec.points[&id].xyz;
                 let z = r[2][0] * x.x + r[2][1] * x.y + r[2][2] * x.z + t[2];
-                own.insert(obs.point3d_id, z / (0.5 * (fx + fy)));
+                let d = z / (0.5 * (fx + fy));
+                seen.entry(id).or_default().push((i, d));
+                nd.push((id, DictValue::Scalar(d)));
             }
-            info.n_points3d.push(own.len() as i64);
-            for (id, nd) in own {
-                seen.entry(id).or_default().push((i, nd));
-            }
+            info.n_points3d.push(xy.len() as i64);
+            let pairs = xy.iter().map(|&(id, p)| (id, DictValue::Pair(p))).collect();
+            info.points3d_id_to_2d.push(pairs);
+            info.points3d_id_to_ndepth.push(nd);
             info.image_paths.push(v.image_path.clone());
             info.depth_paths.push(v.depth_path.clone());
         }
@@ -366,8 +377,38 @@ impl SceneInfo {
             ),
             ("angles", Array::f64(&[n, n], &self.angles).npy()),
             ("n_points3D", Array::i64(&self.n_points3d).npy()),
+            ("points3D_id_to_2D", objects(&self.points3d_id_to_2d)),
+            ("points3D_id_to_ndepth", objects(&self.points3d_id_to_ndepth)),
         ])
     }
+}
+
+/// A view's observations as the script's dict holds them: each point once, where it was
+/// first observed, with its last observation's position.
+fn first_seen_last_value(obs: &[Point2D]) -> Vec<(u64, [f64; 2])> {
+    let mut at: std::collections::HashMap<u64, usize> = Default::default();
+    let mut out: Vec<(u64, [f64; 2])> = Vec::with_capacity(obs.len());
+    for o in obs {
+        let xy = [o.xy.x, o.xy.y];
+        match at.get(&o.point3d_id) {
+            Some(&k) => out[k].1 = xy,
+            None => {
+                at.insert(o.point3d_id, out.len());
+                out.push((o.point3d_id, xy));
+            }
+        }
+    }
+    out
+}
+
+/// The `.npy` of a 1-D object array of dicts (numpy pickles its items).
+fn objects(items: &[Vec<(u64, DictValue)>]) -> Vec<u8> {
+    Array {
+        descr: "|O".into(),
+        shape: vec![items.len()],
+        body: crate::pickle::object_array_of_dicts(items),
+    }
+    .npy()
 }
 
 /// The rotation matrix of a quaternion as preprocess_scene.py builds it: re-normalised, then

@@ -23,6 +23,13 @@ const SHORT_BINBYTES: u8 = b'C';
 const BINBYTES: u8 = b'B';
 const BINBYTES8: u8 = 0x8e;
 const SETITEM: u8 = b's';
+const SETITEMS: u8 = b'u';
+const EMPTY_LIST: u8 = b']';
+const APPENDS: u8 = b'e';
+const BINFLOAT: u8 = b'G';
+const LONG1: u8 = 0x8a;
+const BINPUT: u8 = b'q';
+const BINGET: u8 = b'h';
 const STOP: u8 = b'.';
 
 fn unicode(s: &str, out: &mut Vec<u8>) {
@@ -129,9 +136,124 @@ pub fn write_matrix_dict<E>(
     Ok(())
 }
 
+/// A value of one of MegaDepth's per-image dicts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DictValue {
+    /// A Python list of two floats (`points3D_id_to_2D`'s `[x, y]`).
+    Pair([f64; 2]),
+    /// A `numpy.float64` scalar (`points3D_id_to_ndepth`'s values).
+    Scalar(f64),
+}
+
+/// The pickle `np.save` writes for a 1-D object array whose items are `{int: value}` dicts
+/// (protocol 3; the `numpy.core.multiarray` names numpy 1.x writes and 2.x still loads).
+pub fn object_array_of_dicts(items: &[Vec<(u64, DictValue)>]) -> Vec<u8> {
+    let mut out = vec![PROTO, 3];
+    global("numpy.core.multiarray", "_reconstruct", &mut out);
+    global("numpy", "ndarray", &mut out);
+    int(0, &mut out);
+    out.push(TUPLE1);
+    out.extend_from_slice(&[SHORT_BINBYTES, 1, b'b', TUPLE3, REDUCE]);
+    // __setstate__((1, (n,), dtype('O'), False, [items]))
+    out.push(MARK);
+    int(1, &mut out);
+    long(items.len() as u64, &mut out);
+    out.push(TUPLE1);
+    global("numpy", "dtype", &mut out);
+    unicode("O8", &mut out);
+    out.extend_from_slice(&[NEWFALSE, NEWTRUE, TUPLE3, REDUCE, MARK]);
+    int(3, &mut out);
+    unicode("|", &mut out);
+    out.extend_from_slice(&[NONE, NONE, NONE]);
+    int(-1, &mut out);
+    int(-1, &mut out);
+    int(63, &mut out);
+    out.extend_from_slice(&[TUPLE, BUILD, NEWFALSE, EMPTY_LIST]);
+    let mut memo = false; // numpy's scalar constructor and dtype('f8') stored at 0 and 1
+    if !items.is_empty() {
+        out.push(MARK);
+        for dict in items {
+            out.push(EMPTY_DICT);
+            if dict.is_empty() {
+                continue;
+            }
+            out.push(MARK);
+            for (k, v) in dict {
+                long(*k, &mut out);
+                value(*v, &mut memo, &mut out);
+            }
+            out.push(SETITEMS);
+        }
+        out.push(APPENDS);
+    }
+    out.extend_from_slice(&[TUPLE, BUILD, STOP]);
+    out
+}
+
+/// An integer of any size up to 2⁶⁴ − 1 (LONG1 past BININT's range).
+fn long(v: u64, out: &mut Vec<u8>) {
+    if let Ok(small) = i32::try_from(v) {
+        return int(small, out);
+    }
+    // Little-endian two's complement, with a zero byte when the top bit is set.
+    let mut bytes = v.to_le_bytes().to_vec();
+    while bytes.len() > 1 && bytes[bytes.len() - 1] == 0 && bytes[bytes.len() - 2] < 0x80 {
+        bytes.pop();
+    }
+    if bytes[bytes.len() - 1] >= 0x80 {
+        bytes.push(0);
+    }
+    out.extend_from_slice(&[LONG1, bytes.len() as u8]);
+    out.extend_from_slice(&bytes);
+}
+
+/// One dict value; `memo` says whether the scalar constructor and dtype are memoised yet.
+fn value(v: DictValue, memo: &mut bool, out: &mut Vec<u8>) {
+    match v {
+        DictValue::Pair(xy) => {
+            out.extend_from_slice(&[EMPTY_LIST, MARK]);
+            for x in xy {
+                out.push(BINFLOAT);
+                out.extend_from_slice(&x.to_be_bytes());
+            }
+            out.push(APPENDS);
+        }
+        DictValue::Scalar(x) => {
+            if *memo {
+                out.extend_from_slice(&[BINGET, 0, BINGET, 1]);
+            } else {
+                global("numpy.core.multiarray", "scalar", out);
+                out.extend_from_slice(&[BINPUT, 0]);
+                dtype_f8(out);
+                out.extend_from_slice(&[BINPUT, 1]);
+                *memo = true;
+            }
+            out.extend_from_slice(&[SHORT_BINBYTES, 8]);
+            out.extend_from_slice(&x.to_le_bytes());
+            out.extend_from_slice(&[TUPLE2, REDUCE]);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn large_ids_are_encoded_as_python_pickles_them() {
+        // pickle.dumps(v, 3)[2:-1] for each v.
+        for (v, want) in [
+            (7u64, vec![BININT1, 7]),
+            (2u64.pow(31), vec![138, 5, 0, 0, 0, 128, 0]),
+            (3_000_000_000, vec![138, 5, 0, 94, 208, 178, 0]),
+            (2u64.pow(40) + 5, vec![138, 6, 5, 0, 0, 0, 0, 1]),
+            (u64::MAX, vec![138, 9, 255, 255, 255, 255, 255, 255, 255, 255, 0]),
+        ] {
+            let mut out = Vec::new();
+            long(v, &mut out);
+            assert_eq!(out, want, "{v}");
+        }
+    }
 
     #[test]
     fn the_matrix_bytes_are_in_the_pickle_row_major_little_endian() {

@@ -302,3 +302,56 @@ fn nerfbaselines_reads_the_split_images_masks_and_points() {
     );
     eprintln!("nerfbaselines at images_2: K off K / 2 by up to {worst:.3} px on {odd} odd-sized views, as export.json warns");
 }
+
+#[test]
+fn nerfbaselines_reads_its_phototourism_layout_through_nb_info() {
+    if !python::python_runs(
+        "import nerfbaselines.datasets.colmap, PIL, numpy",
+        "NRW_REQUIRE_PY_ORACLES",
+        "nerfbaselines 1.2.12",
+    ) {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, ds_dir, _) = exported(tmp.path());
+    let out = tmp.path().join("nb");
+    ok(&[
+        "export",
+        ds_dir.to_str().unwrap(),
+        "--layout",
+        "nerfbaselines",
+        "--name",
+        "synthetic",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    let ds = Dataset::open(ds_dir.as_path()).unwrap();
+    let o = std::process::Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/gsplat_nerfbaselines.py"))
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        got["metadata"],
+        serde_json::json!({"id": "phototourism", "scene": "synthetic", "evaluation_protocol": "nerfw"})
+    );
+    let rec = nrw_colmap::read_model(&out.join("sparse"), None).unwrap();
+    assert_eq!(got["points"].as_u64().unwrap() as usize, rec.points.len());
+    let mut ignored = 0;
+    for (split, ours) in [("train", "train"), ("test", "val")] {
+        let views = got["splits"][split].as_array().unwrap();
+        assert_eq!(views.len(), ds.ids(ours).unwrap().len(), "{split}");
+        for v in views {
+            assert!(v["image_equal"].as_bool().unwrap() && v["mask_equal"].as_bool().unwrap());
+            ignored += v["ignored"].as_u64().unwrap();
+        }
+    }
+    assert!(ignored > 0, "nerfbaselines sees the people as ignored pixels");
+    // NeRF-W's split file beside it, as nerf_pl and the downloader write it.
+    let csv = std::fs::read_to_string(out.join("nerfw_split.csv")).unwrap();
+    assert!(csv.starts_with("filename\tid\tsplit\tdataset\n"), "{csv}");
+    assert_eq!(csv.lines().filter(|l| l.contains("\ttest\t")).count(), 1);
+}

@@ -1,7 +1,8 @@
-"""nerfbaselines' own COLMAP loader (PyPI nerfbaselines 1.2.12, no torch) reads an export of
-`--layout gsplat`: the split from train_list.txt / test_list.txt, images, masks and points,
-and, at images_2, its own rescale of the intrinsics. Prints one JSON object of what it read;
-tests/gsplat.rs compares it with the export and the dataset.
+"""nerfbaselines' own loaders (PyPI nerfbaselines 1.2.12, no torch) read an export of
+`--layout gsplat` (its `colmap` loader, and at images_2 its own rescale of the intrinsics) or
+`--layout nerfbaselines` (`load_dataset`, which follows nb-info.json): the split from
+train_list.txt / test_list.txt, images, masks and points. Prints one JSON object of what it
+read; tests/gsplat.rs compares it with the export and the dataset.
 
 usage: gsplat_nerfbaselines.py EXPORT
 """
@@ -12,15 +13,20 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image
-from nerfbaselines.datasets import dataset_load_features
+from nerfbaselines.datasets import dataset_load_features, load_dataset
 from nerfbaselines.datasets.colmap import load_colmap_dataset
 
 root = Path(sys.argv[1])
 features = frozenset({"color", "points3D_xyz", "points3D_rgb"})
+described = (root / "nb-info.json").exists()
 out = {"splits": {}}
 for split in ("train", "test"):
-    ds = load_colmap_dataset(root, split=split, features=features)
-    ds = dataset_load_features(ds, features=features, show_progress=False)
+    if described:
+        ds = load_dataset(str(root), split=split, features=features)
+        out["metadata"] = {k: ds["metadata"].get(k) for k in ("id", "scene", "evaluation_protocol")}
+    else:
+        ds = load_colmap_dataset(root, split=split, features=features)
+        ds = dataset_load_features(ds, features=features, show_progress=False)
     names = [Path(p).name for p in ds["image_paths"]]
     views = []
     for i, p in enumerate(ds["image_paths"]):
@@ -40,6 +46,10 @@ for split in ("train", "test"):
         )
     out["splits"][split] = views
     out["points"] = len(ds["points3D_xyz"])
+
+if described:
+    print(json.dumps(out))
+    sys.exit(0)
 
 # images_2: nerfbaselines estimates the factor from the sizes and rescales K itself.
 half = load_colmap_dataset(root, split="train", features=frozenset({"color"}), images_path="images_2")

@@ -107,12 +107,22 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
         let diff = k["max_abs"].as_f64().unwrap();
         assert!(diff <= tol, "{key}: theirs and ours differ by {diff}");
     }
-    assert_eq!(got["keys_ours"], got["keys_theirs"], "every key the script writes");
+    assert_eq!(
+        got["keys_ours"], got["keys_theirs"],
+        "every key the script writes"
+    );
     let dicts = &got["dicts"];
     assert_eq!(dicts["lengths"][0], dicts["lengths"][1]);
     assert!(dicts["same_2d_and_keys"].as_bool().unwrap(), "{dicts}");
-    assert!(dicts["ndepth_max_abs"].as_f64().unwrap() <= 1e-12, "{dicts}");
-    assert_eq!(dicts["ndepth_types"], serde_json::json!(["float64"]), "numpy scalars");
+    assert!(
+        dicts["ndepth_max_abs"].as_f64().unwrap() <= 1e-12,
+        "{dicts}"
+    );
+    assert_eq!(
+        dicts["ndepth_types"],
+        serde_json::json!(["float64"]),
+        "numpy scalars"
+    );
     let pairs = got["overlap_matrix"]["valid_pairs"].as_u64().unwrap();
     assert!(pairs > 0, "some views share points");
     // Depth: h5py's reading of each file is the dataset's depth of that view.

@@ -60,6 +60,16 @@ fn transforms_json_projects_every_sparse_point_onto_its_observation() {
     assert_eq!(meta["val_filenames"].as_array().unwrap().len(), 3);
     assert_eq!(meta["test_filenames"], meta["val_filenames"]);
     assert!(exp.join("sparse_pc.ply").is_file());
+    // SIMPLE_RADIAL frames carry k1: the PINHOLE-only loaders are warned of, by name.
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(exp.join("export.json")).unwrap()).unwrap();
+    assert!(
+        summary["warnings"][0]
+            .as_str()
+            .unwrap()
+            .contains("Splatfacto-W"),
+        "{summary}"
+    );
     let ds = Dataset::open(ds_dir.as_path()).unwrap();
     for f in frames {
         assert_eq!(

@@ -179,6 +179,7 @@ fn a_subfolder_name_works_end_to_end_in_every_export_layout() {
         ("nerfstudio", "images/cam0/sub/0000.png"),
         ("gsplat", "images_8/cam0/sub/0000.png"),
         ("megadepth", "dense0/depths/cam0/sub/0000.h5"),
+        ("nerfbaselines", "images/cam0/sub/0000.png"),
     ] {
         let exp = tmp.path().join(format!("x_{layout}"));
         assert_eq!(export(&out, layout, &exp), None, "{layout}");
@@ -290,7 +291,14 @@ pub(crate) const LAYOUTS: [&str; nrw_export::Layout::ALL.len()] = {
     names
 };
 /// The layouts whose file names come from the photos' names.
-const NAMED_LAYOUTS: [&str; 5] = ["files", "nerfw", "nerfstudio", "gsplat", "megadepth"];
+const NAMED_LAYOUTS: [&str; 6] = [
+    "files",
+    "nerfw",
+    "nerfstudio",
+    "gsplat",
+    "megadepth",
+    "nerfbaselines",
+];
 
 #[test]
 fn hostile_names_in_a_dataset_reach_no_path_outside_any_export() {

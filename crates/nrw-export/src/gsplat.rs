@@ -26,7 +26,7 @@
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 
-use nrw_colmap::{Camera, Image, Point3D, Reconstruction};
+use nrw_colmap::{Camera, Image, Reconstruction};
 use nrw_dataset::codec::{encode_gray, encode_gray16, encode_rgb};
 use nrw_dataset::split::{TRAIN, VAL};
 use nrw_dataset::ViewRow;
@@ -144,14 +144,19 @@ fn level_ok(v: &ViewRow, f: u32) -> Result<()> {
     Ok(())
 }
 
+/// A view's use-mask (255 = use, 0 = a transient object), when the view has labels.
+pub fn use_mask(v: &ViewRow) -> Result<Option<Vec<u8>>> {
+    Ok(v.transient()?
+        .map(|t| t.as_raw().iter().map(|t| 255 - t).collect()))
+}
+
 /// The use-mask at every level (both names at level 0) and the sky mask, when the view has
 /// labels.
 fn mask_files(v: &ViewRow, file: &str) -> Result<Encoded> {
-    let (Some(transient), Some(labels)) = (v.transient()?, v.labels()?) else {
+    let (Some(usable), Some(labels)) = (use_mask(v)?, v.labels()?) else {
         return Ok(Vec::new());
     };
     let (w, h) = (v.width, v.height);
-    let usable: Vec<u8> = transient.as_raw().iter().map(|t| 255 - t).collect();
     let level0 = encode_gray(&v.name, w, h, &usable)?;
     let mut out = vec![
         (format!("masks/{file}"), level0.clone()),
@@ -204,22 +209,7 @@ fn write_model(
         rec.cameras.insert(*id, m.camera.clone());
         rec.images.insert(*id, m.image.clone());
     }
-    for p in points {
-        let point = Point3D {
-            id: p.id,
-            xyz: p.xyz.into(),
-            rgb: p.rgb,
-            error: p.error,
-            track: Vec::new(),
-        };
-        rec.points.insert(p.id, point);
-    }
-    for file in ["cameras.bin", "images.bin", "points3D.bin"] {
-        staged.claim(&format!("sparse/0/{file}"))?;
-    }
-    let sparse = staged.dir().join("sparse/0");
-    nrw_colmap::write_model(&rec, &sparse, nrw_colmap::Format::Binary)
-        .map_err(|e| ExportError::io(&sparse, e))
+    crate::nerfw::write_binary_model(rec, points, staged, "sparse/0")
 }
 
 /// graphdeco's key of an image: its name without the extension (`extr.name[:-n_remove]`).

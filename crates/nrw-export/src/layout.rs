@@ -28,11 +28,14 @@ pub enum Layout {
     /// MegaDepth's folders and D2-Net's `scene_info` `.npz`, as matcher trainers read them: see
     /// [`crate::megadepth`]. Needs the scene's model (its tracks).
     Megadepth,
+    /// The Phototourism folder nerfbaselines reads (WildGaussians and other in-the-wild
+    /// methods): see [`crate::nerfbaselines`]. Needs the scene's points.
+    Nerfbaselines,
 }
 
 impl Layout {
     /// Every layout, in the order help lists them.
-    pub const ALL: [Layout; 7] = [
+    pub const ALL: [Layout; 8] = [
         Layout::Official,
         Layout::Tfrecord,
         Layout::Files,
@@ -40,6 +43,7 @@ impl Layout {
         Layout::Nerfstudio,
         Layout::Gsplat,
         Layout::Megadepth,
+        Layout::Nerfbaselines,
     ];
 
     /// The layout's name on the command line, in pipeline files and in `export.json`.
@@ -52,6 +56,7 @@ impl Layout {
             Layout::Nerfstudio => "nerfstudio",
             Layout::Gsplat => "gsplat",
             Layout::Megadepth => "megadepth",
+            Layout::Nerfbaselines => "nerfbaselines",
         }
     }
 
@@ -64,6 +69,7 @@ impl Layout {
             Layout::Nerfw => "NeRF-W's Phototourism layout for nerf_pl / Ha-NeRF loaders: NAME.tsv (filename, id, split, dataset), dense/images/, dense/sparse/ (one PINHOLE camera per image, the scene's points); needs a dataset ingested with `ingest.undistort` (or pinhole cameras)",
             Layout::Nerfstudio => "nerfstudio's transforms.json (each frame's exact camera model, OpenGL camera-to-world poses with nerfstudio's applied_transform, depth/*.npy, masks/*.png from the transient mask, train/val/test_filenames) with images/ and sparse_pc.ply; refuses camera models nerfstudio cannot represent exactly (FOV, FULL_OPENCV, thin-prism fisheyes)",
             Layout::Gsplat => "the COLMAP folder 3DGS trainers read (graphdeco, gsplat, OpenSplat, nerfbaselines): images/ and images_2|4|8/ (box-filtered whole blocks, intrinsics / N exactly), masks/ (255 = use; NAME.png and COLMAP's NAME.png.png) and masks_N/, sky/, depths/ and depths_N/ (graphdeco's 16-bit inverse depth) with sparse/0/depth_params.json, sparse/0 (one PINHOLE camera per image, the scene's points), train_list.txt / test_list.txt; needs PINHOLE cameras (`ingest.undistort`)",
+            Layout::Nerfbaselines => "the Phototourism folder nerfbaselines reads (WildGaussians and other in-the-wild methods): images/, sparse/ (one PINHOLE camera per image, the scene's points), masks/ (255 = use), nerfw_split.csv, train_list.txt / test_list.txt and nb-info.json (loader colmap, id phototourism, NeRF-W evaluation); needs PINHOLE cameras (`ingest.undistort`)",
             Layout::Megadepth => "MegaDepth's layout for matcher trainers: Undistorted_SfM/NAME/{images/, sparse-txt/ (PINHOLE, the views' SfM observations)}, phoenix/S6/zl548/MegaDepth_v1/NAME/dense0/depths/*.h5 (key `depth`, float32, 0 = none) and scene_info/NAME.npz as D2-Net's preprocess_scene.py writes it (paths, K, poses, overlap, scale ratios, angles); needs PINHOLE cameras (`ingest.undistort`)",
         }
     }
@@ -72,7 +78,11 @@ impl Layout {
     pub fn needs_points(self) -> bool {
         matches!(
             self,
-            Layout::Nerfw | Layout::Nerfstudio | Layout::Gsplat | Layout::Megadepth
+            Layout::Nerfw
+                | Layout::Nerfstudio
+                | Layout::Gsplat
+                | Layout::Megadepth
+                | Layout::Nerfbaselines
         )
     }
 

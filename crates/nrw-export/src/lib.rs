@@ -16,6 +16,7 @@ pub mod hdf5;
 pub mod inverse_depth;
 pub mod layout;
 pub mod megadepth;
+pub mod nerfbaselines;
 pub mod nerfstudio;
 pub mod nerfw;
 pub mod npz;
@@ -112,5 +113,6 @@ fn writer_of(layout: Layout) -> &'static dyn writer::LayoutWriter {
         Layout::Nerfstudio => &nerfstudio::NERFSTUDIO,
         Layout::Gsplat => &gsplat::Gsplat,
         Layout::Megadepth => &megadepth::Megadepth,
+        Layout::Nerfbaselines => &nerfbaselines::NERFBASELINES,
     }
 }

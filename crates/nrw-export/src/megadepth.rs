@@ -378,7 +378,10 @@ impl SceneInfo {
             ("angles", Array::f64(&[n, n], &self.angles).npy()),
             ("n_points3D", Array::i64(&self.n_points3d).npy()),
             ("points3D_id_to_2D", objects(&self.points3d_id_to_2d)),
-            ("points3D_id_to_ndepth", objects(&self.points3d_id_to_ndepth)),
+            (
+                "points3D_id_to_ndepth",
+                objects(&self.points3d_id_to_ndepth),
+            ),
         ])
     }
 }

@@ -173,12 +173,17 @@ fn frame(v: &ViewRow, staged: &Staged) -> Result<(String, Value)> {
 pub static NERFSTUDIO: WithPoints = WithPoints(write);
 
 /// Write the layout into `staged`. Returns the splits written.
-fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitExport>> {
+fn write(
+    job: &Job,
+    points: &[ScenePoint],
+    staged: &Staged,
+) -> Result<(Vec<SplitExport>, Vec<String>)> {
     let (ds, cfg, tick) = (job.ds, job.cfg, job.tick);
     let mut frames = Vec::new();
     let mut lists: Map<String, Value> = Map::new();
     let mut out = Vec::new();
     let mut seen = std::collections::BTreeSet::new();
+    let mut distorted = Vec::new();
     for (split, n) in &job.splits {
         if *n == 0 {
             continue;
@@ -193,6 +198,12 @@ fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitE
                     &cfg.out,
                     format!("two views would both be written as {image}"),
                 ));
+            }
+            if ["k1", "k2", "k3", "k4", "p1", "p2"]
+                .iter()
+                .any(|k| f[*k].as_f64().is_some_and(|x| x != 0.0))
+            {
+                distorted.push(v.name.clone());
             }
             files.push(Value::from(image.clone()));
             frames.push(f);
@@ -231,7 +242,18 @@ fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitE
         "transforms.json",
         &serde_json::to_vec_pretty(&Value::Object(top)).expect("json"),
     )?;
-    Ok(out)
+    Ok((out, pinhole_only_warning(&distorted).into_iter().collect()))
+}
+
+/// Splatfacto-W and other loaders that take only undistorted cameras read the distortion
+/// terms as absent: name the views that carry some.
+fn pinhole_only_warning(distorted: &[String]) -> Option<String> {
+    let first = distorted.first()?;
+    Some(format!(
+        "Splatfacto-W (and other PINHOLE-only loaders) assert undistorted cameras: {} frame(s) \
+         carry distortion terms (first {first}); ingest with --undistort for them",
+        distorted.len()
+    ))
 }
 
 /// The scene's points in nerfstudio's world frame, as `colmap_to_json`'s `sparse_pc.ply`.

@@ -96,8 +96,49 @@ pub(crate) fn model_image(v: &ViewRow, file: &str) -> Result<Image> {
 /// NeRF-W's Phototourism layout.
 pub static NERFW: WithPoints = WithPoints(write);
 
+/// Where a Phototourism-style layout puts its photos and model.
+pub(crate) struct Places {
+    pub images: &'static str,
+    pub sparse: &'static str,
+}
+
+/// What [`write_phototourism`] wrote: the splits and the tsv rows (without header).
+pub(crate) struct Written {
+    pub splits: Vec<SplitExport>,
+    pub rows: Vec<String>,
+    pub max_id: Option<u32>,
+}
+
 /// Write the layout into `staged`: photos, model, tsv. Returns the splits written.
-fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitExport>> {
+fn write(
+    job: &Job,
+    points: &[ScenePoint],
+    staged: &Staged,
+) -> Result<(Vec<SplitExport>, Vec<String>)> {
+    let places = Places {
+        images: "dense/images",
+        sparse: "dense/sparse",
+    };
+    let w = write_phototourism(job, points, staged, &places, &|_, _| Ok(()))?;
+    staged.write(&format!("{}.tsv", job.cfg.name), tsv(&w.rows).as_bytes())?;
+    let warnings = n_vocab_warning(w.max_id).into_iter().collect();
+    Ok((w.splits, warnings))
+}
+
+/// The tsv NeRF-W's loaders read: a header and one row a view.
+pub(crate) fn tsv(rows: &[String]) -> String {
+    format!("filename\tid\tsplit\tdataset\n{}\n", rows.join("\n"))
+}
+
+/// The photos (and whatever `extra` writes per view, given the view and its file name) and
+/// the PINHOLE model of a Phototourism-style layout.
+pub(crate) fn write_phototourism(
+    job: &Job,
+    points: &[ScenePoint],
+    staged: &Staged,
+    places: &Places,
+    extra: &dyn Fn(&ViewRow, &str) -> Result<()>,
+) -> Result<Written> {
     let (ds, cfg, tick) = (job.ds, job.cfg, job.tick);
     let mut rec = Reconstruction::default();
     let mut rows = Vec::new();
@@ -114,13 +155,17 @@ fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitE
             if let Some(other) = by_file.insert(file.clone(), id) {
                 return Err(ExportError::refused(
                     &cfg.out,
-                    format!("images {other} and {id} would both be written as dense/images/{file}"),
+                    format!(
+                        "images {other} and {id} would both be written as {}/{file}",
+                        places.images
+                    ),
                 ));
             }
             rec.cameras.insert(id, pinhole(&v)?);
             rec.images.insert(id, model_image(&v, &file)?);
-            let rel = format!("dense/images/{file}");
+            let rel = format!("{}/{file}", places.images);
             staged.write(&rel, &v.photo_png)?;
+            extra(&v, &file)?;
             rows.push(format!("{file}\t{id}\t{}\t{}", tsv_split(split), cfg.name));
             s.image_ids.push(id);
             s.names.push(v.name.clone());
@@ -129,25 +174,70 @@ fn write(job: &Job, points: &[ScenePoint], staged: &Staged) -> Result<Vec<SplitE
         }
         out.push(s);
     }
+    let max_id = rec.images.keys().max().copied();
+    write_binary_model(rec, points, staged, places.sparse)?;
+    Ok(Written {
+        splits: out,
+        rows,
+        max_id,
+    })
+}
+
+/// `rec` (cameras and images) with the scene's points, as COLMAP binaries under `dir`.
+pub(crate) fn write_binary_model(
+    mut rec: Reconstruction,
+    points: &[ScenePoint],
+    staged: &Staged,
+    dir: &str,
+) -> Result<()> {
     for p in points {
-        rec.points.insert(
-            p.id,
-            Point3D {
-                id: p.id,
-                xyz: p.xyz.into(),
-                rgb: p.rgb,
-                error: p.error,
-                track: Vec::new(),
-            },
-        );
+        let point = Point3D {
+            id: p.id,
+            xyz: p.xyz.into(),
+            rgb: p.rgb,
+            error: p.error,
+            track: Vec::new(),
+        };
+        rec.points.insert(p.id, point);
     }
     for file in ["cameras.bin", "images.bin", "points3D.bin"] {
-        staged.claim(&format!("dense/sparse/{file}"))?;
+        staged.claim(&format!("{dir}/{file}"))?;
     }
-    let sparse = staged.dir().join("dense/sparse");
+    let sparse = staged.dir().join(dir);
     nrw_colmap::write_model(&rec, &sparse, nrw_colmap::Format::Binary)
-        .map_err(|e| ExportError::io(&sparse, e))?;
-    let tsv = format!("filename\tid\tsplit\tdataset\n{}\n", rows.join("\n"));
-    staged.write(&format!("{}.tsv", cfg.name), tsv.as_bytes())?;
-    Ok(out)
+        .map_err(|e| ExportError::io(&sparse, e))
+}
+
+/// nerf_pl's default `--N_vocab` (opt.py).
+pub const NERF_PL_N_VOCAB: u32 = 100;
+
+/// nerf_pl indexes its appearance and transient embeddings by image id (the tsv's `id`), so
+/// `--N_vocab` must exceed the largest id, not the count; at its default it fails with an
+/// index error past id 99.
+pub fn n_vocab_warning(max_id: Option<u32>) -> Option<String> {
+    let max = max_id?;
+    (max >= NERF_PL_N_VOCAB).then(|| {
+        format!(
+            "nerf_pl indexes its embeddings by image id: train with --N_vocab {} or more (the \
+             largest id here is {max}; its default {NERF_PL_N_VOCAB} fails with an index error)",
+            max + 1
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn n_vocab_is_named_past_nerf_pls_default() {
+        assert_eq!(n_vocab_warning(None), None);
+        assert_eq!(
+            n_vocab_warning(Some(99)),
+            None,
+            "ids 0..=99 fit the default 100"
+        );
+        let w = n_vocab_warning(Some(100)).unwrap();
+        assert!(w.contains("--N_vocab 101") && w.contains("nerf_pl"), "{w}");
+    }
 }

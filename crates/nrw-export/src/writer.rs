@@ -85,8 +85,8 @@ pub trait LayoutWriter: Sync {
 }
 
 /// A layout that carries the scene's points (nerfw, nerfstudio): its writer, given the job
-/// and the points, returns the splits written.
-pub type PointsWriter = fn(&Job, &[ScenePoint], &Staged) -> Result<Vec<SplitExport>>;
+/// and the points, returns the splits written and the consumer warnings.
+pub type PointsWriter = fn(&Job, &[ScenePoint], &Staged) -> Result<(Vec<SplitExport>, Vec<String>)>;
 
 /// The [`LayoutWriter`] of a layout with points: it needs train views and the points, and lists the
 /// splits without views as empty.
@@ -100,7 +100,7 @@ impl LayoutWriter for WithPoints {
 
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
         summary.empty_splits = job.empty_splits();
-        summary.splits = (self.0)(job, job.points()?, staged)?;
+        (summary.splits, summary.warnings) = (self.0)(job, job.points()?, staged)?;
         Ok(())
     }
 }

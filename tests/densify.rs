@@ -892,3 +892,108 @@ fn duplicate_photos_and_a_tiny_baseline_are_never_each_others_source() {
         );
     }
 }
+
+#[test]
+fn exports_take_their_depth_priors_from_densify_when_the_dataset_was_rendered_from_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Photos of 240 px: rendered at 240 px (the workspace's size) and at 180 px (scaled).
+    let scene = textured_scene_with(tmp.path(), 5, &[("max_size = 280", "max_size = 240")]);
+    ok(&["densify", scene.to_str().unwrap(), "-q"]);
+    let ws = Workspace::new(&scene.join("dense"));
+    for side in [240u32, 180] {
+        let ds = tmp.path().join(format!("ds{side}"));
+        let d = ds.to_str().unwrap();
+        let side_arg = side.to_string();
+        ok(&[
+            "ingest",
+            scene.to_str().unwrap(),
+            "--out",
+            d,
+            "--min-dim",
+            &side_arg,
+            "--min-photo-side",
+            "100",
+            "--max-empty",
+            "1",
+            "--quiet",
+        ]);
+        ok(&["split", d, "--val", "1"]);
+        let out = tmp.path().join(format!("gs{side}"));
+        ok(&[
+            "export",
+            d,
+            "--layout",
+            "gsplat",
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ]);
+        check_mvs_priors(&scene, &ws, &ds, &out);
+    }
+}
+
+/// The gsplat export `out` of dataset `ds` carries the workspace's depth: graphdeco's reading
+/// of each prior is the true depth of the photo pixel the view pixel's centre falls in (within
+/// 1% for 90% of the pixels), and at the workspace's own size the map's pixel itself.
+fn check_mvs_priors(scene: &Path, ws: &Workspace, ds: &Path, out: &Path) {
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("export.json")).unwrap()).unwrap();
+    let source = summary["depth_source"].as_str().unwrap();
+    assert!(source.contains("densify geometric depth maps"), "{source}");
+    let params: HashMap<String, serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(out.join("sparse/0/depth_params.json")).unwrap())
+            .unwrap();
+    let dataset = nrw_dataset::reader::Dataset::open(ds).unwrap();
+    let (mut prior, mut good, mut render, mut same_as_map) = (0usize, 0usize, 0usize, 0usize);
+    let mut same_size = false;
+    for (split, _) in dataset.splits() {
+        for &id in dataset.ids(&split).unwrap() {
+            let v = dataset.get(id).unwrap();
+            let file = nrw_export::nerfw::file_name(&v.name);
+            let scale = params[file.trim_end_matches(".png")]["scale"]
+                .as_f64()
+                .unwrap();
+            let png = image::open(out.join("depths").join(&file))
+                .unwrap()
+                .to_luma16();
+            let truth = truth_depth(scene, &v.name);
+            let map = read_map(ws, MapKind::Depth, &v.name);
+            let s = v.width as f64 / truth.width as f64;
+            same_size |= map.width == v.width as usize;
+            render += v.depth().unwrap().data.iter().filter(|z| **z > 0.0).count();
+            for (k, q) in png.as_raw().iter().enumerate() {
+                if *q == 0 {
+                    continue;
+                }
+                let (x, y) = (k % v.width as usize, k / v.width as usize);
+                let (tx, ty) = (
+                    ((x as f64 + 0.5) / s) as usize,
+                    ((y as f64 + 0.5) / s) as usize,
+                );
+                // graphdeco's reading of the prior, against the true depth of that pixel.
+                let z = 1.0 / (*q as f64 / 65536.0 * scale);
+                let t = truth.data[ty * truth.width + tx] as f64;
+                prior += 1;
+                good += (t > 0.0 && ((z - t) / t).abs() <= 0.01) as usize;
+                if map.width == v.width as usize {
+                    let m = map.data[k] as f64;
+                    same_as_map += ((z - m).abs() <= m * m * scale / 65536.0) as usize;
+                }
+            }
+        }
+    }
+    let share = good as f64 / prior as f64;
+    eprintln!(
+        "MVS depth priors of {}: {prior} pixels ({render} in the renders' z-buffers), \
+         {share:.4} within 1% of the true depth; {same_as_map} equal to the map's own pixel",
+        ds.display()
+    );
+    assert!(share >= 0.9, "{share}");
+    if same_size {
+        assert_eq!(
+            same_as_map, prior,
+            "at the workspace's size, the map's own pixels"
+        );
+    }
+    assert!(prior > render, "MVS depth covers more than the render");
+}

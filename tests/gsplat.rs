@@ -349,7 +349,10 @@ fn nerfbaselines_reads_its_phototourism_layout_through_nb_info() {
             ignored += v["ignored"].as_u64().unwrap();
         }
     }
-    assert!(ignored > 0, "nerfbaselines sees the people as ignored pixels");
+    assert!(
+        ignored > 0,
+        "nerfbaselines sees the people as ignored pixels"
+    );
     // NeRF-W's split file beside it, as nerf_pl and the downloader write it.
     let csv = std::fs::read_to_string(out.join("nerfw_split.csv")).unwrap();
     assert!(csv.starts_with("filename\tid\tsplit\tdataset\n"), "{csv}");

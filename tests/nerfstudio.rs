@@ -93,6 +93,14 @@ fn transforms_json_projects_every_sparse_point_onto_its_observation() {
         for (i, z) in depth.data.iter().enumerate() {
             let got = f32::from_le_bytes(body[i * 4..i * 4 + 4].try_into().unwrap());
             assert_eq!(got, z * 1000.0);
+            // nerfstudio's conversion (data/utils/data_utils.py `get_depth_image_from_path`:
+            // the array × depth_unit_scale_factor, 1e-3 by default, in float32) gives model
+            // units back to float32 rounding.
+            let back = got * 1e-3f32;
+            assert!(
+                (back - z).abs() <= 4.0 * f32::EPSILON * z.abs(),
+                "{back} vs {z}"
+            );
         }
     }
     let o = std::process::Command::new("python3")

@@ -28,6 +28,7 @@ use std::sync::Mutex;
 
 use nrw_colmap::{Camera, Image, Reconstruction};
 use nrw_dataset::codec::{encode_gray, encode_gray16, encode_rgb};
+use nrw_dataset::depth::DepthMap;
 use nrw_dataset::split::{TRAIN, VAL};
 use nrw_dataset::ViewRow;
 
@@ -55,6 +56,7 @@ impl LayoutWriter for Gsplat {
         let own = own_depth_scales(job)?;
         let (depth, above) = inverse_depth::params(&own);
         let enc = Encoder {
+            job,
             depth,
             model: Mutex::new(BTreeMap::new()),
         };
@@ -65,6 +67,7 @@ impl LayoutWriter for Gsplat {
         write_split_lists(summary, staged)?;
         summary.semantics = Some("masks: 255 = use, 0 = ignore; sky: 255 = sky".into());
         summary.warnings.extend(consumer_warnings(&model, &above));
+        summary.depth_source = Some(job.depth_source());
         Ok(())
     }
 }
@@ -79,7 +82,7 @@ fn own_depth_scales(job: &Job) -> Result<BTreeMap<u32, f64>> {
         }
         for v in job.ds.iter_split(split)? {
             let v = v?;
-            let inv = inverse_depth::inverse_depth(&v.depth()?);
+            let inv = inverse_depth::inverse_depth(&job.prior_depth(&v)?);
             own.insert(v.image_id, inverse_depth::own_scale(&inv));
         }
     }
@@ -93,12 +96,13 @@ struct ModelView {
 }
 
 /// Encodes one view's files and remembers its camera and image.
-struct Encoder {
+struct Encoder<'a> {
+    job: &'a Job<'a>,
     depth: BTreeMap<u32, DepthParams>,
     model: Mutex<BTreeMap<u32, ModelView>>,
 }
 
-impl ViewEncoder for Encoder {
+impl ViewEncoder for Encoder<'_> {
     fn check_view(&self, v: &ViewRow) -> Result<()> {
         crate::nerfw::pinhole(v).map(|_| ())
     }
@@ -118,7 +122,13 @@ impl ViewEncoder for Encoder {
             ));
         }
         out.extend(mask_files(v, &file)?);
-        out.extend(depth_files(v, &file, self.depth[&v.image_id].scale)?);
+        let prior = self.job.prior_depth(v)?;
+        out.extend(depth_files(
+            v,
+            &prior,
+            &file,
+            self.depth[&v.image_id].scale,
+        )?);
         self.model
             .lock()
             .expect("no encoder panicked")
@@ -180,8 +190,8 @@ fn mask_files(v: &ViewRow, file: &str) -> Result<Encoded> {
 }
 
 /// The inverse-depth PNG at every level, at the view's one scale.
-fn depth_files(v: &ViewRow, file: &str, scale: f64) -> Result<Encoded> {
-    let inv = inverse_depth::inverse_depth(&v.depth()?);
+fn depth_files(v: &ViewRow, depth: &DepthMap, file: &str, scale: f64) -> Result<Encoded> {
+    let inv = inverse_depth::inverse_depth(depth);
     let (w, h) = (v.width, v.height);
     let mut out = vec![(
         format!("depths/{file}"),

@@ -86,6 +86,15 @@ impl Layout {
         )
     }
 
+    /// Whether the layout writes depth priors, which prefer densify's MVS depth to the
+    /// render's z-buffer.
+    pub fn writes_depth_priors(self) -> bool {
+        matches!(
+            self,
+            Layout::Nerfstudio | Layout::Gsplat | Layout::Megadepth
+        )
+    }
+
     /// Whether the layout is one the paper's published code reads (official, tfrecord).
     pub fn paper(self) -> bool {
         matches!(self, Layout::Official | Layout::Tfrecord)

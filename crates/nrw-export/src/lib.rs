@@ -40,6 +40,7 @@ pub use summary::{DepthRecord, ExportConfig, ExportSummary, Skipped, SplitExport
 pub use tfrecord::tfrecord_name;
 pub use writer::ScenePoint;
 
+use nrw_dataset::depth::DepthMap;
 use nrw_dataset::reader::Dataset;
 
 /// The train views' style distance matrix (f64) for the given image ids in that order, as
@@ -64,7 +65,23 @@ pub struct Inputs<'a> {
     pub points: Option<&'a [ScenePoint]>,
     /// The scene's model as ingested, whose tracks `megadepth` carries.
     pub model: Option<&'a nrw_colmap::Reconstruction>,
+    /// A better depth than the render's z-buffer (densify's MVS maps), for the layouts that
+    /// write depth priors.
+    pub depth_prior: Option<&'a DepthPrior<'a>>,
 }
+
+/// Where a view's depth prior comes from when it is not the render's z-buffer.
+pub struct DepthPrior<'a> {
+    /// What `export.json` names as the source.
+    pub source: String,
+    /// The view's depth at its stored size (0 = none), or None to fall back to the render's.
+    #[allow(clippy::type_complexity)]
+    pub depth:
+        &'a (dyn Fn(&nrw_dataset::ViewRow) -> std::result::Result<Option<DepthMap>, String> + Sync),
+}
+
+/// `export.json`'s name for the render's z-buffer as a depth source.
+pub const RENDER_DEPTH: &str = "the render's z-buffer";
 
 /// Export `ds` as `cfg` says into `cfg.out` (a folder or an object-store URL), replacing an
 /// earlier export there whole; `tick` is called once per view done.

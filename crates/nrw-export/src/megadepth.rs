@@ -67,7 +67,7 @@ impl LayoutWriter for Megadepth {
             let mut s = SplitExport::new(split);
             for v in job.ds.iter_split(split)? {
                 let v = v?;
-                let view = write_view(&v, rec, name, staged)?;
+                let view = write_view(job, &v, rec, name, staged)?;
                 s.image_ids.push(v.image_id);
                 s.names.push(v.name.clone());
                 s.files.push(view.image_path.clone());
@@ -86,6 +86,7 @@ impl LayoutWriter for Megadepth {
         })?;
         staged.write(&format!("scene_info/{name}.npz"), &npz)?;
         summary.warnings.extend(consumer_warnings(&views));
+        summary.depth_source = Some(job.depth_source());
         Ok(())
     }
 }
@@ -125,7 +126,13 @@ struct View {
 }
 
 /// Write one view's photo and depth file; its model entries.
-fn write_view(v: &ViewRow, rec: &Reconstruction, name: &str, staged: &Staged) -> Result<View> {
+fn write_view(
+    job: &Job,
+    v: &ViewRow,
+    rec: &Reconstruction,
+    name: &str,
+    staged: &Staged,
+) -> Result<View> {
     let file = crate::nerfw::file_name(&v.name);
     if file.contains(char::is_whitespace) {
         return Err(ExportError::Value {
@@ -140,7 +147,7 @@ fn write_view(v: &ViewRow, rec: &Reconstruction, name: &str, staged: &Staged) ->
     let camera = crate::nerfw::pinhole(v)?;
     let image_path = format!("{}/images/{file}", sfm_dir(name));
     staged.write(&image_path, &v.photo_png)?;
-    let depth = v.depth()?;
+    let depth = job.prior_depth(v)?;
     let stem = file.rsplit_once('.').map_or(file.as_str(), |(s, _)| s);
     let depth_path = format!("{}/{stem}.h5", depth_dir(name));
     let h5 = crate::hdf5::float32_2d(

@@ -137,11 +137,11 @@ fn stem(name: &str) -> String {
 }
 
 /// One view's files and frame.
-fn frame(v: &ViewRow, staged: &Staged) -> Result<(String, Value)> {
+fn frame(job: &Job, v: &ViewRow, staged: &Staged) -> Result<(String, Value)> {
     let s = stem(&v.name);
     let image = format!("images/{s}.png");
     staged.write(&image, &v.photo_png)?;
-    let depth = v.depth()?;
+    let depth = job.prior_depth(v)?;
     let scaled: Vec<f32> = depth.data.iter().map(|z| z * DEPTH_SCALE).collect();
     let depth_file = format!("depth/{s}.npy");
     staged.write(
@@ -192,7 +192,7 @@ fn write(
         let mut files = Vec::new();
         for &id in ds.ids(split)? {
             let v = ds.get(id)?;
-            let (image, f) = frame(&v, staged)?;
+            let (image, f) = frame(job, &v, staged)?;
             if !seen.insert(image.clone()) {
                 return Err(ExportError::refused(
                     &cfg.out,

@@ -94,6 +94,9 @@ pub struct ExportSummary {
     pub empty_splits: Vec<String>,
     /// `dist_<name>.pckl` when the dataset has official style descriptors.
     pub dist_pickle: Option<String>,
+    /// Where the depth the layout writes comes from (layouts with depth priors).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_source: Option<String>,
     /// Where a known consumer's loader would misread this export, naming the loader and rule.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
@@ -114,6 +117,7 @@ impl ExportSummary {
             skipped: Vec::new(),
             empty_splits: Vec::new(),
             dist_pickle: None,
+            depth_source: None,
             warnings: Vec::new(),
         }
     }

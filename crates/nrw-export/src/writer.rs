@@ -63,6 +63,30 @@ impl Job<'_> {
         }
     }
 
+    /// A view's depth prior: the caller's (densify's MVS) where it has one, else the render's
+    /// z-buffer.
+    pub fn prior_depth(&self, v: &nrw_dataset::ViewRow) -> Result<nrw_dataset::depth::DepthMap> {
+        if let Some(p) = self.inputs.depth_prior {
+            let got = (p.depth)(v).map_err(|problem| ExportError::Value {
+                path: v.name.clone().into(),
+                record: format!("image {}", v.image_id),
+                field: "depth".into(),
+                problem,
+            })?;
+            if let Some(d) = got {
+                return Ok(d);
+            }
+        }
+        Ok(v.depth()?)
+    }
+
+    /// What `export.json` names as the source of depth priors.
+    pub fn depth_source(&self) -> String {
+        self.inputs
+            .depth_prior
+            .map_or_else(|| crate::RENDER_DEPTH.to_string(), |p| p.source.clone())
+    }
+
     /// The splits with no view, as `export.json` lists them.
     pub fn empty_splits(&self) -> Vec<String> {
         self.splits

@@ -41,11 +41,25 @@ pub fn export(
             None
         };
         let points = model.as_ref().map(points_of);
+        let mvs = if cfg.layout.writes_depth_priors() {
+            crate::mvs_prior::MvsPriors::of_dataset(store)?
+        } else {
+            None
+        };
+        let mvs_depth = |v: &nrw_dataset::ViewRow| match &mvs {
+            Some(m) => m.depth(v).map_err(|e| e.to_string()),
+            None => Ok(None),
+        };
+        let prior = mvs.as_ref().map(|m| nrw_export::DepthPrior {
+            source: m.source(),
+            depth: &mvs_depth,
+        });
         let dist = |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
         let inputs = nrw_export::Inputs {
             dist: Some(&dist),
             points: points.as_deref(),
             model: model.as_ref(),
+            depth_prior: prior.as_ref(),
         };
         progress.start("export", total as u64, "views");
         let summary = nrw_export::export(&ds, cfg, &inputs, &|| progress.inc(1))?;

@@ -15,6 +15,7 @@ pub mod finalize;
 pub mod ingest;
 pub mod inspect;
 pub mod model;
+pub mod mvs_prior;
 pub mod progress;
 pub mod qa;
 pub mod report;

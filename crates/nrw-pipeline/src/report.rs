@@ -482,6 +482,7 @@ mod tests {
             skipped: Vec::new(),
             empty_splits: Vec::new(),
             dist_pickle: Some("dist_n.pckl".into()),
+            depth_source: None,
             warnings: Vec::new(),
         };
         let warned = |s: &ExportSummary| {

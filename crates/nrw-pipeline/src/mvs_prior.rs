@@ -1,0 +1,147 @@
+//! Depth priors from `densify`'s multi-view stereo: when a dataset was rendered from a dense
+//! workspace's `fused.ply`, each view's geometric depth map is carried into the stored view's
+//! pixels, for the exports that write depth priors.
+//!
+//! A workspace view and a dataset view of one photo share the pose (the model's), so a ray
+//! keeps its camera-space z in both: each stored pixel centre's ray through the stored camera
+//! is projected by the workspace's (undistorted, resized) camera and takes the depth of the
+//! map pixel it lands in (nearest; 0 where the map has none or the ray leaves the map).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use glam::DVec2;
+use nrw_colmap::dense::{DenseMap, MapKind, MapPass, Workspace};
+use nrw_colmap::{Camera, CameraModel, Reconstruction};
+use nrw_dataset::depth::DepthMap;
+use nrw_dataset::ViewRow;
+
+use crate::error::{PipelineError, Result};
+
+/// How far the workspace's pose of a photo may differ from the dataset's before the maps are
+/// not trusted to belong to it (rotation entries and translation, model units).
+const POSE_TOLERANCE: f64 = 1e-9;
+
+/// A dense workspace's geometric depth maps, by photo name.
+pub struct MvsPriors {
+    ws: Workspace,
+    model: Reconstruction,
+    by_name: HashMap<String, u32>,
+}
+
+impl MvsPriors {
+    /// The workspace a dataset was rendered from, when its cloud is a `densify` workspace's
+    /// `fused.ply` (a folder with `densify.json` and geometric depth maps); None otherwise.
+    pub fn of_dataset(store: &nrw_dataset::Store) -> Result<Option<MvsPriors>> {
+        let m = nrw_dataset::Manifest::read(store)?;
+        let Some(root) = m
+            .inputs
+            .iter()
+            .find_map(|f| workspace_of(Path::new(&f.path)))
+        else {
+            return Ok(None);
+        };
+        let ws = Workspace::new(&root);
+        let model = nrw_colmap::read_model(&ws.sparse(), None)?;
+        let by_name = model
+            .images
+            .iter()
+            .map(|(id, i)| (i.name.clone(), *id))
+            .collect();
+        Ok(Some(MvsPriors { ws, model, by_name }))
+    }
+
+    /// Where the priors come from, for `export.json`.
+    pub fn source(&self) -> String {
+        format!("densify geometric depth maps ({})", self.ws.root.display())
+    }
+
+    /// View `v`'s MVS depth at its stored size, or None when the workspace has no map of it.
+    pub fn depth(&self, v: &ViewRow) -> Result<Option<DepthMap>> {
+        let Some(id) = self.by_name.get(&v.name) else {
+            return Ok(None);
+        };
+        let img = &self.model.images[id];
+        let ws_cam = &self.model.cameras[&img.camera_id];
+        let (pose, _) = nrw_colmap::Rigid3::from_colmap(v.qvec, v.tvec).ok_or_else(|| {
+            PipelineError::input(v.name.as_str(), "the view's pose is not a rotation")
+        })?;
+        let same = (pose.matrix() - img.cam_from_world.matrix())
+            .abs_diff_eq(glam::DMat3::ZERO, POSE_TOLERANCE)
+            && pose
+                .translation
+                .abs_diff_eq(img.cam_from_world.translation, POSE_TOLERANCE);
+        if !same {
+            return Err(PipelineError::input(
+                self.ws.sparse(),
+                format!(
+                    "image {:?}: the workspace's pose differs from the dataset's, so its depth \
+                     map does not belong to this view (densify and ingest read different models)",
+                    v.name
+                ),
+            ));
+        }
+        let path = self
+            .ws
+            .map(MapKind::Depth, MapPass::Geometric, &v.name)
+            .map_err(|p| PipelineError::input(self.ws.root.as_path(), p))?;
+        if !path.is_file() {
+            return Ok(None);
+        }
+        let bytes = std::fs::read(&path).map_err(|e| PipelineError::io(&path, e))?;
+        let map = DenseMap::from_bytes(&bytes, &path)?;
+        let stored = stored_camera(v)?;
+        Ok(Some(carry(&map, ws_cam, &stored)))
+    }
+}
+
+/// The workspace folder of a cloud file named `fused.ply` beside `densify.json`.
+fn workspace_of(cloud: &Path) -> Option<PathBuf> {
+    let root = cloud.parent()?;
+    let ws = Workspace::new(root);
+    (cloud.file_name()? == "fused.ply" && ws.settings().is_file()).then(|| root.to_path_buf())
+}
+
+/// The camera of a stored view (its model and parameters at the stored size).
+fn stored_camera(v: &ViewRow) -> Result<Camera> {
+    let model = CameraModel::from_name(&v.model).ok_or_else(|| {
+        PipelineError::input(v.name.as_str(), format!("unknown camera model {}", v.model))
+    })?;
+    Ok(Camera {
+        id: v.camera_id,
+        model,
+        width: v.width as u64,
+        height: v.height as u64,
+        params: v.params.clone(),
+    })
+}
+
+/// A workspace depth map carried into the stored camera's pixels (same pose).
+fn carry(map: &DenseMap, ws_cam: &Camera, stored: &Camera) -> DepthMap {
+    let (w, h) = (stored.width as usize, stored.height as usize);
+    let mut data = vec![0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let centre = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+            let Some(ray) = stored.cam_ray_from_img(centre) else {
+                continue;
+            };
+            let Some(p) = ws_cam.img_from_cam(ray) else {
+                continue;
+            };
+            let (u, v) = (p.x.floor(), p.y.floor());
+            if u < 0.0 || v < 0.0 || u >= map.width as f64 || v >= map.height as f64 {
+                continue;
+            }
+            let z = map.get(u as usize, v as usize, 0);
+            if z > 0.0 && z.is_finite() {
+                data[y * w + x] = z;
+            }
+        }
+    }
+    DepthMap {
+        width: w,
+        height: h,
+        data,
+    }
+}

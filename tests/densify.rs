@@ -896,7 +896,8 @@ fn duplicate_photos_and_a_tiny_baseline_are_never_each_others_source() {
 #[test]
 fn exports_take_their_depth_priors_from_densify_when_the_dataset_was_rendered_from_it() {
     let tmp = tempfile::tempdir().unwrap();
-    // Photos of 240 px: rendered at 240 px (the workspace's size) and at 180 px (scaled).
+    // Photos of 240 px: rendered at 240 px (the workspace's size) and at 180 px (scaled, and
+    // the cloud cleaned of outliers before rendering).
     let scene = textured_scene_with(tmp.path(), 5, &[("max_size = 280", "max_size = 240")]);
     ok(&["densify", scene.to_str().unwrap(), "-q"]);
     let ws = Workspace::new(&scene.join("dense"));
@@ -904,7 +905,7 @@ fn exports_take_their_depth_priors_from_densify_when_the_dataset_was_rendered_fr
         let ds = tmp.path().join(format!("ds{side}"));
         let d = ds.to_str().unwrap();
         let side_arg = side.to_string();
-        ok(&[
+        let mut args = vec![
             "ingest",
             scene.to_str().unwrap(),
             "--out",
@@ -916,7 +917,12 @@ fn exports_take_their_depth_priors_from_densify_when_the_dataset_was_rendered_fr
             "--max-empty",
             "1",
             "--quiet",
-        ]);
+        ];
+        let denoise = side == 180;
+        if denoise {
+            args.extend(["--denoise", "8,1"]);
+        }
+        ok(&args);
         ok(&["split", d, "--val", "1"]);
         let out = tmp.path().join(format!("gs{side}"));
         ok(&[
@@ -929,6 +935,41 @@ fn exports_take_their_depth_priors_from_densify_when_the_dataset_was_rendered_fr
             "--quiet",
         ]);
         check_mvs_priors(&scene, &ws, &ds, &out);
+        // The initialisation cloud is the dense cloud ingest rendered (cleaned as ingest
+        // cleaned it), with its normals.
+        let fused = nrw_colmap::read_ply(&ws.fused_ply()).unwrap();
+        let init = nrw_colmap::read_ply(&out.join("sparse/0/points3D.ply")).unwrap();
+        let bin = nrw_colmap::read_model(&out.join("sparse/0"), None).unwrap();
+        let manifest: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(ds.join("manifest.json")).unwrap()).unwrap();
+        let rendered = manifest["parameters"]["points"].as_u64().unwrap() as usize;
+        assert_eq!(
+            (init.len(), bin.points.len()),
+            (rendered, rendered),
+            "the rendered cloud"
+        );
+        let fused_normal: HashMap<[u64; 3], [f32; 3]> = fused
+            .positions
+            .iter()
+            .zip(fused.normals.as_ref().unwrap())
+            .map(|(p, n)| (p.to_array().map(f64::to_bits), *n))
+            .collect();
+        for (p, n) in init.positions.iter().zip(init.normals.as_ref().unwrap()) {
+            assert_eq!(
+                fused_normal.get(&p.to_array().map(f64::to_bits)),
+                Some(n),
+                "{p}"
+            );
+        }
+        if denoise {
+            assert!(
+                rendered < fused.len(),
+                "outliers removed: {rendered} of {}",
+                fused.len()
+            );
+        } else {
+            assert_eq!(init.positions, fused.positions);
+        }
     }
 }
 

@@ -63,6 +63,7 @@ impl LayoutWriter for Gsplat {
         write_views(job, staged, &enc, summary)?;
         let model = enc.model.into_inner().expect("no encoder panicked");
         write_model(&model, job.points()?, staged)?;
+        write_init_ply(job.points()?, staged)?;
         write_depth_params(&model, &enc.depth, staged)?;
         write_split_lists(summary, staged)?;
         summary.semantics = Some("masks: 255 = use, 0 = ignore; sky: 255 = sky".into());
@@ -220,6 +221,22 @@ fn write_model(
         rec.images.insert(*id, m.image.clone());
     }
     crate::nerfw::write_binary_model(rec, points, staged, "sparse/0")
+}
+
+/// `sparse/0/points3D.ply` with the cloud's normals, which graphdeco reads in preference to
+/// `points3D.bin` (whose points carry none); only when the cloud has normals.
+fn write_init_ply(points: &[ScenePoint], staged: &Staged) -> Result<()> {
+    let Some(normals) = points.iter().map(|p| p.normal).collect::<Option<Vec<_>>>() else {
+        return Ok(());
+    };
+    let path = staged.claim("sparse/0/points3D.ply")?;
+    let cloud = nrw_colmap::PointCloud {
+        path: path.clone(),
+        positions: points.iter().map(|p| p.xyz.into()).collect(),
+        colors: Some(points.iter().map(|p| p.rgb).collect()),
+        normals: Some(normals),
+    };
+    nrw_colmap::write_ply(&cloud, &path).map_err(|e| ExportError::io(&path, e))
 }
 
 /// graphdeco's key of an image: its name without the extension (`extr.name[:-n_remove]`).

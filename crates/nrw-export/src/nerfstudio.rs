@@ -268,11 +268,22 @@ fn write_points(points: &[ScenePoint], path: &Path) -> Result<()> {
             }))
         })
         .collect();
+    // Normals turn with the world: the rotation part of the applied transform.
+    let normals = points
+        .iter()
+        .map(|p| {
+            p.normal.map(|n| {
+                std::array::from_fn(|r| {
+                    a[r][0] as f32 * n[0] + a[r][1] as f32 * n[1] + a[r][2] as f32 * n[2]
+                })
+            })
+        })
+        .collect();
     let cloud = PointCloud {
         path: path.to_path_buf(),
         positions,
         colors: Some(points.iter().map(|p| p.rgb).collect()),
-        normals: None,
+        normals,
     };
     nrw_colmap::write_ply(&cloud, path).map_err(|e| ExportError::io(path, e))
 }

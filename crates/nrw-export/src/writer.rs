@@ -9,13 +9,16 @@ use crate::error::{ExportError, Result};
 use crate::staging::Staged;
 use crate::{ExportConfig, ExportSummary, Inputs, SplitExport};
 
-/// One 3D point of the scene, for `points3D.bin`.
+/// One 3D point of the scene's initialisation cloud, for `points3D.bin` (and a PLY with
+/// normals where the layout has one).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScenePoint {
     pub id: u64,
     pub xyz: [f64; 3],
     pub rgb: [u8; 3],
     pub error: f64,
+    /// The unit normal, when the cloud has normals (a dense cloud does; SfM points do not).
+    pub normal: Option<[f32; 3]>,
 }
 
 /// One export's inputs, as every layout sees them.

@@ -40,7 +40,10 @@ pub fn export(
         } else {
             None
         };
-        let points = model.as_ref().map(points_of);
+        let points = match &model {
+            Some(rec) => Some(init_points(store, rec)?),
+            None => None,
+        };
         let mvs = if cfg.layout.writes_depth_priors() {
             crate::mvs_prior::MvsPriors::of_dataset(store)?
         } else {
@@ -83,6 +86,79 @@ pub fn scene_model(store: &nrw_dataset::Store) -> Result<nrw_colmap::Reconstruct
     Ok(rec)
 }
 
+/// The initialisation cloud the layouts carry: the cloud ingest rendered — a dense PLY
+/// cleaned as ingest cleaned it (its recorded outlier removal and normal estimation), with
+/// its normals — or the model's SfM points when ingest rendered those.
+pub fn init_points(
+    store: &nrw_dataset::Store,
+    rec: &nrw_colmap::Reconstruction,
+) -> Result<Vec<nrw_export::ScenePoint>> {
+    let m = nrw_dataset::Manifest::read(store)?;
+    let at = store.name(nrw_dataset::Manifest::FILE);
+    let p: nrw_dataset::provenance::IngestParameters =
+        nrw_dataset::provenance::from_parameters(&at, &m.parameters)?;
+    let Some(ply) = m.inputs.iter().find(|f| f.path.ends_with(".ply")) else {
+        return Ok(points_of(rec));
+    };
+    if p.point_source != "ply" {
+        return Ok(points_of(rec));
+    }
+    let path = std::path::Path::new(&ply.path);
+    let (_, sha) = nrw_dataset::manifest::sha256_file(path)?;
+    if sha != ply.sha256 {
+        return Err(crate::error::PipelineError::input(
+            path,
+            "changed since this dataset was ingested from it (its SHA-256 differs from the \
+             manifest's): the exported cloud would not be the one rendered",
+        ));
+    }
+    let mut cloud = nrw_colmap::read_ply(path)?;
+    let origin = rec.scene_origin();
+    if let Some(d) = p.denoise {
+        let (keep, _) =
+            nrw_render::clean::statistical_outliers(&cloud.positions, origin, d.k, d.sigma);
+        let mut flags = keep.iter();
+        cloud
+            .positions
+            .retain(|_| *flags.next().expect("one flag a point"));
+        for c in [cloud.colors.as_mut()].into_iter().flatten() {
+            let mut flags = keep.iter();
+            c.retain(|_| *flags.next().expect("one flag a point"));
+        }
+        for n in [cloud.normals.as_mut()].into_iter().flatten() {
+            let mut flags = keep.iter();
+            n.retain(|_| *flags.next().expect("one flag a point"));
+        }
+    }
+    if let (Some(k), None) = (p.estimated_normals_k, &cloud.normals) {
+        // As ingest estimates them for a PLY: oriented toward the mean camera centre.
+        let centres: Vec<glam::DVec3> = rec
+            .images
+            .values()
+            .map(|i| i.cam_from_world.centre())
+            .collect();
+        let mean = centres.iter().copied().sum::<glam::DVec3>() / centres.len().max(1) as f64;
+        cloud.normals = Some(nrw_render::clean::estimate_normals(
+            &cloud.positions,
+            origin,
+            k,
+            &|_| mean,
+        ));
+    }
+    Ok(cloud
+        .positions
+        .iter()
+        .enumerate()
+        .map(|(i, x)| nrw_export::ScenePoint {
+            id: i as u64 + 1,
+            xyz: x.to_array(),
+            rgb: cloud.colors.as_ref().map_or([128; 3], |c| c[i]),
+            error: -1.0,
+            normal: cloud.normals.as_ref().map(|n| n[i]),
+        })
+        .collect())
+}
+
 /// A model's 3D points as the layouts carry them.
 pub fn points_of(rec: &nrw_colmap::Reconstruction) -> Vec<nrw_export::ScenePoint> {
     rec.points
@@ -92,6 +168,7 @@ pub fn points_of(rec: &nrw_colmap::Reconstruction) -> Vec<nrw_export::ScenePoint
             xyz: p.xyz.to_array(),
             rgb: p.rgb,
             error: p.error,
+            normal: None,
         })
         .collect()
 }

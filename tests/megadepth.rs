@@ -177,11 +177,104 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
         n > 0 && worst <= model_max * 1.5,
         "{n} observations, worst {worst} px vs the model's {model_max}"
     );
+    dust3r_reads_its_folder(&out, &dump, &d);
     eprintln!(
         "D2-Net's scene_info of the export equals ours: {} views, {pairs} overlapping ordered \
          pairs; angles within {:.1e}°, scale ratios within {:.1e}",
         d.len(),
         got["angles"]["max_abs"].as_f64().unwrap(),
         got["scale_ratio_matrix"]["max_abs"].as_f64().unwrap()
+    );
+}
+
+/// DUSt3R's loader, transcribed (tests/megadepth_dust3r.py) with OpenCV's own readers, on the
+/// export's `dust3r/` folder: every pair's views open; depth is the dataset's bit for bit; K is
+/// the view's; cam2world inverts the view's world-to-camera pose; the JPEG is the photo within
+/// JPEG's error.
+fn dust3r_reads_its_folder(out: &Path, dump: &Path, d: &Dataset) {
+    let run = std::process::Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/megadepth_dust3r.py"))
+        .arg(out.join("dust3r"))
+        .arg(dump)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let got: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(
+        got["fields"],
+        serde_json::json!(["scene_id", "im1_id", "im2_id", "score"])
+    );
+    let pairs = got["pairs"].as_array().unwrap();
+    assert!(!pairs.is_empty(), "pairs of views sharing points");
+    let ids: Vec<u32> = d
+        .splits()
+        .iter()
+        .flat_map(|(s, _)| d.ids(s).unwrap().to_vec())
+        .collect::<std::collections::BTreeSet<u32>>()
+        .into_iter()
+        .collect();
+    for (stem, v) in got["views"].as_object().unwrap() {
+        let view = d.get(ids[v["id"].as_u64().unwrap() as usize]).unwrap();
+        assert!(
+            view.name.starts_with(stem.as_str()),
+            "{stem} is {}",
+            view.name
+        );
+        let (w, h) = (view.width as u64, view.height as u64);
+        assert_eq!(v["image_shape"], serde_json::json!([h, w, 3]));
+        assert_eq!(v["depth_dtype"], "float32");
+        let depth = npy::read_npy_f64(&dump.join(format!("dust3r_{}.npy", v["id"])));
+        let want: Vec<f64> = view
+            .depth()
+            .unwrap()
+            .data
+            .iter()
+            .map(|z| *z as f64)
+            .collect();
+        assert!(depth == want, "{stem}: depth");
+        let p = &view.params;
+        let k: Vec<Vec<f64>> = serde_json::from_value(v["intrinsics"].clone()).unwrap();
+        assert_eq!(
+            k,
+            vec![
+                vec![p[0] as f32 as f64, 0.0, p[2] as f32 as f64],
+                vec![0.0, p[1] as f32 as f64, p[3] as f32 as f64],
+                vec![0.0, 0.0, 1.0],
+            ]
+        );
+        let c2w: Vec<Vec<f64>> = serde_json::from_value(v["cam2world"].clone()).unwrap();
+        let (pose, _) = nrw_colmap::Rigid3::from_colmap(view.qvec, view.tvec).unwrap();
+        let centre = pose.centre();
+        let r = pose.matrix();
+        for row in 0..3 {
+            for col in 0..3 {
+                assert!(
+                    (c2w[row][col] - r.col(row)[col]).abs() < 1e-6,
+                    "{stem}: rotation"
+                );
+            }
+            assert!(
+                (c2w[row][3] - centre[row]).abs() < 1e-5 * centre.length().max(1.0),
+                "{stem}: centre"
+            );
+        }
+        let photo = view.photo().unwrap();
+        let rgb: Vec<f64> = serde_json::from_value(v["rgb"].clone()).unwrap();
+        let err: f64 = rgb
+            .iter()
+            .zip(photo.as_raw())
+            .map(|(a, b)| (a - *b as f64).abs())
+            .sum::<f64>()
+            / rgb.len() as f64;
+        assert!(err < 4.0, "{stem}: JPEG mean error {err}");
+    }
+    eprintln!(
+        "DUSt3R's loader read {} pairs of the export (EXR read by {})",
+        pairs.len(),
+        got["exr_reader"]
     );
 }

@@ -189,6 +189,23 @@ pub fn encode_gray16(name: &str, w: u32, h: u32, values: &[u16]) -> Result<Vec<u
     png(name, w, h, &bytes, image::ExtendedColorType::L16)
 }
 
+/// JPEG of an RGB8 image at `quality` (1–100), for layouts whose loaders open `.jpg` files.
+pub fn encode_jpeg(name: &str, img: &RgbImage, quality: u8) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality)
+        .write_image(
+            img.as_raw(),
+            img.width(),
+            img.height(),
+            image::ExtendedColorType::Rgb8,
+        )
+        .map_err(|e| DatasetError::Schema {
+            path: name.into(),
+            problem: format!("cannot encode JPEG: {e}"),
+        })?;
+    Ok(out)
+}
+
 /// PNG of an RGB8 image.
 pub fn encode_rgb(name: &str, img: &RgbImage) -> Result<Vec<u8>> {
     png(

@@ -19,13 +19,19 @@ pub struct DepthMap {
 
 /// Encode a depth map as EXR bytes (ZIP, f32: lossless; never PXR24, which is lossy for f32).
 pub fn encode_exr(depth: &DepthMap) -> Result<Vec<u8>> {
+    encode_exr_channel(depth, "Z")
+}
+
+/// [`encode_exr`] with the channel named `channel`: OpenCV's reader (which DUSt3R's loaders
+/// use) takes a single channel only when it is named "Y".
+pub fn encode_exr_channel(depth: &DepthMap, channel: &str) -> Result<Vec<u8>> {
     assert_eq!(
         depth.data.len(),
         depth.width * depth.height,
         "depth buffer size"
     );
     let channels = SpecificChannels::build()
-        .with_channel("Z")
+        .with_channel(channel)
         .with_pixel_fn(|p: Vec2<usize>| (depth.data[p.y() * depth.width + p.x()],));
     let layer = Layer::new(
         (depth.width, depth.height),

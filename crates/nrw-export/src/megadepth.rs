@@ -7,6 +7,10 @@
 //! OUT/phoenix/S6/zl548/MegaDepth_v1/NAME/dense0/depths/STEM.h5   key `depth`, float32 h × w,
 //!                                                           z in model units, 0 = none
 //! OUT/scene_info/NAME.npz                                   what preprocess_scene.py writes
+//! OUT/dust3r/NAME/0/STEM.{jpg,exr,npz}                       DUSt3R's preprocessed MegaDepth:
+//!                                                           photo, depth ("Y"), {intrinsics,
+//!                                                           cam2world}
+//! OUT/dust3r/all_metadata.npz                               scenes, images, scored pairs
 //! ```
 //!
 //! The model is PINHOLE, one camera per image with the image's id (the script reads
@@ -78,13 +82,14 @@ impl LayoutWriter for Megadepth {
         }
         write_sparse_txt(&views, rec, name, staged)?;
         let info = SceneInfo::of(&views, rec);
-        let npz = info.npz().ok_or_else(|| {
-            ExportError::refused(
-                &job.cfg.out,
-                "scene_info over 4 GiB needs ZIP64, not written",
-            )
-        })?;
-        staged.write(&format!("scene_info/{name}.npz"), &npz)?;
+        let too_big =
+            || ExportError::refused(&job.cfg.out, "an .npz over 4 GiB needs ZIP64, not written");
+        staged.write(
+            &format!("scene_info/{name}.npz"),
+            &info.npz().ok_or_else(too_big)?,
+        )?;
+        let meta = dust3r_metadata(name, &views, &info).ok_or_else(too_big)?;
+        staged.write("dust3r/all_metadata.npz", &meta)?;
         summary.warnings.extend(consumer_warnings(&views));
         summary.depth_source = Some(job.depth_source());
         Ok(())
@@ -158,6 +163,7 @@ fn write_view(
     );
     staged.write(&depth_path, &h5)?;
     let image = crate::nerfw::model_image(v, &file)?;
+    write_dust3r_view(v, &depth, &camera, &image, name, stem, staged)?;
     Ok(View {
         points2d: observations(v, rec, &camera)?,
         qvec: image.cam_from_world.qvec(),
@@ -168,6 +174,84 @@ fn write_view(
         depth_path,
         camera,
     })
+}
+
+/// DUSt3R's three files of a view (its `preprocess_megadepth.py` output, at the stored size):
+/// the photo as JPEG (quality 90, as that script saves it), the depth as a one-channel "Y"
+/// EXR (OpenCV's reading), and `{intrinsics, cam2world}`.
+fn write_dust3r_view(
+    v: &ViewRow,
+    depth: &nrw_dataset::depth::DepthMap,
+    camera: &Camera,
+    image: &nrw_colmap::Image,
+    name: &str,
+    stem: &str,
+    staged: &Staged,
+) -> Result<()> {
+    let dir = format!("dust3r/{name}/0/{stem}");
+    let jpg = nrw_dataset::codec::encode_jpeg(&v.name, &v.photo()?, 90)?;
+    staged.write(&format!("{dir}.jpg"), &jpg)?;
+    let exr = nrw_dataset::depth::encode_exr_channel(depth, "Y")?;
+    staged.write(&format!("{dir}.exr"), &exr)?;
+    let p = &camera.params;
+    let k = [p[0], 0.0, p[2], 0.0, p[1], p[3], 0.0, 0.0, 1.0];
+    let r = rotation(image.cam_from_world.qvec());
+    let t = image.cam_from_world.translation.to_array();
+    let mut c2w = [0.0; 16];
+    for row in 0..3 {
+        for col in 0..3 {
+            c2w[row * 4 + col] = r[col][row];
+        }
+        c2w[row * 4 + 3] = -(0..3).map(|m| r[m][row] * t[m]).sum::<f64>();
+    }
+    c2w[15] = 1.0;
+    let npz = npz::npz(&[
+        ("intrinsics", Array::f64(&[3, 3], &k).npy()),
+        ("cam2world", Array::f64(&[4, 4], &c2w).npy()),
+    ])
+    .expect("two small arrays");
+    staged.write(&format!("{dir}.npz"), &npz)
+}
+
+/// DUSt3R's `all_metadata.npz`: `scenes` ("NAME 0"), `images` (the views' stems, in
+/// scene_info's order) and `pairs` (scene_id, im1_id, im2_id, score) for every pair of views
+/// that share SfM points, scored by the smaller of their two overlaps (our choice: DUSt3R
+/// publishes its pairs, not how they were scored).
+fn dust3r_metadata(name: &str, views: &BTreeMap<u32, View>, info: &SceneInfo) -> Option<Vec<u8>> {
+    let n = views.len();
+    let stems: Vec<String> = views
+        .values()
+        .map(|v| {
+            v.file
+                .rsplit_once('.')
+                .map_or(v.file.clone(), |(s, _)| s.to_string())
+        })
+        .collect();
+    let mut body = Vec::new();
+    let mut rows = 0;
+    for i in 0..n {
+        for j in i + 1..n {
+            let score = info.overlap[i * n + j].min(info.overlap[j * n + i]);
+            if score > 0.0 {
+                body.extend_from_slice(&0i32.to_le_bytes());
+                body.extend_from_slice(&(i as i32).to_le_bytes());
+                body.extend_from_slice(&(j as i32).to_le_bytes());
+                body.extend_from_slice(&(score as f32).to_le_bytes());
+                rows += 1;
+            }
+        }
+    }
+    let fields = [
+        ("scene_id", "<i4"),
+        ("im1_id", "<i4"),
+        ("im2_id", "<i4"),
+        ("score", "<f4"),
+    ];
+    npz::npz(&[
+        ("scenes", Array::unicode(&[format!("{name} 0")]).npy()),
+        ("images", Array::unicode(&stems).npy()),
+        ("pairs", Array::records(&fields, rows, body).npy()),
+    ])
 }
 
 /// The scene model's observations of view `v`, carried into the stored view's pixels: each
@@ -413,12 +497,7 @@ fn first_seen_last_value(obs: &[Point2D]) -> Vec<(u64, [f64; 2])> {
 
 /// The `.npy` of a 1-D object array of dicts (numpy pickles its items).
 fn objects(items: &[Vec<(u64, DictValue)>]) -> Vec<u8> {
-    Array {
-        descr: "|O".into(),
-        shape: vec![items.len()],
-        body: crate::pickle::object_array_of_dicts(items),
-    }
-    .npy()
+    Array::objects(items.len(), crate::pickle::object_array_of_dicts(items)).npy()
 }
 
 /// The rotation matrix of a quaternion as preprocess_scene.py builds it: re-normalised, then

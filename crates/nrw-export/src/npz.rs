@@ -1,7 +1,8 @@
 //! NumPy's `.npy` (format 1.0) and `.npz` (a zip of `.npy` members, stored, as `np.savez`
 //! writes it) for the arrays exports carry: float64, int64, float32 and fixed-width unicode.
 
-/// One array: its numpy `descr`, shape and little-endian body.
+/// One array: its numpy `descr` as a Python literal (`'<f8'`, or a list of fields for a
+/// structured array), shape and little-endian body.
 pub struct Array {
     pub descr: String,
     pub shape: Vec<usize>,
@@ -53,9 +54,32 @@ impl Array {
         Array::of(&format!("<U{width}"), &[v.len()], body)
     }
 
+    /// A 1-D structured array of `rows` records, each `fields` (name, descr) packed in order
+    /// as `body` holds them.
+    pub fn records(fields: &[(&str, &str)], rows: usize, body: Vec<u8>) -> Array {
+        let list: Vec<String> = fields
+            .iter()
+            .map(|(n, d)| format!("('{n}', '{d}')"))
+            .collect();
+        Array {
+            descr: format!("[{}]", list.join(", ")),
+            shape: vec![rows],
+            body,
+        }
+    }
+
+    /// A 1-D object array whose `.npy` body is numpy's pickle of it.
+    pub fn objects(rows: usize, pickle: Vec<u8>) -> Array {
+        Array {
+            descr: "'|O'".into(),
+            shape: vec![rows],
+            body: pickle,
+        }
+    }
+
     fn of(descr: &str, shape: &[usize], body: Vec<u8>) -> Array {
         Array {
-            descr: descr.into(),
+            descr: format!("'{descr}'"),
             shape: shape.to_vec(),
             body,
         }
@@ -69,7 +93,7 @@ impl Array {
             _ => format!("({})", dims.join(", ")),
         };
         let dict = format!(
-            "{{'descr': '{}', 'fortran_order': False, 'shape': {shape}, }}",
+            "{{'descr': {}, 'fortran_order': False, 'shape': {shape}, }}",
             self.descr
         );
         // Magic (6) + version (2) + length (2) + dict + padding + '\n' ≡ 0 (mod 64).
@@ -143,7 +167,7 @@ mod tests {
     #[test]
     fn headers_pad_to_64_bytes_and_unicode_is_utf32() {
         let a = Array::unicode(&["ab".into(), "é".into()]);
-        assert_eq!(a.descr, "<U2");
+        assert_eq!(a.descr, "'<U2'");
         assert_eq!(a.body.len(), 16);
         assert_eq!(&a.body[8..12], &0xe9u32.to_le_bytes());
         let npy = a.npy();

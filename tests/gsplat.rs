@@ -280,7 +280,7 @@ fn nerfbaselines_reads_the_split_images_masks_and_points() {
             .zip(&cam.params)
             .map(|(a, b)| (a - (*b as f32 as f64 / 2.0) as f32 as f64).abs())
             .fold(0.0, f64::max);
-        if cam.width % 2 == 0 && cam.height % 2 == 0 {
+        if cam.width.is_multiple_of(2) && cam.height.is_multiple_of(2) {
             assert_eq!(off, 0.0, "even sizes: nerfbaselines' K is K / 2");
         } else {
             worst = worst.max(off);

@@ -250,15 +250,13 @@ fn dust3r_reads_its_folder(out: &Path, dump: &Path, d: &Dataset) {
         let (pose, _) = nrw_colmap::Rigid3::from_colmap(view.qvec, view.tvec).unwrap();
         let centre = pose.centre();
         let r = pose.matrix();
-        for row in 0..3 {
-            for col in 0..3 {
-                assert!(
-                    (c2w[row][col] - r.col(row)[col]).abs() < 1e-6,
-                    "{stem}: rotation"
-                );
+        for (row, c2w_row) in c2w.iter().enumerate().take(3) {
+            // cam2world's rotation is Rᵀ: its row `row` is R's column `row`.
+            for (col, x) in c2w_row.iter().enumerate().take(3) {
+                assert!((x - r.col(row)[col]).abs() < 1e-6, "{stem}: rotation");
             }
             assert!(
-                (c2w[row][3] - centre[row]).abs() < 1e-5 * centre.length().max(1.0),
+                (c2w_row[3] - centre[row]).abs() < 1e-5 * centre.length().max(1.0),
                 "{stem}: centre"
             );
         }

@@ -986,6 +986,7 @@ fn check_mvs_priors(scene: &Path, ws: &Workspace, ds: &Path, out: &Path) {
             .unwrap();
     let dataset = nrw_dataset::reader::Dataset::open(ds).unwrap();
     let (mut prior, mut good, mut render, mut same_as_map) = (0usize, 0usize, 0usize, 0usize);
+    let (mut trusted, mut confidence) = (0usize, 0f64);
     let mut same_size = false;
     for (split, _) in dataset.splits() {
         for &id in dataset.ids(&split).unwrap() {
@@ -997,6 +998,20 @@ fn check_mvs_priors(scene: &Path, ws: &Workspace, ds: &Path, out: &Path) {
             let png = image::open(out.join("depths").join(&file))
                 .unwrap()
                 .to_luma16();
+            let valid = image::open(out.join("depth_masks").join(&file))
+                .unwrap()
+                .to_luma8();
+            let conf = image::open(out.join("depth_confidence").join(&file))
+                .unwrap()
+                .to_luma8();
+            for ((q, m), c) in png.as_raw().iter().zip(valid.as_raw()).zip(conf.as_raw()) {
+                assert!(
+                    *m == 255 || (*q == 0 && *c == 0),
+                    "{file}: no depth, no confidence"
+                );
+                trusted += (*m == 255) as usize;
+                confidence += *c as f64 / 255.0;
+            }
             let truth = truth_depth(scene, &v.name);
             let map = read_map(ws, MapKind::Depth, &v.name);
             let s = v.width as f64 / truth.width as f64;
@@ -1030,6 +1045,13 @@ fn check_mvs_priors(scene: &Path, ws: &Workspace, ds: &Path, out: &Path) {
         ds.display()
     );
     assert!(share >= 0.9, "{share}");
+    assert!(
+        trusted >= prior,
+        "the validity mask covers every prior pixel"
+    );
+    let mean = confidence / trusted as f64;
+    eprintln!("MVS confidence: mean {mean:.3} over {trusted} valid pixels");
+    assert!(mean > 0.2 && mean <= 1.0, "{mean}");
     if same_size {
         assert_eq!(
             same_as_map, prior,

@@ -126,6 +126,18 @@ fn masks_depth_priors_and_pyramids_hold_what_they_claim() {
             .unwrap()
             .to_luma16();
         let depth = v.depth().unwrap();
+        let valid = gray(&out.join("depth_masks").join(&file));
+        for (m, z) in valid.as_raw().iter().zip(&depth.data) {
+            assert_eq!(
+                *m == 255,
+                *z > 0.0,
+                "{file}: the validity mask is the render's coverage"
+            );
+        }
+        assert!(
+            !out.join("depth_confidence").exists(),
+            "the render's z-buffer has no confidence"
+        );
         for (q, z) in png.as_raw().iter().zip(&depth.data) {
             let inv = *q as f64 / 65536.0 * scale + offset;
             if *z > 0.0 {

@@ -12,6 +12,8 @@
 //! OUT/sky/FILE                       255 = sky (ADE20K `sky`), 0 = anything else
 //! OUT/depths/FILE                    16-bit inverse depth (crate::inverse_depth), 0 = none
 //! OUT/depths_{2,4,8}/FILE            the inverse-depth pyramid, same scale per view
+//! OUT/depth_masks/FILE               255 = the depth prior has depth at the pixel, 0 = none
+//! OUT/depth_confidence/FILE          with densify's depth: its confidence, 0–255 for 0–1
 //! OUT/sparse/0/{cameras,images,points3D}.bin
 //! OUT/sparse/0/depth_params.json     {stem: {scale, offset, med_scale}}, graphdeco's
 //! OUT/train_list.txt, test_list.txt  the split, as nerfbaselines' colmap loader reads it
@@ -123,13 +125,10 @@ impl ViewEncoder for Encoder<'_> {
             ));
         }
         out.extend(mask_files(v, &file)?);
-        let prior = self.job.prior_depth(v)?;
-        out.extend(depth_files(
-            v,
-            &prior,
-            &file,
-            self.depth[&v.image_id].scale,
-        )?);
+        let prior = self.job.prior(v)?;
+        let scale = self.depth[&v.image_id].scale;
+        out.extend(depth_files(v, &prior.depth, &file, scale)?);
+        out.extend(depth_trust_files(v, &prior, &file)?);
         self.model
             .lock()
             .expect("no encoder panicked")
@@ -204,6 +203,34 @@ fn depth_files(v: &ViewRow, depth: &DepthMap, file: &str, scale: f64) -> Result<
         out.push((
             format!("{}/{file}", pyramid::level_dir("depths", f)),
             encode_gray16(&v.name, lw, lh, &inverse_depth::quantise(&level, scale))?,
+        ));
+    }
+    Ok(out)
+}
+
+/// The depth prior's validity mask (255 = the prior has depth there) and, when the source
+/// has one, its confidence (0–255 for 0–1).
+fn depth_trust_files(v: &ViewRow, prior: &crate::Prior, file: &str) -> Result<Encoded> {
+    let (w, h) = (v.width, v.height);
+    let valid: Vec<u8> = prior
+        .depth
+        .data
+        .iter()
+        .map(|z| if *z > 0.0 { 255 } else { 0 })
+        .collect();
+    let mut out = vec![(
+        format!("depth_masks/{file}"),
+        encode_gray(&v.name, w, h, &valid)?,
+    )];
+    if let Some(c) = &prior.confidence {
+        // Precision given up here: confidence in steps of 1/255.
+        let c: Vec<u8> = c
+            .iter()
+            .map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
+        out.push((
+            format!("depth_confidence/{file}"),
+            encode_gray(&v.name, w, h, &c)?,
         ));
     }
     Ok(out)

@@ -77,7 +77,16 @@ pub struct DepthPrior<'a> {
     /// The view's depth at its stored size (0 = none), or None to fall back to the render's.
     #[allow(clippy::type_complexity)]
     pub depth:
-        &'a (dyn Fn(&nrw_dataset::ViewRow) -> std::result::Result<Option<DepthMap>, String> + Sync),
+        &'a (dyn Fn(&nrw_dataset::ViewRow) -> std::result::Result<Option<Prior>, String> + Sync),
+}
+
+/// One view's depth prior at its stored size.
+pub struct Prior {
+    /// Depth along the camera's z, 0 = none.
+    pub depth: DepthMap,
+    /// How much to trust each pixel's depth in [0, 1] (densify: the mean NCC of the agreeing
+    /// source views), when the source has a measure; 0 where there is no depth.
+    pub confidence: Option<Vec<f32>>,
 }
 
 /// `export.json`'s name for the render's z-buffer as a depth source.

@@ -69,6 +69,11 @@ impl Job<'_> {
     /// A view's depth prior: the caller's (densify's MVS) where it has one, else the render's
     /// z-buffer.
     pub fn prior_depth(&self, v: &nrw_dataset::ViewRow) -> Result<nrw_dataset::depth::DepthMap> {
+        Ok(self.prior(v)?.depth)
+    }
+
+    /// A view's depth prior with its confidence, when the source has one.
+    pub fn prior(&self, v: &nrw_dataset::ViewRow) -> Result<crate::Prior> {
         if let Some(p) = self.inputs.depth_prior {
             let got = (p.depth)(v).map_err(|problem| ExportError::Value {
                 path: v.name.clone().into(),
@@ -76,11 +81,14 @@ impl Job<'_> {
                 field: "depth".into(),
                 problem,
             })?;
-            if let Some(d) = got {
-                return Ok(d);
+            if let Some(prior) = got {
+                return Ok(prior);
             }
         }
-        Ok(v.depth()?)
+        Ok(crate::Prior {
+            depth: v.depth()?,
+            confidence: None,
+        })
     }
 
     /// What `export.json` names as the source of depth priors.

@@ -56,8 +56,9 @@ impl MvsPriors {
         format!("densify geometric depth maps ({})", self.ws.root.display())
     }
 
-    /// View `v`'s MVS depth at its stored size, or None when the workspace has no map of it.
-    pub fn depth(&self, v: &ViewRow) -> Result<Option<DepthMap>> {
+    /// View `v`'s MVS depth at its stored size with its confidence (the mean NCC of the
+    /// agreeing source views, clamped to [0, 1]), or None when the workspace has no map of it.
+    pub fn depth(&self, v: &ViewRow) -> Result<Option<nrw_export::Prior>> {
         let Some(id) = self.by_name.get(&v.name) else {
             return Ok(None);
         };
@@ -88,11 +89,38 @@ impl MvsPriors {
         if !path.is_file() {
             return Ok(None);
         }
-        let bytes = std::fs::read(&path).map_err(|e| PipelineError::io(&path, e))?;
-        let map = DenseMap::from_bytes(&bytes, &path)?;
+        let map = read_map(&path)?;
         let stored = stored_camera(v)?;
-        Ok(Some(carry(&map, ws_cam, &stored)))
+        let (w, h) = (v.width as usize, v.height as usize);
+        let depth = DepthMap {
+            width: w,
+            height: h,
+            data: carry(&map, 0, ws_cam, &stored),
+        };
+        let conf_path = self
+            .ws
+            .map(MapKind::Confidence, MapPass::Geometric, &v.name)
+            .map_err(|p| PipelineError::input(self.ws.root.as_path(), p))?;
+        let confidence = if conf_path.is_file() {
+            let c = carry(&read_map(&conf_path)?, 0, ws_cam, &stored);
+            // No depth, no confidence: the two maps keep one validity.
+            let c = c
+                .iter()
+                .zip(&depth.data)
+                .map(|(c, z)| if *z > 0.0 { c.clamp(0.0, 1.0) } else { 0.0 })
+                .collect();
+            Some(c)
+        } else {
+            None
+        };
+        Ok(Some(nrw_export::Prior { depth, confidence }))
     }
+}
+
+/// A dense map file.
+fn read_map(path: &Path) -> Result<DenseMap> {
+    let bytes = std::fs::read(path).map_err(|e| PipelineError::io(path, e))?;
+    Ok(DenseMap::from_bytes(&bytes, path)?)
 }
 
 /// The workspace folder of a cloud file named `fused.ply` beside `densify.json`.
@@ -116,8 +144,9 @@ fn stored_camera(v: &ViewRow) -> Result<Camera> {
     })
 }
 
-/// A workspace depth map carried into the stored camera's pixels (same pose).
-fn carry(map: &DenseMap, ws_cam: &Camera, stored: &Camera) -> DepthMap {
+/// Channel `c` of a workspace map carried into the stored camera's pixels (same pose); 0
+/// where the map has no finite positive value or the ray leaves it.
+fn carry(map: &DenseMap, c: usize, ws_cam: &Camera, stored: &Camera) -> Vec<f32> {
     let (w, h) = (stored.width as usize, stored.height as usize);
     let mut data = vec![0f32; w * h];
     for y in 0..h {
@@ -133,15 +162,11 @@ fn carry(map: &DenseMap, ws_cam: &Camera, stored: &Camera) -> DepthMap {
             if u < 0.0 || v < 0.0 || u >= map.width as f64 || v >= map.height as f64 {
                 continue;
             }
-            let z = map.get(u as usize, v as usize, 0);
+            let z = map.get(u as usize, v as usize, c);
             if z > 0.0 && z.is_finite() {
                 data[y * w + x] = z;
             }
         }
     }
-    DepthMap {
-        width: w,
-        height: h,
-        data,
-    }
+    data
 }

@@ -20,7 +20,8 @@
 //! ```
 //!
 //! Masks and sky come from the labels a dataset carries (`ingest --semantics` or
-//! `--segment-weights`); without labels none are written. Depth is the render's z-buffer.
+//! `--segment-weights`); without labels none are written. Depth is the render's z-buffer, or
+//! densify's MVS depth when the dataset was rendered from its workspace ([`crate::Prior`]).
 //! Cameras are PINHOLE, one per image with the image's id (graphdeco, gsplat and
 //! Splatfacto-W read `params[0..4]` as fx, fy, cx, cy; loaders that look cameras up by image id
 //! find the right one): a distorted camera is refused by name (ingest with `--undistort`).

@@ -20,7 +20,7 @@
 //! `scene_info` follows the script line by line (see [`SceneInfo`]); every view has a depth
 //! file, so no entry is `None`.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use glam::{DVec2, DVec3};
 use nrw_colmap::{Camera, Point2D, Point3D, Reconstruction, TrackElement};
@@ -82,12 +82,19 @@ impl LayoutWriter for Megadepth {
         }
         write_sparse_txt(&views, rec, name, staged)?;
         let info = SceneInfo::of(&views, rec);
+        let path = staged.claim(&format!("scene_info/{name}.npz"))?;
+        let dir = path.parent().expect("a file under the export");
+        std::fs::create_dir_all(dir).map_err(|e| ExportError::io(dir, e))?;
+        let file = std::fs::File::create(&path).map_err(|e| ExportError::io(&path, e))?;
+        let file = info
+            .write_npz(std::io::BufWriter::with_capacity(1 << 20, file))
+            .map_err(|e| ExportError::io(&path, e))?;
+        let file = file
+            .into_inner()
+            .map_err(|e| ExportError::io(&path, e.into_error()))?;
+        file.sync_all().map_err(|e| ExportError::io(&path, e))?;
         let too_big =
             || ExportError::refused(&job.cfg.out, "an .npz over 4 GiB needs ZIP64, not written");
-        staged.write(
-            &format!("scene_info/{name}.npz"),
-            &info.npz().ok_or_else(too_big)?,
-        )?;
         let meta = dust3r_metadata(name, &views, &info).ok_or_else(too_big)?;
         staged.write("dust3r/all_metadata.npz", &meta)?;
         summary.warnings.extend(consumer_warnings(&views));
@@ -218,7 +225,6 @@ fn write_dust3r_view(
 /// that share SfM points, scored by the smaller of their two overlaps (our choice: DUSt3R
 /// publishes its pairs, not how they were scored).
 fn dust3r_metadata(name: &str, views: &BTreeMap<u32, View>, info: &SceneInfo) -> Option<Vec<u8>> {
-    let n = views.len();
     let stems: Vec<String> = views
         .values()
         .map(|v| {
@@ -227,20 +233,16 @@ fn dust3r_metadata(name: &str, views: &BTreeMap<u32, View>, info: &SceneInfo) ->
                 .map_or(v.file.clone(), |(s, _)| s.to_string())
         })
         .collect();
-    let mut body = Vec::new();
-    let mut rows = 0;
-    for i in 0..n {
-        for j in i + 1..n {
-            let score = info.overlap[i * n + j].min(info.overlap[j * n + i]);
-            if score > 0.0 {
-                body.extend_from_slice(&0i32.to_le_bytes());
-                body.extend_from_slice(&(i as i32).to_le_bytes());
-                body.extend_from_slice(&(j as i32).to_le_bytes());
-                body.extend_from_slice(&(score as f32).to_le_bytes());
-                rows += 1;
-            }
-        }
+    let pairs = info.scored_pairs();
+    let mut body = Vec::with_capacity(pairs.len() * 16);
+    for (i, j, score) in &pairs {
+        body.extend_from_slice(&0i32.to_le_bytes());
+        body.extend_from_slice(&(*i as i32).to_le_bytes());
+        body.extend_from_slice(&(*j as i32).to_le_bytes());
+        // Precision given up here: DUSt3R's pairs hold float32 scores.
+        body.extend_from_slice(&(*score as f32).to_le_bytes());
     }
+    let rows = pairs.len();
     let fields = [
         ("scene_id", "<i4"),
         ("im1_id", "<i4"),
@@ -340,20 +342,31 @@ fn write_sparse_txt(
 /// `(R[2]·X + t_z) / ((fx + fy) / 2)`; `overlap[i, j] = |common points| / |points of i|`;
 /// `scale_ratio[i, j] = min over common points of max(nd_i / nd_j, nd_j / nd_i)` (−1 without
 /// common points, and on the diagonal with overlap); `angles = degrees(arccos(clip(a·b)))`.
+/// The N × N matrices are never held: each is written a row at a time from the points' views
+/// ([`SceneInfo::row`]), so memory grows with the observations, not with N².
 pub struct SceneInfo {
     pub image_paths: Vec<String>,
     pub depth_paths: Vec<String>,
     pub intrinsics: Vec<[[f64; 3]; 3]>,
     pub poses: Vec<[[f64; 4]; 4]>,
-    pub overlap: Vec<f64>,
-    pub scale_ratio: Vec<f64>,
-    pub angles: Vec<f64>,
     pub n_points3d: Vec<i64>,
     /// Per view, `{point id: [x, y]}` in the script's insertion order (first observation of a
     /// point, last one's value).
     pub points3d_id_to_2d: Vec<Vec<(u64, DictValue)>>,
     /// Per view, `{point id: normalised depth}` in the same order.
     pub points3d_id_to_ndepth: Vec<Vec<(u64, DictValue)>>,
+    /// Each view's principal axis (R's third row).
+    axes: Vec<DVec3>,
+    /// Per point: the views that observe it, with its normalised depth in each.
+    seen: HashMap<u64, Vec<(usize, f64)>>,
+}
+
+/// Which N × N matrix of scene_info.
+#[derive(Clone, Copy)]
+enum Matrix {
+    Overlap,
+    ScaleRatio,
+    Angles,
 }
 
 impl SceneInfo {
@@ -365,17 +378,12 @@ impl SceneInfo {
             depth_paths: Vec::with_capacity(n),
             intrinsics: Vec::with_capacity(n),
             poses: Vec::with_capacity(n),
-            overlap: vec![-1.0; n * n],
-            scale_ratio: vec![-1.0; n * n],
-            angles: vec![0.0; n * n],
             n_points3d: Vec::with_capacity(n),
             points3d_id_to_2d: Vec::with_capacity(n),
             points3d_id_to_ndepth: Vec::with_capacity(n),
+            axes: Vec::with_capacity(n),
+            seen: HashMap::new(),
         };
-        let mut axes = Vec::with_capacity(n);
-        // Per point: (view index, normalised depth), in view order (a dict per view: the
-        // last observation of a point in a view wins, as in the script).
-        let mut seen: BTreeMap<u64, Vec<(usize, f64)>> = BTreeMap::new();
         for (i, v) in views.values().enumerate() {
             let p = &v.camera.params;
             let (fx, fy, cx, cy) = (p[0], p[1], p[2], p[3]);
@@ -390,14 +398,14 @@ impl SceneInfo {
             }
             pose[3][3] = 1.0;
             info.poses.push(pose);
-            axes.push(DVec3::from_array(r[2]));
+            info.axes.push(DVec3::from_array(r[2]));
             let xy = first_seen_last_value(&v.points2d);
             let mut nd = Vec::with_capacity(xy.len());
             for &(id, _) in &xy {
                 let x = rec.points[&id].xyz;
                 let z = r[2][0] * x.x + r[2][1] * x.y + r[2][2] * x.z + t[2];
                 let d = z / (0.5 * (fx + fy));
-                seen.entry(id).or_default().push((i, d));
+                info.seen.entry(id).or_default().push((i, d));
                 nd.push((id, DictValue::Scalar(d)));
             }
             info.n_points3d.push(xy.len() as i64);
@@ -407,73 +415,128 @@ impl SceneInfo {
             info.image_paths.push(v.image_path.clone());
             info.depth_paths.push(v.depth_path.clone());
         }
-        for i in 0..n {
-            for j in 0..n {
-                let d = axes[i].dot(axes[j]).clamp(-1.0, 1.0);
-                info.angles[i * n + j] = d.acos().to_degrees();
-            }
-        }
-        info.pairs(&seen);
         info
     }
 
-    /// Overlap and scale ratio of every pair of views, from the points they share.
-    fn pairs(&mut self, seen: &BTreeMap<u64, Vec<(usize, f64)>>) {
-        let n = self.n_points3d.len();
-        let mut common = vec![0u64; n * n];
-        let mut ratio = vec![f64::INFINITY; n * n];
-        for obs in seen.values() {
-            for (a, &(i, ni)) in obs.iter().enumerate() {
-                for &(j, nj) in &obs[a + 1..] {
-                    common[i * n + j] += 1;
-                    let r = (ni / nj).max(nj / ni);
-                    ratio[i * n + j] = ratio[i * n + j].min(r);
+    /// Views in the scene.
+    fn len(&self) -> usize {
+        self.n_points3d.len()
+    }
+
+    /// For view `i`, the points it shares with every view and the smallest scale ratio over
+    /// them (infinite without common points).
+    fn shared(&self, i: usize) -> (Vec<u64>, Vec<f64>) {
+        let n = self.len();
+        let (mut common, mut ratio) = (vec![0u64; n], vec![f64::INFINITY; n]);
+        for (id, v) in &self.points3d_id_to_ndepth[i] {
+            let DictValue::Scalar(ni) = *v else {
+                unreachable!("normalised depths are scalars")
+            };
+            for &(j, nj) in &self.seen[id] {
+                if j != i {
+                    common[j] += 1;
+                    ratio[j] = ratio[j].min((ni / nj).max(nj / ni));
                 }
             }
         }
-        for i in 0..n {
-            for j in i + 1..n {
-                let c = common[i * n + j] as f64;
-                let share = |k: usize| match self.n_points3d[k] {
-                    0 => 0.0, // the script divides by zero here (see the export's warnings)
-                    m => c / m as f64,
-                };
-                self.overlap[i * n + j] = share(i);
-                self.overlap[j * n + i] = share(j);
-                if c > 0.0 {
-                    self.scale_ratio[i * n + j] = ratio[i * n + j];
-                    self.scale_ratio[j * n + i] = ratio[i * n + j];
-                }
+        (common, ratio)
+    }
+
+    /// Row `i` of one of the matrices.
+    fn row(&self, m: Matrix, i: usize) -> Vec<f64> {
+        let n = self.len();
+        match m {
+            Matrix::Angles => (0..n)
+                .map(|j| {
+                    self.axes[i]
+                        .dot(self.axes[j])
+                        .clamp(-1.0, 1.0)
+                        .acos()
+                        .to_degrees()
+                })
+                .collect(),
+            Matrix::Overlap => {
+                let (common, _) = self.shared(i);
+                let own = self.n_points3d[i];
+                (0..n)
+                    .map(|j| match (j == i, own) {
+                        (true, _) => -1.0,
+                        (false, 0) => 0.0, // the script divides by zero here (see the warnings)
+                        (false, own) => common[j] as f64 / own as f64,
+                    })
+                    .collect()
+            }
+            Matrix::ScaleRatio => {
+                let (common, ratio) = self.shared(i);
+                (0..n)
+                    .map(|j| {
+                        if j == i || common[j] == 0 {
+                            -1.0
+                        } else {
+                            ratio[j]
+                        }
+                    })
+                    .collect()
             }
         }
     }
 
-    /// The `.npz`, with the arrays `np.savez` makes of the script's lists.
-    fn npz(&self) -> Option<Vec<u8>> {
-        let n = self.n_points3d.len();
+    /// Every pair (i < j) of views sharing points, scored by the smaller of their overlaps.
+    fn scored_pairs(&self) -> Vec<(usize, usize, f64)> {
+        let mut out = Vec::new();
+        for i in 0..self.len() {
+            let (common, _) = self.shared(i);
+            for j in i + 1..self.len() {
+                if common[j] > 0 {
+                    let share = |k: usize| common[j] as f64 / self.n_points3d[k] as f64;
+                    out.push((i, j, share(i).min(share(j))));
+                }
+            }
+        }
+        out
+    }
+
+    /// Write the `.npz` into `w`, with the arrays `np.savez` makes of the script's lists; the
+    /// matrices a row at a time.
+    fn write_npz<W: std::io::Write + std::io::Seek>(&self, w: W) -> std::io::Result<W> {
+        let n = self.len();
         let flat = |m: &[[[f64; 3]; 3]]| m.iter().flatten().flatten().copied().collect::<Vec<_>>();
         let poses: Vec<f64> = self.poses.iter().flatten().flatten().copied().collect();
-        npz::npz(&[
-            ("image_paths", Array::unicode(&self.image_paths).npy()),
-            ("depth_paths", Array::unicode(&self.depth_paths).npy()),
-            (
-                "intrinsics",
-                Array::f64(&[n, 3, 3], &flat(&self.intrinsics)).npy(),
-            ),
-            ("poses", Array::f64(&[n, 4, 4], &poses).npy()),
-            ("overlap_matrix", Array::f64(&[n, n], &self.overlap).npy()),
-            (
-                "scale_ratio_matrix",
-                Array::f64(&[n, n], &self.scale_ratio).npy(),
-            ),
-            ("angles", Array::f64(&[n, n], &self.angles).npy()),
-            ("n_points3D", Array::i64(&self.n_points3d).npy()),
-            ("points3D_id_to_2D", objects(&self.points3d_id_to_2d)),
-            (
-                "points3D_id_to_ndepth",
-                objects(&self.points3d_id_to_ndepth),
-            ),
-        ])
+        let mut z = npz::NpzWriter::new(w);
+        z.member("image_paths", &Array::unicode(&self.image_paths).npy())?;
+        z.member("depth_paths", &Array::unicode(&self.depth_paths).npy())?;
+        z.member(
+            "intrinsics",
+            &Array::f64(&[n, 3, 3], &flat(&self.intrinsics)).npy(),
+        )?;
+        z.member("poses", &Array::f64(&[n, 4, 4], &poses).npy())?;
+        for (name, m) in [
+            ("overlap_matrix", Matrix::Overlap),
+            ("scale_ratio_matrix", Matrix::ScaleRatio),
+            ("angles", Matrix::Angles),
+        ] {
+            let header = npz::npy_header("'<f8'", &[n, n]);
+            let len = header.len() as u64 + (n * n * 8) as u64;
+            z.streamed(name, len, |put| {
+                put(&header)?;
+                for i in 0..n {
+                    let row: Vec<u8> = self
+                        .row(m, i)
+                        .iter()
+                        .flat_map(|x| x.to_le_bytes())
+                        .collect();
+                    put(&row)?;
+                }
+                Ok(())
+            })?;
+        }
+        z.member("n_points3D", &Array::i64(&self.n_points3d).npy())?;
+        z.member("points3D_id_to_2D", &objects(&self.points3d_id_to_2d))?;
+        z.member(
+            "points3D_id_to_ndepth",
+            &objects(&self.points3d_id_to_ndepth),
+        )?;
+        z.finish()
     }
 }
 

@@ -87,45 +87,94 @@ impl Array {
 
     /// The `.npy` bytes.
     pub fn npy(&self) -> Vec<u8> {
-        let dims: Vec<String> = self.shape.iter().map(|d| d.to_string()).collect();
-        let shape = match dims.len() {
-            1 => format!("({},)", dims[0]),
-            _ => format!("({})", dims.join(", ")),
-        };
-        let dict = format!(
-            "{{'descr': {}, 'fortran_order': False, 'shape': {shape}, }}",
-            self.descr
-        );
-        // Magic (6) + version (2) + length (2) + dict + padding + '\n' ≡ 0 (mod 64).
-        let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
-        let header = format!("{dict}{}\n", " ".repeat(pad));
-        let mut out = Vec::with_capacity(10 + header.len() + self.body.len());
-        out.extend_from_slice(b"\x93NUMPY\x01\x00");
-        out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-        out.extend_from_slice(header.as_bytes());
+        let mut out = npy_header(&self.descr, &self.shape);
         out.extend_from_slice(&self.body);
         out
     }
 }
 
+/// The `.npy` header (format 1.0, padded to 64 bytes) of an array of `descr` (a Python
+/// literal) and `shape`, for a body written after it.
+pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let shape = match dims.len() {
+        1 => format!("({},)", dims[0]),
+        _ => format!("({})", dims.join(", ")),
+    };
+    let dict = format!("{{'descr': {descr}, 'fortran_order': False, 'shape': {shape}, }}");
+    // Magic (6) + version (2) + length (2) + dict + padding + '\n' ≡ 0 (mod 64).
+    let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
+    let header = format!("{dict}{}\n", " ".repeat(pad));
+    let mut out = Vec::with_capacity(10 + header.len());
+    out.extend_from_slice(b"\x93NUMPY\x01\x00");
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    out
+}
+
 /// An `.npz` of `members` (name without `.npy`, bytes of an `.npy`), stored uncompressed as
 /// `np.savez` does; None when it would need ZIP64 (a member or the archive over 4 GiB).
 pub fn npz(members: &[(&str, Vec<u8>)]) -> Option<Vec<u8>> {
-    let mut out = Vec::new();
-    let mut central = Vec::new();
+    let mut z = NpzWriter::new(std::io::Cursor::new(Vec::new()));
     for (name, data) in members {
+        z.member(name, data).ok()?;
+    }
+    Some(z.finish().ok()?.into_inner())
+}
+
+/// An `.npz` written member by member, a member's bytes streamed in pieces (its CRC patched
+/// into its header after), so an array larger than memory can be written a row at a time.
+pub struct NpzWriter<W: std::io::Write + std::io::Seek> {
+    w: W,
+    central: Vec<u8>,
+    count: u16,
+    offset: u64,
+}
+
+/// Where a ZIP local header keeps its CRC-32.
+const CRC_AT: u64 = 14;
+
+/// A member or an offset past 4 GiB, which only ZIP64 can hold.
+fn zip64() -> std::io::Error {
+    std::io::Error::other("the .npz would pass 4 GiB, which needs ZIP64 (not written)")
+}
+
+impl<W: std::io::Write + std::io::Seek> NpzWriter<W> {
+    /// An empty archive written into `w` from its current position 0.
+    pub fn new(w: W) -> Self {
+        NpzWriter {
+            w,
+            central: Vec::new(),
+            count: 0,
+            offset: 0,
+        }
+    }
+
+    /// One member of known bytes.
+    pub fn member(&mut self, name: &str, data: &[u8]) -> std::io::Result<()> {
+        self.streamed(name, data.len() as u64, |put| put(data))
+    }
+
+    /// One member of `len` bytes that `fill` gives in pieces through `put`.
+    pub fn streamed(
+        &mut self,
+        name: &str,
+        len: u64,
+        fill: impl FnOnce(&mut dyn FnMut(&[u8]) -> std::io::Result<()>) -> std::io::Result<()>,
+    ) -> std::io::Result<()> {
         let name = format!("{name}.npy");
-        let offset = u32::try_from(out.len()).ok()?;
-        let size = u32::try_from(data.len()).ok()?;
-        let crc = crc32fast::hash(data);
-        // Version 2.0, no flags, stored, 1980-01-01 00:00.
-        let fixed = |sig: u32, central: bool| {
-            let mut h = sig.to_le_bytes().to_vec();
+        let offset = u32::try_from(self.offset).map_err(|_| zip64())?;
+        let size = u32::try_from(len).map_err(|_| zip64())?;
+        let header = |crc: u32, central: bool| {
+            let mut h = if central { 0x0201_4b50u32 } else { 0x0403_4b50 }
+                .to_le_bytes()
+                .to_vec();
             if central {
                 h.extend_from_slice(&20u16.to_le_bytes()); // made by
             }
+            // Version 2.0, no flags, stored, 1980-01-01 00:00.
             for v in [20u16, 0, 0, 0, 0x21] {
-                h.extend_from_slice(&v.to_le_bytes()); // needed, flags, method, time, date
+                h.extend_from_slice(&v.to_le_bytes());
             }
             for v in [crc, size, size] {
                 h.extend_from_slice(&v.to_le_bytes());
@@ -134,30 +183,58 @@ pub fn npz(members: &[(&str, Vec<u8>)]) -> Option<Vec<u8>> {
             h.extend_from_slice(&0u16.to_le_bytes()); // extra
             h
         };
-        out.extend(fixed(0x0403_4b50, false));
-        out.extend_from_slice(name.as_bytes());
-        out.extend_from_slice(data);
-        central.extend(fixed(0x0201_4b50, true));
-        for v in [0u16, 0, 0] {
-            central.extend_from_slice(&v.to_le_bytes()); // comment, disk, internal attributes
+        let local = header(0, false);
+        self.w.write_all(&local)?;
+        self.w.write_all(name.as_bytes())?;
+        let mut crc = crc32fast::Hasher::new();
+        let mut written = 0u64;
+        {
+            let w = &mut self.w;
+            let mut put = |b: &[u8]| {
+                crc.update(b);
+                written += b.len() as u64;
+                w.write_all(b)
+            };
+            fill(&mut put)?;
         }
-        central.extend_from_slice(&0u32.to_le_bytes()); // external attributes
-        central.extend_from_slice(&offset.to_le_bytes());
-        central.extend_from_slice(name.as_bytes());
+        assert_eq!(
+            written, len,
+            "a streamed member gives the bytes it announced"
+        );
+        let crc = crc.finalize();
+        let end = self.offset + (local.len() + name.len()) as u64 + len;
+        self.w
+            .seek(std::io::SeekFrom::Start(self.offset + CRC_AT))?;
+        self.w.write_all(&crc.to_le_bytes())?;
+        self.w.seek(std::io::SeekFrom::Start(end))?;
+        self.central.extend(header(crc, true));
+        for v in [0u16, 0, 0] {
+            self.central.extend_from_slice(&v.to_le_bytes()); // comment, disk, internal
+        }
+        self.central.extend_from_slice(&0u32.to_le_bytes()); // external attributes
+        self.central.extend_from_slice(&offset.to_le_bytes());
+        self.central.extend_from_slice(name.as_bytes());
+        self.offset = end;
+        self.count = self.count.checked_add(1).ok_or_else(zip64)?;
+        Ok(())
     }
-    let cd_offset = u32::try_from(out.len()).ok()?;
-    let cd_len = u32::try_from(central.len()).ok()?;
-    out.extend(central);
-    out.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
-    let n = u16::try_from(members.len()).ok()?;
-    for v in [0u16, 0, n, n] {
-        out.extend_from_slice(&v.to_le_bytes()); // disk, cd disk, entries here, entries
+
+    /// Write the central directory; the writer back.
+    pub fn finish(mut self) -> std::io::Result<W> {
+        let cd_offset = u32::try_from(self.offset).map_err(|_| zip64())?;
+        let cd_len = u32::try_from(self.central.len()).map_err(|_| zip64())?;
+        self.w.write_all(&self.central)?;
+        let mut end = 0x0605_4b50u32.to_le_bytes().to_vec();
+        for v in [0u16, 0, self.count, self.count] {
+            end.extend_from_slice(&v.to_le_bytes()); // disk, cd disk, entries here, entries
+        }
+        end.extend_from_slice(&cd_len.to_le_bytes());
+        end.extend_from_slice(&cd_offset.to_le_bytes());
+        end.extend_from_slice(&0u16.to_le_bytes()); // comment
+        self.w.write_all(&end)?;
+        self.w.flush()?;
+        Ok(self.w)
     }
-    out.extend_from_slice(&cd_len.to_le_bytes());
-    out.extend_from_slice(&cd_offset.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes()); // comment
-    u32::try_from(out.len()).ok()?;
-    Some(out)
 }
 
 #[cfg(test)]

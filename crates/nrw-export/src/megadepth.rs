@@ -486,9 +486,9 @@ impl SceneInfo {
         let mut out = Vec::new();
         for i in 0..self.len() {
             let (common, _) = self.shared(i);
-            for j in i + 1..self.len() {
-                if common[j] > 0 {
-                    let share = |k: usize| common[j] as f64 / self.n_points3d[k] as f64;
+            for (j, &c) in common.iter().enumerate().skip(i + 1) {
+                if c > 0 {
+                    let share = |k: usize| c as f64 / self.n_points3d[k] as f64;
                     out.push((i, j, share(i).min(share(j))));
                 }
             }

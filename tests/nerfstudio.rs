@@ -70,6 +70,7 @@ fn transforms_json_projects_every_sparse_point_onto_its_observation() {
             .contains("Splatfacto-W"),
         "{summary}"
     );
+    assert_eq!(summary["depth_source"], "the render's z-buffer");
     let ds = Dataset::open(ds_dir.as_path()).unwrap();
     for f in frames {
         assert_eq!(

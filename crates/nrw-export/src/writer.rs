@@ -136,6 +136,9 @@ impl LayoutWriter for WithPoints {
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
         summary.empty_splits = job.empty_splits();
         (summary.splits, summary.warnings) = (self.0)(job, job.points()?, staged)?;
+        if job.cfg.layout.writes_depth_priors() {
+            summary.depth_source = Some(job.depth_source());
+        }
         Ok(())
     }
 }

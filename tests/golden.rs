@@ -86,7 +86,14 @@ fn the_demo_dataset_and_every_export_layout_keep_their_bytes() {
     ok(&["split", &pinhole, "--val", "3"]);
     // Every layout the tool has, so a new one is pinned the day it is added.
     for layout in nrw_export::Layout::ALL {
-        let from = if layout == nrw_export::Layout::Nerfw {
+        // The layouts that take PINHOLE cameras only read the undistorted dataset.
+        let pinhole_only = [
+            nrw_export::Layout::Nerfw,
+            nrw_export::Layout::Gsplat,
+            nrw_export::Layout::Nerfbaselines,
+            nrw_export::Layout::Megadepth,
+        ];
+        let from = if pinhole_only.contains(&layout) {
             &pinhole
         } else {
             &ds

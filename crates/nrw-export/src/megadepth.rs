@@ -599,7 +599,7 @@ fn consumer_warnings(views: &BTreeMap<u32, View>) -> Vec<String> {
         out.push(format!(
             "D2-Net's preprocess_scene.py takes a depth file under 100 KiB for a mask and drops \
              the image: {} view(s) (first {first}) are that small (render at a larger \
-             `ingest.min_dim`); this export's scene_info keeps them",
+             --min-dim); this export's scene_info keeps them",
             small.len()
         ));
     }

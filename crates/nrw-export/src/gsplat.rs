@@ -68,7 +68,7 @@ impl LayoutWriter for Gsplat {
         write_model(&model, job.points()?, staged)?;
         write_init_ply(job.points()?, staged)?;
         write_depth_params(&model, &enc.depth, staged)?;
-        write_split_lists(summary, staged)?;
+        write_split_lists(&summary.splits, staged)?;
         summary.semantics = Some("masks: 255 = use, 0 = ignore; sky: 255 = sky".into());
         summary.warnings.extend(consumer_warnings(&model, &above));
         summary.depth_source = Some(job.depth_source());
@@ -288,10 +288,11 @@ fn write_depth_params(
     )
 }
 
-/// `train_list.txt` and `test_list.txt` (our val), one image name a line.
-fn write_split_lists(summary: &ExportSummary, staged: &Staged) -> Result<()> {
+/// `train_list.txt` and `test_list.txt` (our val), one image name a line, as nerfbaselines'
+/// colmap loader reads the split.
+pub(crate) fn write_split_lists(splits: &[crate::SplitExport], staged: &Staged) -> Result<()> {
     for (split, file) in [(TRAIN, "train_list.txt"), (VAL, "test_list.txt")] {
-        let Some(s) = summary.splits.iter().find(|s| s.split == split) else {
+        let Some(s) = splits.iter().find(|s| s.split == split) else {
             continue;
         };
         let names: String = s

@@ -46,17 +46,7 @@ fn write(
     };
     let w = write_phototourism(job, points, staged, &places, &masks)?;
     staged.write("nerfw_split.csv", crate::nerfw::tsv(&w.rows).as_bytes())?;
-    for (split, file) in [("train", "train_list.txt"), ("val", "test_list.txt")] {
-        let Some(s) = w.splits.iter().find(|s| s.split == split) else {
-            continue;
-        };
-        let names: String = s
-            .names
-            .iter()
-            .map(|n| format!("{}\n", crate::nerfw::file_name(n)))
-            .collect();
-        staged.write(file, names.as_bytes())?;
-    }
+    crate::gsplat::write_split_lists(&w.splits, staged)?;
     let info = json!({
         "loader": "colmap",
         "loader_kwargs": {"images_path": "images", "colmap_path": "sparse"},

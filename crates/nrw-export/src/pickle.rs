@@ -66,6 +66,19 @@ fn dtype_f8(out: &mut Vec<u8>) {
     out.extend_from_slice(&[TUPLE, BUILD]);
 }
 
+/// What `ndarray.__reduce__` pickles before the shape: the empty array
+/// `numpy.core.multiarray._reconstruct(numpy.ndarray, (0,), b'b')`, then the opening of its
+/// state `(1, ` (version), whose shape, dtype, order and data follow.
+fn empty_ndarray(out: &mut Vec<u8>) {
+    global("numpy.core.multiarray", "_reconstruct", out);
+    global("numpy", "ndarray", out);
+    int(0, out);
+    out.push(TUPLE1);
+    out.extend_from_slice(&[SHORT_BINBYTES, 1, b'b', TUPLE3, REDUCE]);
+    out.push(MARK);
+    int(1, out);
+}
+
 /// The pickle of `{key: n × n float64 array}` with `values` row-major (length n²).
 pub fn matrix_dict(key: &str, n: usize, values: &[f64]) -> Vec<u8> {
     assert_eq!(values.len(), n * n, "an n × n matrix has n² values");
@@ -99,15 +112,8 @@ pub fn write_matrix_dict<E>(
     let mut out = Vec::with_capacity(512);
     out.extend_from_slice(&[PROTO, if big { 4 } else { 3 }, EMPTY_DICT]);
     unicode(key, &mut out);
-    // numpy.core.multiarray._reconstruct(numpy.ndarray, (0,), b'b')
-    global("numpy.core.multiarray", "_reconstruct", &mut out);
-    global("numpy", "ndarray", &mut out);
-    int(0, &mut out);
-    out.push(TUPLE1);
-    out.extend_from_slice(&[SHORT_BINBYTES, 1, b'b', TUPLE3, REDUCE]);
+    empty_ndarray(&mut out);
     // __setstate__((1, (n, n), dtype('<f8'), False, data))
-    out.push(MARK);
-    int(1, &mut out);
     int(n as i32, &mut out);
     int(n as i32, &mut out);
     out.push(TUPLE2);
@@ -149,14 +155,8 @@ pub enum DictValue {
 /// (protocol 3; the `numpy.core.multiarray` names numpy 1.x writes and 2.x still loads).
 pub fn object_array_of_dicts(items: &[Vec<(u64, DictValue)>]) -> Vec<u8> {
     let mut out = vec![PROTO, 3];
-    global("numpy.core.multiarray", "_reconstruct", &mut out);
-    global("numpy", "ndarray", &mut out);
-    int(0, &mut out);
-    out.push(TUPLE1);
-    out.extend_from_slice(&[SHORT_BINBYTES, 1, b'b', TUPLE3, REDUCE]);
+    empty_ndarray(&mut out);
     // __setstate__((1, (n,), dtype('O'), False, [items]))
-    out.push(MARK);
-    int(1, &mut out);
     long(items.len() as u64, &mut out);
     out.push(TUPLE1);
     global("numpy", "dtype", &mut out);

@@ -92,17 +92,28 @@ impl MvsPriors {
         let map = read_map(&path)?;
         let stored = stored_camera(v)?;
         let (w, h) = (v.width as usize, v.height as usize);
+        let at = landing(ws_cam, &stored, (map.width, map.height));
         let depth = DepthMap {
             width: w,
             height: h,
-            data: carry(&map, 0, ws_cam, &stored),
+            data: carry(&map, 0, &at),
         };
         let conf_path = self
             .ws
             .map(MapKind::Confidence, MapPass::Geometric, &v.name)
             .map_err(|p| PipelineError::input(self.ws.root.as_path(), p))?;
         let confidence = if conf_path.is_file() {
-            let c = carry(&read_map(&conf_path)?, 0, ws_cam, &stored);
+            let conf = read_map(&conf_path)?;
+            if (conf.width, conf.height) != (map.width, map.height) {
+                return Err(PipelineError::input(
+                    conf_path.as_path(),
+                    format!(
+                        "{}×{}, but the depth map beside it is {}×{}",
+                        conf.width, conf.height, map.width, map.height
+                    ),
+                ));
+            }
+            let c = carry(&conf, 0, &at);
             // No depth, no confidence: the two maps keep one validity.
             let c = c
                 .iter()
@@ -144,29 +155,34 @@ fn stored_camera(v: &ViewRow) -> Result<Camera> {
     })
 }
 
-/// Channel `c` of a workspace map carried into the stored camera's pixels (same pose); 0
-/// where the map has no finite positive value or the ray leaves it.
-fn carry(map: &DenseMap, c: usize, ws_cam: &Camera, stored: &Camera) -> Vec<f32> {
+/// For each stored pixel (row-major), the workspace map pixel its centre's ray lands in
+/// (same pose), or None where the ray leaves a `size` map: computed once, sampled per map.
+fn landing(ws_cam: &Camera, stored: &Camera, size: (usize, usize)) -> Vec<Option<(usize, usize)>> {
     let (w, h) = (stored.width as usize, stored.height as usize);
-    let mut data = vec![0f32; w * h];
+    let mut out = Vec::with_capacity(w * h);
     for y in 0..h {
         for x in 0..w {
             let centre = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-            let Some(ray) = stored.cam_ray_from_img(centre) else {
-                continue;
-            };
-            let Some(p) = ws_cam.img_from_cam(ray) else {
-                continue;
-            };
-            let (u, v) = (p.x.floor(), p.y.floor());
-            if u < 0.0 || v < 0.0 || u >= map.width as f64 || v >= map.height as f64 {
-                continue;
-            }
-            let z = map.get(u as usize, v as usize, c);
-            if z > 0.0 && z.is_finite() {
-                data[y * w + x] = z;
-            }
+            let p = stored
+                .cam_ray_from_img(centre)
+                .and_then(|ray| ws_cam.img_from_cam(ray));
+            out.push(p.and_then(|p| {
+                let (u, v) = (p.x.floor(), p.y.floor());
+                let inside = u >= 0.0 && v >= 0.0 && u < size.0 as f64 && v < size.1 as f64;
+                inside.then_some((u as usize, v as usize))
+            }));
         }
     }
-    data
+    out
+}
+
+/// Channel `c` of a workspace map at the stored pixels' landing places; 0 where the map has
+/// no finite positive value or the ray leaves it.
+fn carry(map: &DenseMap, c: usize, at: &[Option<(usize, usize)>]) -> Vec<f32> {
+    at.iter()
+        .map(|p| match p.map(|(u, v)| map.get(u, v, c)) {
+            Some(z) if z > 0.0 && z.is_finite() => z,
+            _ => 0.0,
+        })
+        .collect()
 }

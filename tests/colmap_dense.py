@@ -1,6 +1,8 @@
 """COLMAP's own reading and writing of dense-workspace maps, to check ours against.
 
-Follows scripts/python/read_write_dense.py of COLMAP (3.8; the same in 3.9–3.11) line by
+With NRW_COLMAP_SCRIPTS naming COLMAP's scripts/python folder (.ci/run takes it from Debian's
+colmap 3.8 source tarball, checked by its SHA-256), COLMAP's read_write_dense.py itself is
+imported and run, unmodified. Without it, this file's transcription stands in; it follows scripts/python/read_write_dense.py of COLMAP (3.8; the same in 3.9–3.11) line by
 line: `read_array` (its lines 38–53: the header's three numbers before the third `&`, then
 `np.fromfile(float32).reshape((width, height, channels), order="F")` transposed to
 height × width × channels and squeezed) and `write_array` (lines 56–82: the header, then the
@@ -8,7 +10,10 @@ array transposed to width × height × channels and flattened in Fortran order, 
 
 usage: colmap_dense.py read FILE EXPECTED.npy   (exit 0 when COLMAP's reading equals it)
        colmap_dense.py write OUT FROM.npy       (COLMAP's writing of the array)
+Prints which reader ran: "reader: colmap PATH" or "reader: transcription".
 """
+
+import os
 
 import struct
 import sys
@@ -52,6 +57,15 @@ def write_array(array, path):
 
 
 if __name__ == "__main__":
+    scripts = os.environ.get("NRW_COLMAP_SCRIPTS")
+    if scripts:
+        sys.path.insert(0, scripts)
+        import read_write_dense
+
+        read_array, write_array = read_write_dense.read_array, read_write_dense.write_array
+        print("reader: colmap", os.path.realpath(read_write_dense.__file__))
+    else:
+        print("reader: transcription")
     what, path, npy = sys.argv[1:4]
     if what == "read":
         got, want = read_array(path), np.load(npy)

@@ -75,20 +75,8 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
     );
     let dump = tmp.path().join("dump");
     std::fs::create_dir_all(&dump).unwrap();
-    let cmp = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/megadepth_d2net.py"))
-        .arg(&theirs)
-        .arg(out.join(format!("scene_info/{SCENE}.npz")))
-        .arg(&out)
-        .arg(&dump)
-        .output()
-        .unwrap();
-    assert!(
-        cmp.status.success(),
-        "{}",
-        String::from_utf8_lossy(&cmp.stderr)
-    );
-    let got: serde_json::Value = serde_json::from_slice(&cmp.stdout).unwrap();
+    let ours = out.join(format!("scene_info/{SCENE}.npz"));
+    let got = script_json("megadepth_d2net.py", &[&theirs, &ours, &out, &dump]);
     for key in ["image_paths", "depth_paths"] {
         assert_eq!(got[key][0], got[key][1], "{key}");
     }
@@ -178,6 +166,7 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
         "{n} observations, worst {worst} px vs the model's {model_max}"
     );
     dust3r_reads_its_folder(&out, &dump, &d);
+    matchers_read_their_indices(&out, &theirs);
     eprintln!(
         "D2-Net's scene_info of the export equals ours: {} views, {pairs} overlapping ordered \
          pairs; angles within {:.1e}°, scale ratios within {:.1e}",
@@ -187,23 +176,74 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
     );
 }
 
+/// Run tests/SCRIPT with `args`; the one JSON object it prints.
+fn script_json(script: &str, args: &[&Path]) -> serde_json::Value {
+    let run = std::process::Command::new("python3")
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../tests")
+                .join(script),
+        )
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{script}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&run.stdout).unwrap()
+}
+
+/// LoFTR's and RoMa's loaders, transcribed (tests/megadepth_matchers.py), read the export's
+/// `index/` and `prep_scene_info/`: every pair's views open, and the pairs, scores and central
+/// matches are those D2-Net's own overlap matrix and dicts (`theirs`) give.
+fn matchers_read_their_indices(out: &Path, theirs: &Path) {
+    let got = script_json("megadepth_matchers.py", &[out, theirs, Path::new(SCENE)]);
+    let (loftr, roma) = (&got["loftr"], &got["roma"]);
+    assert_eq!(loftr["problems"], serde_json::json!([]), "LoFTR: {got}");
+    assert_eq!(roma["problems"], serde_json::json!([]), "RoMa: {got}");
+    assert_eq!(
+        loftr["keys"],
+        serde_json::json!(["depth_paths", "image_paths", "intrinsics", "poses"]),
+        "what LoFTR's loader keeps after taking pair_infos"
+    );
+    assert_eq!(
+        roma["keys"],
+        serde_json::json!([
+            "depth_paths",
+            "image_paths",
+            "intrinsics",
+            "overlaps",
+            "pairs",
+            "poses"
+        ])
+    );
+    assert_eq!(roma["dtypes"], serde_json::json!(["int64", "float64"]));
+    let sharing = got["sharing_pairs"].as_u64().unwrap();
+    let bands: Vec<(String, u64)> = loftr["bands"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, v)| (k.clone(), v.as_u64().unwrap()))
+        .collect();
+    assert_eq!(bands.len(), 3, "{bands:?}");
+    assert!(
+        sharing > 0 && bands.iter().any(|b| b.1 > 0),
+        "pairs to check: {got}"
+    );
+    eprintln!(
+        "LoFTR's index: {bands:?} of {sharing} pairs sharing points; RoMa's: {} pairs",
+        roma["pairs"]
+    );
+}
+
 /// DUSt3R's loader, transcribed (tests/megadepth_dust3r.py) with OpenCV's own readers, on the
 /// export's `dust3r/` folder: every pair's views open; depth is the dataset's bit for bit; K is
 /// the view's; cam2world inverts the view's world-to-camera pose; the JPEG is the photo within
 /// JPEG's error.
 fn dust3r_reads_its_folder(out: &Path, dump: &Path, d: &Dataset) {
-    let run = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/megadepth_dust3r.py"))
-        .arg(out.join("dust3r"))
-        .arg(dump)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let got: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let got = script_json("megadepth_dust3r.py", &[&out.join("dust3r"), dump]);
     assert_eq!(
         got["fields"],
         serde_json::json!(["scene_id", "im1_id", "im2_id", "score"])

@@ -50,7 +50,15 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 
 
 def read_bin(path):
-    """COLMAP's dense map layout, as scripts/python/read_write_dense.py reads it."""
+    """COLMAP's dense map layout: COLMAP's own read_write_dense.py where NRW_COLMAP_SCRIPTS
+    names its folder (as .ci/run sets it), else its reading transcribed (the header's three
+    numbers, float32 in Fortran order, transposed and squeezed)."""
+    scripts = os.environ.get("NRW_COLMAP_SCRIPTS")
+    if scripts:
+        sys.path.insert(0, scripts)
+        import read_write_dense
+
+        return read_write_dense.read_array(path)
     with open(path, "rb") as f:
         data = f.read()
     w, h, c, rest = data.split(b"&", 3)
@@ -124,8 +132,12 @@ def sgbm_depth(rec, ref, src, ws):
     t = p2.translation - r @ p1.translation
     size = (c1.width, c1.height)
     zero = np.zeros(5)
+    # alpha=1 keeps every pixel of both views: alpha=0 zooms into the region both cover,
+    # which for converging views is a small part of the reference.
     r1, r2, q1, q2, q, _, _ = cv2.stereoRectify(k1, zero, k2, zero, size, r, t.reshape(3, 1),
-                                                flags=cv2.CALIB_ZERO_DISPARITY, alpha=0)
+                                                flags=cv2.CALIB_ZERO_DISPARITY, alpha=1)
+    if q1[0, 0] <= 0:  # views too far apart to rectify (the rectified focal length flips)
+        return None
     load = lambda im: cv2.imread(os.path.join(ws, "images", im.name), cv2.IMREAD_GRAYSCALE)
     # Both views resampled into the common rectified frame, at the reference's size.
     m1 = cv2.initUndistortRectifyMap(k1, zero, r1, q1, size, cv2.CV_32FC1)
@@ -205,9 +217,9 @@ def sgbm_partner(rec, ref):
     return best
 
 
-def sgbm_peer(ws, out):
-    """The SGBM peer over our workspace's views into a copy `out`; (seconds per view, peak MB of
-    this process, fused points)."""
+def sgbm_peer(ws, out, min_pixels=5):
+    """The SGBM peer over our workspace's views into a copy `out`, fused by COLMAP with
+    `min_pixels`; (seconds per view, peak MB of this process, fused points)."""
     # The model (sparse/*.bin) is copied; our maps and cloud are not.
     shutil.copytree(ws, out, ignore=lambda d, names: [
         n for n in names if n.startswith("fused.ply") or (n.endswith(".bin") and "stereo" in d)])
@@ -231,7 +243,8 @@ def sgbm_peer(ws, out):
     secs = time.perf_counter() - started
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     fused = subprocess.run(["colmap", "stereo_fusion", "--workspace_path", out, "--input_type",
-                            "geometric", "--output_path", os.path.join(out, "fused.ply")],
+                            "geometric", "--output_path", os.path.join(out, "fused.ply"),
+                            "--StereoFusion.min_num_pixels", str(min_pixels)],
                            capture_output=True, text=True)
     m = re.search(r"Number of fused points: (\d+)", fused.stdout + fused.stderr)
     if not m:
@@ -263,20 +276,33 @@ def sfm_median(ws):
     return float(np.median(rel)) if rel else float("nan"), len(rel)
 
 
-def real_scene(binary, scene, tmp, min_pixels, window):
+def kept_views(binary, scene, cloud, ds):
+    """(views ingest keeps at the paper's settings rendering `cloud`, registered views)."""
+    r = subprocess.run([binary, "ingest", scene, "--points", cloud, "--out", ds],
+                       capture_output=True, text=True)
+    kept = re.search(r"(\d+) kept", r.stderr)
+    total = re.search(r"(\d+) registered", r.stderr)
+    return int(kept.group(1)) if kept else 0, int(total.group(1)) if total else None
+
+
+def real_scene(binary, scene, tmp, min_pixels, window, peer):
     """densify at the defaults (but fusion's min_num_pixels and the window radius), then
-    ingest at the paper's."""
+    ingest at the paper's; with `peer`, the SGBM peer's row over the same workspace too."""
     out = os.path.join(tmp, "real_" + os.path.basename(scene))
     secs, rss, views, points = run(binary, scene, out, ["--min-num-pixels", str(min_pixels),
                                                         "--window-radius", str(window)])
     median, n = sfm_median(out)
-    ds = out + "_ds"
-    r = subprocess.run([binary, "ingest", scene, "--points", os.path.join(out, "fused.ply"), "--out", ds],
-                       capture_output=True, text=True)
-    kept = re.search(r"(\d+) kept", r.stderr)
-    kept = int(kept.group(1)) if kept else 0
-    total = re.search(r"(\d+) registered", r.stderr)
-    return secs / max(views, 1), rss / 1024, median, n, points, kept, int(total.group(1)) if total else views
+    kept, total = kept_views(binary, scene, os.path.join(out, "fused.ply"), out + "_ds")
+    rows = [(str(min_pixels), str(window), secs / max(views, 1), rss / 1024, median, n, points,
+             kept, total or views)]
+    if peer:
+        sgbm = out + "_sgbm"
+        spv, mb, pts = sgbm_peer(out, sgbm, min_pixels)
+        median, n = sfm_median(sgbm)
+        kept, total = kept_views(binary, scene, os.path.join(sgbm, "fused.ply"), sgbm + "_ds")
+        rows.append((f"{min_pixels} (COLMAP)", "**peer: SGBM**", spv, mb, median, n, pts, kept,
+                     total or views))
+    return rows
 
 
 def main():
@@ -330,10 +356,11 @@ def main():
     real = []
     data = os.path.join(ROOT, "..", "shared", "data")
     if not a.quick and os.path.isdir(data):
-        for name, m, w in (("sacre_coeur", 3, 5), ("sacre_coeur", 5, 5), ("sacre_coeur", 3, 3),
-                           ("sceaux_castle", 5, 5)):
-            real.append((name, m, w, *real_scene(a.bin, os.path.join(data, name), tmp, m, w)))
-            print(real[-1], file=sys.stderr)
+        for name, m, w, with_peer in (("sacre_coeur", 3, 5, True), ("sacre_coeur", 5, 5, False),
+                                      ("sacre_coeur", 3, 3, False), ("sceaux_castle", 5, 5, True)):
+            for row in real_scene(a.bin, os.path.join(data, name), tmp, m, w, with_peer):
+                real.append((name, *row))
+                print(real[-1], file=sys.stderr)
     flags = [f for f in ("avx512f", "avx2", "fma") if f in open("/proc/cpuinfo").read().split()]
     with open(a.out, "w") as f:
         f.write("# densify: what accuracy costs in time\n\n")
@@ -364,7 +391,10 @@ def main():
             f.write("\n## Real scenes (../shared/data), default settings (800 px)\n\n"
                     "SfM: median relative difference between the geometric depth at each SfM observation's "
                     "pixel and the point's depth. Kept: views `ingest --points dense/fused.ply` keeps at the "
-                    "paper's settings (from the sparse model: 0 of 10 on sacre_coeur).\n\n")
+                    "paper's settings (from the sparse model: 0 of 10 on sacre_coeur). The peer rows: "
+                    "SGBM over the row above's workspace (its undistorted views, one rectified pair a "
+                    "view, as above), fused by COLMAP with the same min_num_pixels, measured the same "
+                    "way.\n\n")
             f.write("| scene | fusion min_num_pixels | window radius | s / view | peak MB | SfM median | SfM observations | fused points | kept views |\n")
             f.write("|---|---|---|---|---|---|---|---|---|\n")
             for name, m, w, spv, mb, med, n, pts, kept, total in real:

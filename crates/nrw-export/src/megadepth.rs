@@ -11,6 +11,11 @@
 //!                                                           photo, depth ("Y"), {intrinsics,
 //!                                                           cam2world}
 //! OUT/dust3r/all_metadata.npz                               scenes, images, scored pairs
+//! OUT/index/scene_info_0.1_0.7/NAME_LO_HI.npz                LoFTR's index, one file an overlap
+//!                                                           band (0.1_0.3, 0.3_0.5, 0.5_0.7)
+//! OUT/index/trainvaltest_list/train_list.txt                 those files' stems
+//! OUT/prep_scene_info/NAME.npy                               RoMa's / DKM's scene info: every
+//!                                                           pair sharing points, its overlap
 //! ```
 //!
 //! The model is PINHOLE, one camera per image with the image's id (the script reads
@@ -19,6 +24,14 @@
 //! undistorted when the dataset was), so tracks and depth maps share one image frame.
 //! `scene_info` follows the script line by line (see [`SceneInfo`]); every view has a depth
 //! file, so no entry is `None`.
+//!
+//! A pair's overlap score in LoFTR's, RoMa's and DUSt3R's files is the smaller of its two
+//! `overlap_matrix` entries (shared points over each view's points): LoFTR publishes its index,
+//! not how it was scored. LoFTR's `central_matches` hold one match a pair in D2-Net's
+//! `central_match` layout `[y_i, x_i, y_j, x_j]`: the shared point nearest view i's principal
+//! point (D2-Net draws one at random; LoFTR's loader does not read it). LoFTR's and RoMa's
+//! files are pickled dicts as their loaders `np.load(…, allow_pickle=True)` them: LoFTR's a
+//! bare pickle (numpy falls back to `pickle.load`), RoMa's a 0-d object array in an `.npy`.
 
 use std::collections::{BTreeMap, HashMap};
 
@@ -28,7 +41,7 @@ use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
 use crate::npz::{self, Array};
-use crate::pickle::DictValue;
+use crate::pickle::{DictValue, Dtype, Pickler};
 use crate::staging::Staged;
 use crate::writer::{Job, LayoutWriter};
 use crate::{ExportSummary, SplitExport};
@@ -97,6 +110,7 @@ impl LayoutWriter for Megadepth {
             || ExportError::refused(&job.cfg.out, "an .npz over 4 GiB needs ZIP64, not written");
         let meta = dust3r_metadata(name, &views, &info).ok_or_else(too_big)?;
         staged.write("dust3r/all_metadata.npz", &meta)?;
+        write_pair_indices(name, &info, staged)?;
         summary.warnings.extend(consumer_warnings(&views));
         summary.depth_source = Some(job.depth_source());
         Ok(())
@@ -357,8 +371,8 @@ pub struct SceneInfo {
     pub points3d_id_to_ndepth: Vec<Vec<(u64, DictValue)>>,
     /// Each view's principal axis (R's third row).
     axes: Vec<DVec3>,
-    /// Per point: the views that observe it, with its normalised depth in each.
-    seen: HashMap<u64, Vec<(usize, f64)>>,
+    /// Per point: the views that observe it, with its normalised depth and position in each.
+    seen: HashMap<u64, Vec<(usize, f64, [f64; 2])>>,
 }
 
 /// Which N × N matrix of scene_info.
@@ -367,6 +381,24 @@ enum Matrix {
     Overlap,
     ScaleRatio,
     Angles,
+}
+
+/// LoFTR's overlap bands: its index folder `scene_info_0.1_0.7` holds a scene's pairs in one
+/// file a band, named `SCENE_LO_HI.npz`.
+pub const LOFTR_BANDS: [(f64, f64); 3] = [(0.1, 0.3), (0.3, 0.5), (0.5, 0.7)];
+
+/// A central match candidate of a pair: (squared distance to view i's principal point, point
+/// id, xy in view i, xy in view j).
+type Candidate = (f64, u64, [f64; 2], [f64; 2]);
+
+/// Two views (i < j) that share SfM points.
+struct PairInfo {
+    i: usize,
+    j: usize,
+    /// The smaller of the two views' overlaps.
+    score: f64,
+    /// One shared point in D2-Net's `central_match` layout: [y_i, x_i, y_j, x_j].
+    central: [f64; 4],
 }
 
 impl SceneInfo {
@@ -401,11 +433,11 @@ impl SceneInfo {
             info.axes.push(DVec3::from_array(r[2]));
             let xy = first_seen_last_value(&v.points2d);
             let mut nd = Vec::with_capacity(xy.len());
-            for &(id, _) in &xy {
+            for &(id, at) in &xy {
                 let x = rec.points[&id].xyz;
                 let z = r[2][0] * x.x + r[2][1] * x.y + r[2][2] * x.z + t[2];
                 let d = z / (0.5 * (fx + fy));
-                info.seen.entry(id).or_default().push((i, d));
+                info.seen.entry(id).or_default().push((i, d, at));
                 nd.push((id, DictValue::Scalar(d)));
             }
             info.n_points3d.push(xy.len() as i64);
@@ -432,7 +464,7 @@ impl SceneInfo {
             let DictValue::Scalar(ni) = *v else {
                 unreachable!("normalised depths are scalars")
             };
-            for &(j, nj) in &self.seen[id] {
+            for &(j, nj, _) in &self.seen[id] {
                 if j != i {
                     common[j] += 1;
                     ratio[j] = ratio[j].min((ni / nj).max(nj / ni));
@@ -483,17 +515,139 @@ impl SceneInfo {
 
     /// Every pair (i < j) of views sharing points, scored by the smaller of their overlaps.
     fn scored_pairs(&self) -> Vec<(usize, usize, f64)> {
-        let mut out = Vec::new();
-        for i in 0..self.len() {
-            let (common, _) = self.shared(i);
-            for (j, &c) in common.iter().enumerate().skip(i + 1) {
-                if c > 0 {
-                    let share = |k: usize| c as f64 / self.n_points3d[k] as f64;
-                    out.push((i, j, share(i).min(share(j))));
+        (0..self.len())
+            .flat_map(|i| self.pairs_of(i))
+            .map(|p| (p.i, p.j, p.score))
+            .collect()
+    }
+
+    /// View i's pairs with the views after it that share points, in view order: the smaller
+    /// of the two overlaps, and the central match (the shared point nearest view i's
+    /// principal point; the smaller point id on a tie). Costs the track lengths of i's points.
+    fn pairs_of(&self, i: usize) -> Vec<PairInfo> {
+        let n = self.len();
+        let (cx, cy) = (self.intrinsics[i][0][2], self.intrinsics[i][1][2]);
+        let mut common = vec![0u64; n];
+        let mut central: Vec<Option<Candidate>> = vec![None; n];
+        for (id, v) in &self.points3d_id_to_2d[i] {
+            let DictValue::Pair(p) = *v else {
+                unreachable!("positions are pairs")
+            };
+            let d2 = (p[0] - cx) * (p[0] - cx) + (p[1] - cy) * (p[1] - cy);
+            for &(j, _, q) in &self.seen[id] {
+                if j <= i {
+                    continue;
+                }
+                common[j] += 1;
+                let nearer = central[j].is_none_or(|b| d2 < b.0 || (d2 == b.0 && *id < b.1));
+                if nearer {
+                    central[j] = Some((d2, *id, p, q));
                 }
             }
         }
-        out
+        (i + 1..n)
+            .filter_map(|j| {
+                let (_, _, p, q) = central[j]?;
+                let share = |k: usize| common[j] as f64 / self.n_points3d[k] as f64;
+                Some(PairInfo {
+                    i,
+                    j,
+                    score: share(i).min(share(j)),
+                    central: [p[1], p[0], q[1], q[0]],
+                })
+            })
+            .collect()
+    }
+
+    /// The keys LoFTR's and RoMa's files share with scene_info: image and depth paths (lists
+    /// of str), intrinsics (N × 3 × 3) and world-to-camera poses (N × 4 × 4).
+    fn pickle_views(&self, p: &mut Pickler) -> std::io::Result<()> {
+        let n = self.len();
+        let intrinsics: Vec<f64> = self
+            .intrinsics
+            .iter()
+            .flatten()
+            .flatten()
+            .copied()
+            .collect();
+        let poses: Vec<f64> = self.poses.iter().flatten().flatten().copied().collect();
+        p.str("image_paths")?;
+        p.str_list(&self.image_paths)?;
+        p.set_item()?;
+        p.str("depth_paths")?;
+        p.str_list(&self.depth_paths)?;
+        p.set_item()?;
+        p.str("intrinsics")?;
+        p.f8_array(&[n, 3, 3], &intrinsics)?;
+        p.set_item()?;
+        p.str("poses")?;
+        p.f8_array(&[n, 4, 4], &poses)?;
+        p.set_item()
+    }
+
+    /// LoFTR's index of the pairs whose score is in [lo, hi): the views' keys and
+    /// `pair_infos`, a list of `(array([i, j]), score, central_matches (1 × 4))`, written a
+    /// view's pairs at a time.
+    fn write_loftr(&self, (lo, hi): (f64, f64), w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let mut p = Pickler::new(w)?;
+        p.dict()?;
+        self.pickle_views(&mut p)?;
+        p.str("pair_infos")?;
+        p.list()?;
+        for i in 0..self.len() {
+            for pair in self
+                .pairs_of(i)
+                .iter()
+                .filter(|x| lo <= x.score && x.score < hi)
+            {
+                p.i8_array(&[2], &[pair.i as i64, pair.j as i64])?;
+                p.float(pair.score)?;
+                p.f8_array(&[1, 4], &pair.central)?;
+                p.tuple3()?;
+                p.append()?;
+            }
+        }
+        p.set_item()?;
+        p.stop()
+    }
+
+    /// RoMa's (and DKM's) scene info: the views' keys, `pairs` (P × 2 int64) and `overlaps`
+    /// (P float64) of every pair sharing points, streamed (one pass counts P).
+    fn write_roma(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let n = self.len();
+        let count: usize = (0..n).map(|i| self.pairs_of(i).len()).sum();
+        w.write_all(&npz::npy_header("'|O'", &[]))?;
+        let mut p = Pickler::new(w)?;
+        p.object_scalar_begin()?;
+        p.dict()?;
+        self.pickle_views(&mut p)?;
+        p.str("pairs")?;
+        p.array_begin(Dtype::I8, &[count, 2])?;
+        for i in 0..n {
+            let row: Vec<u8> = self
+                .pairs_of(i)
+                .iter()
+                .flat_map(|x| [x.i as i64, x.j as i64])
+                .flat_map(i64::to_le_bytes)
+                .collect();
+            p.data(&row)?;
+        }
+        p.array_end()?;
+        p.set_item()?;
+        p.str("overlaps")?;
+        p.array_begin(Dtype::F8, &[count])?;
+        for i in 0..n {
+            let row: Vec<u8> = self
+                .pairs_of(i)
+                .iter()
+                .flat_map(|x| x.score.to_le_bytes())
+                .collect();
+            p.data(&row)?;
+        }
+        p.array_end()?;
+        p.set_item()?;
+        p.object_scalar_end()?;
+        p.stop()
     }
 
     /// Write the `.npz` into `w`, with the arrays `np.savez` makes of the script's lists; the
@@ -538,6 +692,28 @@ impl SceneInfo {
         )?;
         z.finish()
     }
+}
+
+/// LoFTR's index (a file a band and the list of them) and RoMa's scene info.
+fn write_pair_indices(name: &str, info: &SceneInfo, staged: &Staged) -> Result<()> {
+    let mut stems = Vec::new();
+    for band in LOFTR_BANDS {
+        let stem = format!("{name}_{}_{}", band.0, band.1);
+        let rel = format!("index/scene_info_0.1_0.7/{stem}.npz");
+        let path = staged.dir().join(&rel);
+        staged.write_with(&rel, &mut |w| {
+            info.write_loftr(band, w)
+                .map_err(|e| ExportError::io(&path, e))
+        })?;
+        stems.push(stem);
+    }
+    let list: String = stems.iter().map(|s| format!("{s}\n")).collect();
+    staged.write("index/trainvaltest_list/train_list.txt", list.as_bytes())?;
+    let rel = format!("prep_scene_info/{name}.npy");
+    let path = staged.dir().join(&rel);
+    staged.write_with(&rel, &mut |w| {
+        info.write_roma(w).map_err(|e| ExportError::io(&path, e))
+    })
 }
 
 /// A view's observations as the script's dict holds them: each point once, where it was

@@ -1,7 +1,8 @@
-//! `dist_<name>.pckl`: the pickle the published pretraining (`pretrain_appearance.py`) loads,
-//! `{'dist_matrix': numpy.ndarray float64 N × N}`, written as numpy's own `ndarray.__reduce__`
-//! would be pickled (protocol 3; protocol 4 past 4 GiB of data), so `pickle.load` with numpy
-//! 1.x or 2.x rebuilds the array without this tool.
+//! Pickles numpy loads without this tool (protocol 3; numpy's own `ndarray.__reduce__` for
+//! arrays, so numpy 1.x or 2.x rebuilds them): `dist_<name>.pckl`, the
+//! `{'dist_matrix': float64 N × N}` the published pretraining (`pretrain_appearance.py`) loads
+//! (protocol 4 past 4 GiB of data); MegaDepth's object arrays of dicts; and, through
+//! [`Pickler`], the matcher trainers' index files (LoFTR's, RoMa's).
 
 const PROTO: u8 = 0x80;
 const EMPTY_DICT: u8 = b'}';
@@ -25,6 +26,8 @@ const BINBYTES8: u8 = 0x8e;
 const SETITEM: u8 = b's';
 const SETITEMS: u8 = b'u';
 const EMPTY_LIST: u8 = b']';
+const EMPTY_TUPLE: u8 = b')';
+const APPEND: u8 = b'a';
 const APPENDS: u8 = b'e';
 const BINFLOAT: u8 = b'G';
 const LONG1: u8 = 0x8a;
@@ -54,16 +57,39 @@ fn int(v: i32, out: &mut Vec<u8>) {
 
 /// `numpy.dtype('<f8')` as numpy pickles it.
 fn dtype_f8(out: &mut Vec<u8>) {
+    dtype("f8", "<", 0, out);
+}
+
+/// `numpy.dtype(name)` as numpy pickles it: byte order `endian` ("<", or "|" where it has
+/// none) and numpy's flags (0 for numbers, 63 for objects).
+fn dtype(name: &str, endian: &str, flags: i32, out: &mut Vec<u8>) {
     global("numpy", "dtype", out);
-    unicode("f8", out);
+    unicode(name, out);
     out.extend_from_slice(&[NEWFALSE, NEWTRUE, TUPLE3, REDUCE, MARK]);
     int(3, out);
-    unicode("<", out);
+    unicode(endian, out);
     out.extend_from_slice(&[NONE, NONE, NONE]);
     int(-1, out);
     int(-1, out);
-    int(0, out);
+    int(flags, out);
     out.extend_from_slice(&[TUPLE, BUILD]);
+}
+
+/// An array's shape as the tuple of Python ints pickle writes.
+fn shape_tuple(shape: &[usize], out: &mut Vec<u8>) {
+    if shape.len() > 3 {
+        out.push(MARK);
+    }
+    for d in shape {
+        long(*d as u64, out);
+    }
+    out.push(match shape.len() {
+        0 => EMPTY_TUPLE,
+        1 => TUPLE1,
+        2 => TUPLE2,
+        3 => TUPLE3,
+        _ => TUPLE,
+    });
 }
 
 /// What `ndarray.__reduce__` pickles before the shape: the empty array
@@ -159,16 +185,8 @@ pub fn object_array_of_dicts(items: &[Vec<(u64, DictValue)>]) -> Vec<u8> {
     // __setstate__((1, (n,), dtype('O'), False, [items]))
     long(items.len() as u64, &mut out);
     out.push(TUPLE1);
-    global("numpy", "dtype", &mut out);
-    unicode("O8", &mut out);
-    out.extend_from_slice(&[NEWFALSE, NEWTRUE, TUPLE3, REDUCE, MARK]);
-    int(3, &mut out);
-    unicode("|", &mut out);
-    out.extend_from_slice(&[NONE, NONE, NONE]);
-    int(-1, &mut out);
-    int(-1, &mut out);
-    int(63, &mut out);
-    out.extend_from_slice(&[TUPLE, BUILD, NEWFALSE, EMPTY_LIST]);
+    dtype("O8", "|", 63, &mut out);
+    out.extend_from_slice(&[NEWFALSE, EMPTY_LIST]);
     let mut memo = false; // numpy's scalar constructor and dtype('f8') stored at 0 and 1
     if !items.is_empty() {
         out.push(MARK);
@@ -232,6 +250,151 @@ fn value(v: DictValue, memo: &mut bool, out: &mut Vec<u8>) {
             out.extend_from_slice(&x.to_le_bytes());
             out.extend_from_slice(&[TUPLE2, REDUCE]);
         }
+    }
+}
+
+/// The element type of an ndarray a [`Pickler`] writes.
+#[derive(Clone, Copy)]
+pub enum Dtype {
+    F8,
+    I8,
+}
+
+/// A pickle written as it goes (protocol 3, numpy's own `ndarray.__reduce__` for arrays): what
+/// the matcher trainers' index files hold — a dict of str keys whose values are lists of str,
+/// float64 and int64 ndarrays (their data streamed), floats and tuples. The caller lays the
+/// opcodes out in pickle's order: a value, then what combines it (`set_item`, `append`,
+/// `tuple`).
+pub struct Pickler<'w> {
+    w: &'w mut dyn std::io::Write,
+}
+
+impl<'w> Pickler<'w> {
+    /// Start a pickle on `w`.
+    pub fn new(w: &'w mut dyn std::io::Write) -> std::io::Result<Self> {
+        w.write_all(&[PROTO, 3])?;
+        Ok(Pickler { w })
+    }
+
+    fn put(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.w.write_all(bytes)
+    }
+
+    /// An empty dict, which `set_item` fills.
+    pub fn dict(&mut self) -> std::io::Result<()> {
+        self.put(&[EMPTY_DICT])
+    }
+
+    /// A str (a dict key, or a value).
+    pub fn str(&mut self, s: &str) -> std::io::Result<()> {
+        let mut out = Vec::with_capacity(5 + s.len());
+        unicode(s, &mut out);
+        self.put(&out)
+    }
+
+    /// A Python float.
+    pub fn float(&mut self, v: f64) -> std::io::Result<()> {
+        let mut out = vec![BINFLOAT];
+        out.extend_from_slice(&v.to_be_bytes());
+        self.put(&out)
+    }
+
+    /// Store the last value under the key before it in the dict before that.
+    pub fn set_item(&mut self) -> std::io::Result<()> {
+        self.put(&[SETITEM])
+    }
+
+    /// An empty list, which `append` fills.
+    pub fn list(&mut self) -> std::io::Result<()> {
+        self.put(&[EMPTY_LIST])
+    }
+
+    /// Append the last value to the list before it.
+    pub fn append(&mut self) -> std::io::Result<()> {
+        self.put(&[APPEND])
+    }
+
+    /// The last three values as a tuple.
+    pub fn tuple3(&mut self) -> std::io::Result<()> {
+        self.put(&[TUPLE3])
+    }
+
+    /// A list of str.
+    pub fn str_list(&mut self, items: &[String]) -> std::io::Result<()> {
+        self.list()?;
+        for s in items {
+            self.str(s)?;
+            self.append()?;
+        }
+        Ok(())
+    }
+
+    /// The opening of a C-order ndarray of `shape` whose `nbytes` bytes of little-endian data
+    /// the caller writes next with `data`, then closes with `array_end`; refused past 4 GiB
+    /// (protocol 3's bytes).
+    pub fn array_begin(&mut self, dtype: Dtype, shape: &[usize]) -> std::io::Result<()> {
+        let count: usize = shape.iter().product();
+        let nbytes = u32::try_from(count * 8).map_err(|_| {
+            std::io::Error::other("an array over 4 GiB in an index pickle is not written")
+        })?;
+        let mut out = Vec::with_capacity(256);
+        empty_ndarray(&mut out);
+        shape_tuple(shape, &mut out);
+        match dtype {
+            Dtype::F8 => self::dtype("f8", "<", 0, &mut out),
+            Dtype::I8 => self::dtype("i8", "<", 0, &mut out),
+        }
+        out.push(NEWFALSE);
+        out.push(BINBYTES);
+        out.extend_from_slice(&nbytes.to_le_bytes());
+        self.put(&out)
+    }
+
+    /// Data of the array `array_begin` opened.
+    pub fn data(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.put(bytes)
+    }
+
+    /// Close the array `array_begin` opened.
+    pub fn array_end(&mut self) -> std::io::Result<()> {
+        self.put(&[TUPLE, BUILD])
+    }
+
+    /// A whole float64 ndarray.
+    pub fn f8_array(&mut self, shape: &[usize], v: &[f64]) -> std::io::Result<()> {
+        self.array_begin(Dtype::F8, shape)?;
+        let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        self.data(&bytes)?;
+        self.array_end()
+    }
+
+    /// A whole int64 ndarray.
+    pub fn i8_array(&mut self, shape: &[usize], v: &[i64]) -> std::io::Result<()> {
+        self.array_begin(Dtype::I8, shape)?;
+        let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        self.data(&bytes)?;
+        self.array_end()
+    }
+
+    /// The opening of a 0-d object ndarray (what `np.save` pickles for a dict): its one item
+    /// comes next, then `object_scalar_end`.
+    pub fn object_scalar_begin(&mut self) -> std::io::Result<()> {
+        let mut out = Vec::with_capacity(160);
+        empty_ndarray(&mut out);
+        shape_tuple(&[], &mut out);
+        dtype("O8", "|", 63, &mut out);
+        out.extend_from_slice(&[NEWFALSE, EMPTY_LIST]);
+        self.put(&out)
+    }
+
+    /// Close the 0-d object ndarray around the item just written.
+    pub fn object_scalar_end(&mut self) -> std::io::Result<()> {
+        self.put(&[APPEND, TUPLE, BUILD])
+    }
+
+    /// End the pickle.
+    pub fn stop(&mut self) -> std::io::Result<()> {
+        self.put(&[STOP])
     }
 }
 

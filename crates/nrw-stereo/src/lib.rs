@@ -12,6 +12,7 @@
 //! the model's convention; see docs/densify.md.
 
 pub mod fusion;
+mod ncc;
 pub mod patchmatch;
 mod rng;
 pub mod view;

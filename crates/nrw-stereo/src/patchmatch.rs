@@ -14,6 +14,7 @@
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
+use crate::ncc::{self, Samples, Warp, LANES};
 use crate::rng::PixelRng;
 use crate::view::StereoView;
 
@@ -126,6 +127,21 @@ pub struct StereoMaps {
 /// A pixel's new hypothesis: depth, normal, cost, selected views.
 type Update = (f32, [f32; 3], f32, u32);
 
+/// Source costs already computed for one hypothesis at one pixel (bit j of `mask`: source
+/// j's cost is `costs[j]`).
+struct Known {
+    mask: u32,
+    costs: [f64; MAX_SOURCES],
+}
+
+impl Known {
+    /// Nothing computed yet.
+    const NONE: Known = Known {
+        mask: 0,
+        costs: [MAX_COST as f64; MAX_SOURCES],
+    };
+}
+
 /// The four directions a pixel takes hypotheses from.
 const DIRECTIONS: [(isize, isize); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
 
@@ -141,8 +157,10 @@ struct Rel<'a> {
     t: DVec3,
     /// The source's centre in reference-camera coordinates.
     centre: DVec3,
-    /// The source's K, which every homography into it starts with.
-    k: DMat3,
+    /// K_src · R · K_ref⁻¹ and K_src · t: the homography of every plane into this source is
+    /// the first plus the second times a row that depends on the plane only.
+    krk: DMat3,
+    kt: DVec3,
     depth: Option<&'a [f32]>,
 }
 
@@ -155,62 +173,37 @@ struct Problem<'a> {
     window: Vec<(f64, f64, f64)>,
     range: (f64, f64),
     geometric: bool,
-    /// The reference's K⁻¹, which every homography ends with.
-    k_inv: DMat3,
+    /// The reference's K⁻ᵀ, which turns a plane's normal into its homographies' row.
+    k_inv_t: DMat3,
 }
 
-/// The reference window around one pixel: centred grey values and bilateral weights, one
-/// array per field (the warp loop runs over them in f32).
-/// The sample arrays are padded to a multiple of [`LANES`] with weight 0 (and a real
-/// sample's offset, so a padded sample is never outside when the real ones are inside).
+/// The reference window around one pixel: offsets, bilateral weights and centred grey
+/// values, one run of `len` f32 per field in one buffer (the warp loop runs over them in f32).
+/// The runs are padded to a multiple of [`LANES`] with weight 0 (and a real sample's offset,
+/// so a padded sample is never outside when the real ones are inside).
 struct Patch {
-    dx: Vec<f32>,
-    dy: Vec<f32>,
-    w: Vec<f32>,
-    /// Weight × (grey value minus the weighted mean).
-    wa: Vec<f32>,
+    /// dx, dy, weight, and weight × (grey value minus the weighted mean): `stride` apart.
+    buf: Vec<f32>,
+    stride: usize,
+    len: usize,
     sum_w: f64,
     var: f64,
 }
 
-/// Window samples handled at once by the NCC's loops (a multiple of `LANES`).
-const CHUNK: usize = 64;
+impl Patch {
+    /// Field `field`'s run (0 dx, 1 dy, 2 weight, 3 weight × centred value).
+    fn run(&self, field: usize) -> &[f32] {
+        &self.buf[field * self.stride..field * self.stride + self.len]
+    }
 
-/// Independent partial sums the NCC keeps (8 f32: one AVX register, two SSE ones).
-const LANES: usize = 8;
-
-/// A homography applied to window offsets around one pixel: base + dx · hx + dy · hy (f32).
-struct Warp {
-    base: glam::Vec3,
-    hx: glam::Vec3,
-    hy: glam::Vec3,
-}
-
-impl Warp {
-    /// The source image coordinates (pixel centres at integers) of each offset, into `xs`,
-    /// `ys`; whether every sample lies in front of the source and within [0, last].
-    fn samples(
-        &self,
-        dx: &[f32],
-        dy: &[f32],
-        last: (f32, f32),
-        xs: &mut [f32],
-        ys: &mut [f32],
-    ) -> bool {
-        let (b, hx, hy) = (self.base, self.hx, self.hy);
-        let mut inside = true;
-        for k in 0..xs.len() {
-            let (dx, dy) = (dx[k], dy[k]);
-            let pz = b.z + hx.z * dx + hy.z * dy;
-            let inv = 1.0 / pz;
-            let sx = (b.x + hx.x * dx + hy.x * dy) * inv - 0.5;
-            let sy = (b.y + hx.y * dx + hy.y * dy) * inv - 0.5;
-            // NaN fails every comparison, so it counts as outside.
-            inside &= (pz > 0.0) & (sx >= 0.0) & (sy >= 0.0) & (sx <= last.0) & (sy <= last.1);
-            xs[k] = sx;
-            ys[k] = sy;
+    /// The samples as the NCC kernel reads them.
+    fn samples(&self) -> Samples<'_> {
+        Samples {
+            dx: self.run(0),
+            dy: self.run(1),
+            w: self.run(2),
+            wa: self.run(3),
         }
-        inside
     }
 }
 
@@ -229,12 +222,14 @@ impl<'a> Problem<'a> {
             .map(|s| {
                 let r = s.view.rotation * r_ref_t;
                 let t = s.view.translation - r * reference.translation;
+                let k = s.view.lens.matrix();
                 Rel {
                     view: s.view,
                     r,
                     t,
                     centre: -(r.transpose() * t),
-                    k: s.view.lens.matrix(),
+                    krk: k * r * reference.lens.inverse(),
+                    kt: k * t,
                     depth: s.depth,
                 }
             })
@@ -256,7 +251,7 @@ impl<'a> Problem<'a> {
             window,
             range,
             geometric,
-            k_inv: reference.lens.inverse(),
+            k_inv_t: reference.lens.inverse().transpose(),
         }
     }
 
@@ -264,46 +259,45 @@ impl<'a> Problem<'a> {
         let img = &self.reference.image;
         let centre = img.at(x, y) as f64;
         let sc2 = 2.0 * self.opts.sigma_color * self.opts.sigma_color;
-        let n = self.window.len();
-        let mut p = Patch {
-            dx: Vec::with_capacity(n),
-            dy: Vec::with_capacity(n),
-            w: Vec::with_capacity(n),
-            wa: Vec::with_capacity(n),
-            sum_w: 0.0,
-            var: 0.0,
-        };
-        let mut sum_a = 0.0;
-        let mut values = Vec::with_capacity(n);
-        for &(dx, dy, ws) in &self.window {
+        let stride = self.window.len().next_multiple_of(LANES);
+        // One allocation a pixel: the four runs (the last holds the grey values until the
+        // mean is known; f32 holds them exactly).
+        let mut buf = vec![0.0f32; 4 * stride];
+        let (dxs, rest) = buf.split_at_mut(stride);
+        let (dys, rest) = rest.split_at_mut(stride);
+        let (ws, was) = rest.split_at_mut(stride);
+        let (mut count, mut sum_w, mut sum_a) = (0, 0.0, 0.0);
+        for &(dx, dy, spatial) in &self.window {
             let (sx, sy) = (x as isize + dx as isize, y as isize + dy as isize);
             if sx < 0 || sy < 0 || sx >= img.width as isize || sy >= img.height as isize {
                 continue;
             }
-            let a = img.at(sx as usize, sy as usize) as f64;
-            let w = ws * (-(a - centre) * (a - centre) / sc2).exp();
-            p.dx.push(dx as f32);
-            p.dy.push(dy as f32);
-            p.w.push(w as f32);
-            values.push(a);
-            p.sum_w += w as f32 as f64;
-            sum_a += w as f32 as f64 * a;
+            let a = img.at(sx as usize, sy as usize);
+            let d = a as f64 - centre;
+            let w = (spatial * (-d * d / sc2).exp()) as f32;
+            (dxs[count], dys[count], ws[count], was[count]) = (dx as f32, dy as f32, w, a);
+            sum_w += w as f64;
+            sum_a += w as f64 * a as f64;
+            count += 1;
         }
-        let mean = sum_a / p.sum_w;
-        for (a, w) in values.iter().zip(&p.w) {
-            let c = a - mean;
-            p.wa.push(*w * c as f32);
-            p.var += *w as f64 * c * c;
+        let mean = sum_a / sum_w;
+        let mut var = 0.0;
+        for (wa, w) in was[..count].iter_mut().zip(&ws[..count]) {
+            let c = *wa as f64 - mean;
+            *wa = *w * c as f32;
+            var += *w as f64 * c * c;
         }
-        p.var /= p.sum_w;
-        let (dx0, dy0) = (p.dx.first().copied(), p.dy.first().copied());
-        while !p.w.len().is_multiple_of(LANES) {
-            p.dx.push(dx0.unwrap_or(0.0));
-            p.dy.push(dy0.unwrap_or(0.0));
-            p.w.push(0.0);
-            p.wa.push(0.0);
+        let len = count.next_multiple_of(LANES);
+        for k in count..len {
+            (dxs[k], dys[k]) = (dxs[0], dys[0]);
         }
-        p
+        Patch {
+            buf,
+            stride,
+            len,
+            sum_w,
+            var: var / sum_w,
+        }
     }
 
     /// 1 − the bilateral-weighted NCC of the window warped into `src` by `h`.
@@ -318,44 +312,12 @@ impl<'a> Problem<'a> {
             hx: h.x_axis.as_vec3(),
             hy: h.y_axis.as_vec3(),
         };
-        let img = &src.view.image;
-        let last = ((img.width - 1) as f32, (img.height - 1) as f32);
-        // Sums in LANES independent lanes, added up in lane order at the end: a fixed order
-        // (the same bits on every machine and thread count) that the compiler vectorises.
-        let (mut s_b, mut s_bb, mut s_ab) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-        let (mut xs, mut ys, mut bs) = ([0.0f32; CHUNK], [0.0f32; CHUNK], [0.0f32; CHUNK]);
-        for start in (0..patch.w.len()).step_by(CHUNK) {
-            let end = (start + CHUNK).min(patch.w.len());
-            let len = end - start;
-            // Three loops: the warp of a chunk of samples (no branch, so it vectorises), the
-            // bilinear reads (independent, so they overlap), the weighted sums (vectorised).
-            let inside = warp.samples(
-                &patch.dx[start..end],
-                &patch.dy[start..end],
-                last,
-                &mut xs[..len],
-                &mut ys[..len],
-            );
-            if !inside {
-                return MAX_COST as f64;
-            }
-            for k in 0..len {
-                bs[k] = img.bilinear_f32(xs[k], ys[k]);
-            }
-            let (w, wa) = (&patch.w[start..end], &patch.wa[start..end]);
-            for ((b, w), wa) in bs[..len]
-                .chunks_exact(LANES)
-                .zip(w.chunks_exact(LANES))
-                .zip(wa.chunks_exact(LANES))
-            {
-                for l in 0..LANES {
-                    let wb = w[l] * b[l];
-                    s_b[l] += wb;
-                    s_bb[l] += wb * b[l];
-                    s_ab[l] += wa[l] * b[l];
-                }
-            }
-        }
+        let samples = patch.samples();
+        // Sums in LANES independent lanes, added up in lane order here: a fixed order (the
+        // same bits on every machine and thread count).
+        let Some([s_b, s_bb, s_ab]) = ncc::sums(&warp, &samples, &src.view.image) else {
+            return MAX_COST as f64;
+        };
         let lanes = |s: [f32; LANES]| s.iter().fold(0.0f64, |acc, v| acc + *v as f64);
         let (s_b, s_bb, s_ab) = (lanes(s_b), lanes(s_bb), lanes(s_ab));
         let sum_w = patch.sum_w;
@@ -377,8 +339,9 @@ impl<'a> Problem<'a> {
         if dp >= -1e-12 * point.length() {
             return None;
         }
-        let tn = DMat3::from_cols(src.t * (n.x / dp), src.t * (n.y / dp), src.t * (n.z / dp));
-        Some(src.k * (src.r + tn) * self.k_inv)
+        // K (R + t nᵀ / dp) K⁻¹ = K R K⁻¹ + (K t) (K⁻ᵀ n / dp)ᵀ: a rank-one update.
+        let m = self.k_inv_t * n / dp;
+        Some(src.krk + DMat3::from_cols(src.kt * m.x, src.kt * m.y, src.kt * m.z))
     }
 
     /// The forward-backward reprojection error (px) of the reference point `point` through
@@ -439,9 +402,25 @@ impl<'a> Problem<'a> {
         depth: f64,
         n: DVec3,
     ) -> [f64; MAX_SOURCES] {
-        let mut costs = [MAX_COST as f64; MAX_SOURCES];
+        self.costs_knowing(patch, x, y, depth, n, &Known::NONE)
+    }
+
+    /// `source_costs`, taking the costs `known` already holds instead of computing them
+    /// again (the same numbers: a source's cost is a function of its inputs).
+    fn costs_knowing(
+        &self,
+        patch: &Patch,
+        x: usize,
+        y: usize,
+        depth: f64,
+        n: DVec3,
+        known: &Known,
+    ) -> [f64; MAX_SOURCES] {
+        let mut costs = known.costs;
         for (j, src) in self.sources.iter().enumerate() {
-            costs[j] = self.source_cost(patch, src, x, y, depth, n);
+            if known.mask & (1 << j) == 0 {
+                costs[j] = self.source_cost(patch, src, x, y, depth, n);
+            }
         }
         costs
     }
@@ -449,8 +428,21 @@ impl<'a> Problem<'a> {
     /// The pixel's cost of a hypothesis over every source: the mean of its best `best_k`
     /// source costs, and the views selected for it (the best `best_k + 1`).
     fn cost(&self, patch: &Patch, x: usize, y: usize, depth: f64, n: DVec3) -> (f64, u32) {
+        self.cost_knowing(patch, x, y, depth, n, &Known::NONE)
+    }
+
+    /// `cost`, taking the source costs `known` already holds for this hypothesis.
+    fn cost_knowing(
+        &self,
+        patch: &Patch,
+        x: usize,
+        y: usize,
+        depth: f64,
+        n: DVec3,
+        known: &Known,
+    ) -> (f64, u32) {
         let m = self.sources.len();
-        let costs = self.source_costs(patch, x, y, depth, n);
+        let costs = self.costs_knowing(patch, x, y, depth, n, known);
         let mut order: Vec<usize> = (0..m).collect();
         order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]).then(a.cmp(&b)));
         let k = self.opts.best_k.clamp(1, m);
@@ -462,7 +454,8 @@ impl<'a> Problem<'a> {
     }
 
     /// The cost of a hypothesis over the selected views only (the mean of their best
-    /// `best_k`): what the candidates of one pixel are compared by.
+    /// `best_k`): what the candidates of one pixel are compared by; with the source costs it
+    /// computed.
     fn subset_cost(
         &self,
         patch: &Patch,
@@ -471,20 +464,25 @@ impl<'a> Problem<'a> {
         depth: f64,
         n: DVec3,
         mask: u32,
-    ) -> f64 {
+    ) -> (f64, Known) {
+        let mut known = Known {
+            mask,
+            costs: [MAX_COST as f64; MAX_SOURCES],
+        };
         let mut costs = [MAX_COST as f64; MAX_SOURCES];
         let mut count = 0;
         for (j, src) in self.sources.iter().enumerate() {
             if mask & (1 << j) == 0 {
                 continue;
             }
-            costs[count] = self.source_cost(patch, src, x, y, depth, n);
+            known.costs[j] = self.source_cost(patch, src, x, y, depth, n);
+            costs[count] = known.costs[j];
             count += 1;
         }
         let costs = &mut costs[..count.max(1)];
         costs.sort_unstable_by(f64::total_cmp);
         let k = self.opts.best_k.clamp(1, costs.len());
-        costs[..k].iter().sum::<f64>() / k as f64
+        (costs[..k].iter().sum::<f64>() / k as f64, known)
     }
 
     fn in_range(&self, d: f64) -> bool {
@@ -540,10 +538,10 @@ impl<'a> Problem<'a> {
         // The current plane's cost over its selected views is the mean of its best `best_k`
         // costs, which is the cost it was stored with (the selected views are its best
         // `best_k + 1`): it is not computed again (precision given up: the stored f32).
-        let start = if !self.in_range(d_cur) {
-            f64::INFINITY
+        let (start, mut best_known) = if !self.in_range(d_cur) {
+            (f64::INFINITY, Known::NONE)
         } else if current.3 != 0 {
-            current.2 as f64
+            (current.2 as f64, Known::NONE)
         } else {
             self.subset_cost(&patch, x, y, d_cur, n_cur, mask)
         };
@@ -553,9 +551,10 @@ impl<'a> Problem<'a> {
             if !self.in_range(d) {
                 return;
             }
-            let c = self.subset_cost(&patch, x, y, d, n, mask);
+            let (c, known) = self.subset_cost(&patch, x, y, d, n, mask);
             if c < best.2 {
                 *best = (d, n, c);
+                best_known = known;
                 changed = true;
             }
         };
@@ -610,7 +609,7 @@ impl<'a> Problem<'a> {
         if !changed && current.3 != 0 {
             return current;
         }
-        let (cost, views) = self.cost(&patch, x, y, best.0, best.1);
+        let (cost, views) = self.cost_knowing(&patch, x, y, best.0, best.1, &best_known);
         (best.0 as f32, to_f(best.1), cost as f32, views)
     }
 

@@ -46,6 +46,12 @@ import numpy as np
 import OpenEXR
 import pycolmap
 
+# COLMAP's own scripts/python/read_write_dense.py, where NRW_COLMAP_SCRIPTS names its folder.
+COLMAP_DENSE = None
+if os.environ.get("NRW_COLMAP_SCRIPTS"):
+    sys.path.insert(0, os.environ["NRW_COLMAP_SCRIPTS"])
+    import read_write_dense as COLMAP_DENSE
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -53,12 +59,8 @@ def read_bin(path):
     """COLMAP's dense map layout: COLMAP's own read_write_dense.py where NRW_COLMAP_SCRIPTS
     names its folder (as .ci/run sets it), else its reading transcribed (the header's three
     numbers, float32 in Fortran order, transposed and squeezed)."""
-    scripts = os.environ.get("NRW_COLMAP_SCRIPTS")
-    if scripts:
-        sys.path.insert(0, scripts)
-        import read_write_dense
-
-        return read_write_dense.read_array(path)
+    if COLMAP_DENSE:
+        return COLMAP_DENSE.read_array(path)
     with open(path, "rb") as f:
         data = f.read()
     w, h, c, rest = data.split(b"&", 3)

@@ -140,9 +140,7 @@ pub fn write_matrix_dict<E>(
     unicode(key, &mut out);
     empty_ndarray(&mut out);
     // __setstate__((1, (n, n), dtype('<f8'), False, data))
-    int(n as i32, &mut out);
-    int(n as i32, &mut out);
-    out.push(TUPLE2);
+    shape_tuple(&[n, n], &mut out);
     dtype_f8(&mut out);
     out.push(NEWFALSE);
     if big {
@@ -183,8 +181,7 @@ pub fn object_array_of_dicts(items: &[Vec<(u64, DictValue)>]) -> Vec<u8> {
     let mut out = vec![PROTO, 3];
     empty_ndarray(&mut out);
     // __setstate__((1, (n,), dtype('O'), False, [items]))
-    long(items.len() as u64, &mut out);
-    out.push(TUPLE1);
+    shape_tuple(&[items.len()], &mut out);
     dtype("O8", "|", 63, &mut out);
     out.extend_from_slice(&[NEWFALSE, EMPTY_LIST]);
     let mut memo = false; // numpy's scalar constructor and dtype('f8') stored at 0 and 1

@@ -393,21 +393,9 @@ impl<'a> Problem<'a> {
         c
     }
 
-    /// Each source's cost of a hypothesis.
+    /// Each source's cost of a hypothesis, taking the costs `known` already holds instead of
+    /// computing them again (the same numbers: a source's cost is a function of its inputs).
     fn source_costs(
-        &self,
-        patch: &Patch,
-        x: usize,
-        y: usize,
-        depth: f64,
-        n: DVec3,
-    ) -> [f64; MAX_SOURCES] {
-        self.costs_knowing(patch, x, y, depth, n, &Known::NONE)
-    }
-
-    /// `source_costs`, taking the costs `known` already holds instead of computing them
-    /// again (the same numbers: a source's cost is a function of its inputs).
-    fn costs_knowing(
         &self,
         patch: &Patch,
         x: usize,
@@ -425,14 +413,10 @@ impl<'a> Problem<'a> {
         costs
     }
 
-    /// The pixel's cost of a hypothesis over every source: the mean of its best `best_k`
-    /// source costs, and the views selected for it (the best `best_k + 1`).
-    fn cost(&self, patch: &Patch, x: usize, y: usize, depth: f64, n: DVec3) -> (f64, u32) {
-        self.cost_knowing(patch, x, y, depth, n, &Known::NONE)
-    }
-
-    /// `cost`, taking the source costs `known` already holds for this hypothesis.
-    fn cost_knowing(
+    /// The pixel's cost of a hypothesis over every source (those `known` holds taken from
+    /// it): the mean of its best `best_k` source costs, and the views selected for it (the
+    /// best `best_k + 1`).
+    fn cost(
         &self,
         patch: &Patch,
         x: usize,
@@ -442,7 +426,7 @@ impl<'a> Problem<'a> {
         known: &Known,
     ) -> (f64, u32) {
         let m = self.sources.len();
-        let costs = self.costs_knowing(patch, x, y, depth, n, known);
+        let costs = self.source_costs(patch, x, y, depth, n, known);
         let mut order: Vec<usize> = (0..m).collect();
         order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]).then(a.cmp(&b)));
         let k = self.opts.best_k.clamp(1, m);
@@ -609,7 +593,7 @@ impl<'a> Problem<'a> {
         if !changed && current.3 != 0 {
             return current;
         }
-        let (cost, views) = self.cost_knowing(&patch, x, y, best.0, best.1, &best_known);
+        let (cost, views) = self.cost(&patch, x, y, best.0, best.1, &best_known);
         (best.0 as f32, to_f(best.1), cost as f32, views)
     }
 
@@ -641,7 +625,7 @@ impl<'a> Problem<'a> {
         if patch.var.sqrt() < self.opts.min_texture {
             return (MAX_COST, 0);
         }
-        let (c, v) = self.cost(&patch, x, y, d, n);
+        let (c, v) = self.cost(&patch, x, y, d, n, &Known::NONE);
         (c as f32, v)
     }
 
@@ -866,7 +850,7 @@ pub fn filter(
             }
             let n = to_d(state.normal[i]);
             let point = reference.lens.pixel_ray(x, y) * d;
-            let costs = problem.source_costs(&patch, x, y, d, n);
+            let costs = problem.source_costs(&patch, x, y, d, n, &Known::NONE);
             let (mut count, mut ncc_sum) = (0usize, 0.0);
             for (j, src) in problem.sources.iter().enumerate() {
                 let ncc = 1.0 - costs[j];

@@ -19,7 +19,7 @@ const SIDE: u32 = 121;
 
 /// A split dataset of a PINHOLE synthetic scene with people, ingested with its truth labels,
 /// and its gsplat export: (scene, dataset, export).
-fn exported(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+pub(crate) fn exported(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     let scene = dir.join("scene");
     // Shorter sides of 121 px rendered at 121 px: views stored unscaled (the truth applies as
     // it is) and sizes not a multiple of 2, 4 or 8 (the pyramid's floor matters).

@@ -13,6 +13,9 @@ use super::{npy, ok, python, shared};
 /// The scene name the export is made under (`--name`, D2-Net's `--scene_id`).
 const SCENE: &str = "synthetic0001";
 
+/// The metric scale the export is given (IMC 2022's scaling factor).
+const METRES_PER_UNIT: &str = "0.25";
+
 #[test]
 fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
     let Some(d2net) = shared::shared("consumers/d2-net/preprocess_scene.py") else {
@@ -51,6 +54,8 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
         "megadepth",
         "--name",
         SCENE,
+        "--metres-per-unit",
+        METRES_PER_UNIT,
         "--out",
         out.to_str().unwrap(),
     ]);
@@ -167,6 +172,7 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
     );
     dust3r_reads_its_folder(&out, &dump, &d);
     matchers_read_their_indices(&out, &theirs);
+    imc2022_reads_its_folder(&out, &theirs);
     eprintln!(
         "D2-Net's scene_info of the export equals ours: {} views, {pairs} overlapping ordered \
          pairs; angles within {:.1e}°, scale ratios within {:.1e}",
@@ -235,6 +241,45 @@ fn matchers_read_their_indices(out: &Path, theirs: &Path) {
     eprintln!(
         "LoFTR's index: {bands:?} of {sharing} pairs sharing points; RoMa's: {} pairs",
         roma["pairs"]
+    );
+}
+
+/// IMC 2022's evaluation code, transcribed (tests/megadepth_imc2022.py), reads the export's
+/// `imc2022/train/`: calibration equals D2-Net's K and poses, the pairs are those sharing points
+/// in D2-Net's overlap matrix, each covisibility is the bounding-box rule recomputed from
+/// D2-Net's dicts, each F is the organisers' `ComputeFundamentalMatrix`, and submitted as a
+/// prediction it scores as the ground truth.
+fn imc2022_reads_its_folder(out: &Path, theirs: &Path) {
+    let got = script_json("megadepth_imc2022.py", &[out, theirs, Path::new(SCENE)]);
+    assert_eq!(got["problems"], serde_json::json!([]), "{got}");
+    assert_eq!(
+        got["scaling_dict"][SCENE].as_f64(),
+        METRES_PER_UNIT.parse().ok(),
+        "{got}"
+    );
+    let pairs = got["pairs"].as_u64().unwrap();
+    assert!(
+        pairs > 0 && got["recommended"].as_u64().unwrap() > 0,
+        "{got}"
+    );
+    let worst = &got["worst"];
+    let at_most = |key: &str, tol: f64| {
+        let x = worst[key].as_f64().unwrap();
+        assert!(x <= tol, "{key}: {x} > {tol} ({got})");
+    };
+    at_most("covisibility", 1e-12);
+    at_most("F_relative", 1e-12);
+    at_most("err_q_deg", 1e-4);
+    at_most("err_t", 1e-6);
+    eprintln!(
+        "IMC 2022's reading: {pairs} pairs ({} at covisibility ≥ 0.1), worst covisibility \
+         difference {:.1e}, F {:.1e} relative, the export's F scored as a prediction: {:.1e}° \
+         and {:.1e} m",
+        got["recommended"],
+        worst["covisibility"].as_f64().unwrap(),
+        worst["F_relative"].as_f64().unwrap(),
+        worst["err_q_deg"].as_f64().unwrap(),
+        worst["err_t"].as_f64().unwrap(),
     );
 }
 

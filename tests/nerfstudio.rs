@@ -238,3 +238,80 @@ fn masks_keep_what_the_transient_mask_does_not_cover() {
     }
     assert!(masked > 0, "the people are masked out somewhere");
 }
+
+/// nerfstudio itself (1.1.5, which needs torch: never in CI) reads the nerfstudio export through
+/// its `NerfstudioDataParser` and `DepthDataset`, and the gsplat export through its
+/// `ColmapDataParser` at downscale factors 1, 2 and 4 (tests/nerfstudio_torch.py). Runs where
+/// `NRW_TORCH_PYTHON` names a Python with torch and nerfstudio; skips and says so elsewhere.
+#[test]
+fn nerfstudio_itself_reads_the_nerfstudio_and_gsplat_exports() {
+    let Some(py) = std::env::var_os("NRW_TORCH_PYTHON") else {
+        eprintln!(
+            "skipped: NRW_TORCH_PYTHON is not set (a Python with torch and nerfstudio 1.1.5); \
+             CI keeps the transcribed checks"
+        );
+        return;
+    };
+    // The gsplat test's dataset (PINHOLE, people, truth labels) and its gsplat export.
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, ds, gs) = crate::gsplat::exported(tmp.path());
+    let ns = tmp.path().join("ns");
+    let o = export(&ds, &ns);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = std::process::Command::new(py)
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/nerfstudio_torch.py"))
+        .args([&ns, &gs])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let got: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let n = &got["nerfstudio"];
+    assert_eq!(
+        (n["train"].as_u64(), n["val"].as_u64()),
+        (Some(4), Some(1)),
+        "{n}"
+    );
+    assert_eq!(
+        n["depth_unit_scale_factor"], 0.001,
+        "the default the files are written for"
+    );
+    let mut masked = 0;
+    for f in n["frames"].as_array().unwrap() {
+        assert_eq!(f["image"][0], f["camera"][0], "{f}");
+        assert_eq!(f["image"][1], f["camera"][1], "{f}");
+        assert_eq!(f["depth"], f["camera"], "{f}");
+        assert_eq!(f["masked"], f["masked_in_png"], "0 = ignore: {f}");
+        masked += f["masked"].as_u64().unwrap();
+    }
+    assert!(masked > 0, "the people are masked out somewhere");
+    let median = n["median_relative_depth"].as_f64().unwrap();
+    let visible = n["visible_points"].as_u64().unwrap();
+    assert!(
+        visible > 1000 && median < 1e-4,
+        "{visible} points, median {median}"
+    );
+    for factor in ["1", "2", "4"] {
+        let c = &got["colmap"][factor];
+        let folder = if factor == "1" {
+            "images".to_string()
+        } else {
+            format!("images_{factor}")
+        };
+        assert_eq!(c["folders"], serde_json::json!([folder]), "{c}");
+        assert_eq!(c["views"], 4, "{c}");
+        assert_eq!(c["shape_mismatches"], 0, "{c}");
+        assert_eq!(c["fx_worst_relative"], 0.0, "{c}");
+    }
+    eprintln!(
+        "nerfstudio {} (torch {}) read both exports: {visible} sparse points seen through its \
+         cameras land on its depth within {:.1e} (median, relative); images_2/4 and masks_2/4 match its \
+         rescaled cameras",
+        got["nerfstudio_version"].as_str().unwrap(),
+        got["torch"].as_str().unwrap(),
+        median
+    );
+}

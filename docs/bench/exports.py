@@ -16,8 +16,8 @@ clock, peak memory) and states its accuracy:
   actual / expected size) and where it is in that level's pixels (COLMAP's convention: K times
   the level's size / the image's size, per axis).
 - scene_info. Ours: `export --layout megadepth` (scene_info with the HDF5 depth, text model,
-  DUSt3R folder: the whole export). Peer, in the same run: D2-Net's own preprocess_scene.py
-  on that export (scene_info alone). Accuracy: the largest difference between the two
+  DUSt3R folder, pair indices, IMC 2022: the whole export). Peer, in the same run: D2-Net's
+  own preprocess_scene.py on that export (scene_info alone). Accuracy: the largest difference between the two
   scene_info files' overlap, scale-ratio and angle matrices.
 
 Needs numpy, Pillow, h5py and imagesize; ../shared/data and ../shared/consumers/d2-net.
@@ -193,7 +193,7 @@ def main():
         for scene, n, (s, m), (ps, pm), d in infos:
             f.write(f"| {scene} | {n} | {s:.2f} | {m:.0f} | {ps:.2f} | {pm:.0f} | {ps / s:.2f}× | {d:.1e} |\n")
         f.write("\nOurs writes the whole layout (photos, HDF5 depth, the text model, scene_info, DUSt3R's "
-                "folder); the peer reads that layout and writes scene_info alone.\n")
+                "folder, LoFTR's and RoMa's pair indices, IMC 2022's csvs and JPEGs); the peer reads that layout and writes scene_info alone.\n")
     print(out.read_text())
 
 

@@ -13,6 +13,7 @@ pub mod error;
 pub mod files;
 pub mod gsplat;
 pub mod hdf5;
+pub mod imc;
 pub mod inverse_depth;
 pub mod layout;
 pub mod megadepth;

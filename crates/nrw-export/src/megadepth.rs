@@ -16,6 +16,8 @@
 //! OUT/index/trainvaltest_list/train_list.txt                 those files' stems
 //! OUT/prep_scene_info/NAME.npy                               RoMa's / DKM's scene info: every
 //!                                                           pair sharing points, its overlap
+//! OUT/imc2022/train/…                                       IMC 2022's training layout: see
+//!                                                           [`crate::imc`]
 //! ```
 //!
 //! The model is PINHOLE, one camera per image with the image's id (the script reads
@@ -40,6 +42,7 @@ use nrw_colmap::{Camera, Point2D, Point3D, Reconstruction, TrackElement};
 use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
+use crate::imc::ImcView;
 use crate::npz::{self, Array};
 use crate::pickle::{DictValue, Dtype, Pickler};
 use crate::staging::Staged;
@@ -111,6 +114,19 @@ impl LayoutWriter for Megadepth {
         let meta = dust3r_metadata(name, &views, &info).ok_or_else(too_big)?;
         staged.write("dust3r/all_metadata.npz", &meta)?;
         write_pair_indices(name, &info, staged)?;
+        let imc: Vec<ImcView> = views
+            .values()
+            .map(|v| ImcView {
+                id: &v.stem,
+                jpg: &v.jpg,
+                width: v.camera.width,
+                height: v.camera.height,
+            })
+            .collect();
+        let unit = job.cfg.metres_per_unit;
+        summary
+            .warnings
+            .extend(crate::imc::write(name, &imc, &info, unit, staged)?);
         summary.warnings.extend(consumer_warnings(&views));
         summary.depth_source = Some(job.depth_source());
         Ok(())
@@ -140,6 +156,10 @@ fn depth_dir(name: &str) -> String {
 /// One written view: what the model and `scene_info` need of it.
 struct View {
     file: String,
+    /// The file's stem: DUSt3R's and IMC's image id.
+    stem: String,
+    /// The export-relative path of DUSt3R's JPEG of the view.
+    jpg: String,
     image_path: String,
     depth_path: String,
     depth_bytes: usize,
@@ -184,12 +204,14 @@ fn write_view(
     );
     staged.write(&depth_path, &h5)?;
     let image = crate::nerfw::model_image(v, &file)?;
-    write_dust3r_view(v, &depth, &camera, &image, name, stem, staged)?;
+    let jpg = write_dust3r_view(v, &depth, &camera, &image, name, stem, staged)?;
     Ok(View {
         points2d: observations(v, rec, &camera)?,
         qvec: image.cam_from_world.qvec(),
         tvec: image.cam_from_world.translation.to_array(),
         depth_bytes: h5.len(),
+        stem: stem.to_string(),
+        jpg,
         file,
         image_path,
         depth_path,
@@ -199,7 +221,7 @@ fn write_view(
 
 /// DUSt3R's three files of a view (its `preprocess_megadepth.py` output, at the stored size):
 /// the photo as JPEG (quality 90, as that script saves it), the depth as a one-channel "Y"
-/// EXR (OpenCV's reading), and `{intrinsics, cam2world}`.
+/// EXR (OpenCV's reading), and `{intrinsics, cam2world}`; the JPEG's export-relative path.
 fn write_dust3r_view(
     v: &ViewRow,
     depth: &nrw_dataset::depth::DepthMap,
@@ -208,7 +230,7 @@ fn write_dust3r_view(
     name: &str,
     stem: &str,
     staged: &Staged,
-) -> Result<()> {
+) -> Result<String> {
     let dir = format!("dust3r/{name}/0/{stem}");
     let jpg = nrw_dataset::codec::encode_jpeg(&v.name, &v.photo()?, 90)?;
     staged.write(&format!("{dir}.jpg"), &jpg)?;
@@ -231,7 +253,8 @@ fn write_dust3r_view(
         ("cam2world", Array::f64(&[4, 4], &c2w).npy()),
     ])
     .expect("two small arrays");
-    staged.write(&format!("{dir}.npz"), &npz)
+    staged.write(&format!("{dir}.npz"), &npz)?;
+    Ok(format!("{dir}.jpg"))
 }
 
 /// DUSt3R's `all_metadata.npz`: `scenes` ("NAME 0"), `images` (the views' stems, in
@@ -392,13 +415,43 @@ pub const LOFTR_BANDS: [(f64, f64); 3] = [(0.1, 0.3), (0.3, 0.5), (0.5, 0.7)];
 type Candidate = (f64, u64, [f64; 2], [f64; 2]);
 
 /// Two views (i < j) that share SfM points.
-struct PairInfo {
-    i: usize,
-    j: usize,
+pub(crate) struct PairInfo {
+    pub i: usize,
+    pub j: usize,
     /// The smaller of the two views' overlaps.
-    score: f64,
+    pub score: f64,
     /// One shared point in D2-Net's `central_match` layout: [y_i, x_i, y_j, x_j].
     central: [f64; 4],
+    /// The bounding boxes of the shared points' positions in view i and in view j.
+    pub boxes: [Bbox; 2],
+}
+
+/// An axis-aligned box of image positions, grown a point at a time.
+#[derive(Clone, Copy)]
+pub(crate) struct Bbox {
+    pub min: DVec2,
+    pub max: DVec2,
+}
+
+impl Bbox {
+    /// The box of no point, which any point replaces.
+    const EMPTY: Bbox = Bbox {
+        min: DVec2::splat(f64::INFINITY),
+        max: DVec2::splat(f64::NEG_INFINITY),
+    };
+
+    /// Grow the box to hold `p`.
+    fn add(&mut self, p: [f64; 2]) {
+        let p = DVec2::from_array(p);
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    /// The box's area in square pixels (0 for one point or a line).
+    pub fn area(&self) -> f64 {
+        let d = self.max - self.min;
+        d.x * d.y
+    }
 }
 
 impl SceneInfo {
@@ -451,7 +504,7 @@ impl SceneInfo {
     }
 
     /// Views in the scene.
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.n_points3d.len()
     }
 
@@ -524,11 +577,12 @@ impl SceneInfo {
     /// View i's pairs with the views after it that share points, in view order: the smaller
     /// of the two overlaps, and the central match (the shared point nearest view i's
     /// principal point; the smaller point id on a tie). Costs the track lengths of i's points.
-    fn pairs_of(&self, i: usize) -> Vec<PairInfo> {
+    pub(crate) fn pairs_of(&self, i: usize) -> Vec<PairInfo> {
         let n = self.len();
         let (cx, cy) = (self.intrinsics[i][0][2], self.intrinsics[i][1][2]);
         let mut common = vec![0u64; n];
         let mut central: Vec<Option<Candidate>> = vec![None; n];
+        let mut boxes = vec![[Bbox::EMPTY; 2]; n];
         for (id, v) in &self.points3d_id_to_2d[i] {
             let DictValue::Pair(p) = *v else {
                 unreachable!("positions are pairs")
@@ -539,6 +593,8 @@ impl SceneInfo {
                     continue;
                 }
                 common[j] += 1;
+                boxes[j][0].add(p);
+                boxes[j][1].add(q);
                 let nearer = central[j].is_none_or(|b| d2 < b.0 || (d2 == b.0 && *id < b.1));
                 if nearer {
                     central[j] = Some((d2, *id, p, q));
@@ -554,6 +610,7 @@ impl SceneInfo {
                     j,
                     score: share(i).min(share(j)),
                     central: [p[1], p[0], q[1], q[0]],
+                    boxes: boxes[j],
                 })
             })
             .collect()

@@ -25,6 +25,8 @@ pub struct ExportConfig {
     pub depth: DepthMapping,
     /// TFRecord files per split (1: `<name>_<split>.tfrecord`).
     pub tfrecord_files: usize,
+    /// Metres a model unit, when known: IMC 2022's `scaling_factors.csv` (megadepth layout).
+    pub metres_per_unit: Option<f64>,
 }
 
 impl ExportConfig {
@@ -38,6 +40,7 @@ impl ExportConfig {
             semantics: true,
             depth: DepthMapping::Linear,
             tfrecord_files: 1,
+            metres_per_unit: None,
         }
     }
 }

@@ -26,6 +26,16 @@ fn parse_crop(s: &str) -> std::result::Result<Crop, String> {
     }
 }
 
+/// `--metres-per-unit` values: a finite length above zero.
+fn parse_scale(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!(
+            "{s:?} is not a length in metres above zero (e.g. 0.0254)"
+        )),
+    }
+}
+
 /// Arguments of `export`.
 #[derive(Debug, Args)]
 #[command(after_help = "Examples:
@@ -37,6 +47,7 @@ fn parse_crop(s: &str) -> std::result::Result<Crop, String> {
   nrw-etl export DATASET --layout nerfstudio --out trevi_ns   # ns-train nerfacto --data trevi_ns
   nrw-etl export DATASET --layout gsplat --out trevi_gs   # 3DGS: train.py -s trevi_gs -d depths; gsplat --data_factor 4
   nrw-etl export DATASET --layout megadepth --name trevi --out md   # D2-Net: preprocess_scene.py --base_path md --scene_id trevi
+  nrw-etl export DATASET --layout megadepth --name trevi --metres-per-unit 0.37 --out md   # with IMC 2022's scaling_factors.csv
 
 The official and tfrecord layouts follow google/neural_rerendering_in_the_wild: every channel
 is scaled by its loaders as x * 2/255 - 1, so depth is written as levels 1-255 (0 = empty) by
@@ -75,6 +86,10 @@ pub struct ExportArgs {
     /// name, still taken)
     #[arg(long, alias = "shards", default_value_t = 1)]
     pub tfrecord_files: usize,
+    /// Metres a model unit, megadepth layout: IMC 2022's scaling_factors.csv, which its pose
+    /// evaluation multiplies translations by (SfM does not know it: measure a known length)
+    #[arg(long, value_parser = parse_scale)]
+    pub metres_per_unit: Option<f64>,
     /// No progress bar
     #[arg(long)]
     pub quiet: bool,
@@ -97,6 +112,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         semantics: !args.no_semantics,
         depth: args.depth,
         tfrecord_files: args.tfrecord_files,
+        metres_per_unit: args.metres_per_unit,
         ..nrw_pipeline::export::official(&args.dataset, &args.out)
     };
     let summary = nrw_pipeline::export::export(&args.dataset, &cfg, &super::Bars::new(args.quiet))?;

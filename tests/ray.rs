@@ -80,7 +80,7 @@ fn the_ray_driver_with_a_node_killed_gives_the_bytes_of_one_process() {
     one_process(s, &one, &ingest);
     // The driver on a two-node cluster, one node killed after the first shard.
     let ray = tmp.path().join("ray");
-    let args = [&ingest[..], &["--pause-after-group-ms", "800"]].concat();
+    let args = [&ingest[..], &["--pause-after-group-ms", "2000"]].concat();
     let stdout = driver(s, ray.to_str().unwrap(), &args, &[]);
     assert!(stdout.contains("node killed mid-run"), "{stdout}");
     // The task log showed a task cut off on the killed node, run again elsewhere, and no
@@ -184,7 +184,7 @@ fn the_corpus_driver_called_from_another_driver_with_a_node_killed_indexes_every
     let out = tmp.path().join("corpus");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/ray_corpus.py");
     let driver_py = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/driver.py");
-    let args = [&ingest[..], &["--pause-after-group-ms", "800"]].concat();
+    let args = [&ingest[..], &["--pause-after-group-ms", "2000"]].concat();
     let o = Command::new("python3")
         .arg(&script)
         .arg(&driver_py)

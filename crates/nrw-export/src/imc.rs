@@ -26,10 +26,12 @@
 //! otherwise.
 
 use crate::error::{ExportError, Result};
-use crate::megadepth::SceneInfo;
 use crate::staging::Staged;
 
-/// One view as the IMC files name and size it.
+/// A 3 × 3 matrix as rows.
+pub type Mat3 = [[f64; 3]; 3];
+
+/// One view as the IMC files name, size and calibrate it.
 pub struct ImcView<'a> {
     /// The image id: the photo's file stem.
     pub id: &'a str,
@@ -38,7 +40,23 @@ pub struct ImcView<'a> {
     /// The stored view's size, the unit of its covisibility.
     pub width: u64,
     pub height: u64,
+    /// PINHOLE K, world-to-camera R and T (`x_cam = R X + T`).
+    pub k: Mat3,
+    pub r: Mat3,
+    pub t: [f64; 3],
 }
+
+/// Two views (indices into the views) that share SfM points, with the area of the shared
+/// points' bounding box in each, in square pixels.
+pub struct Shared {
+    pub i: usize,
+    pub j: usize,
+    pub areas: [f64; 2],
+}
+
+/// View i's pairs with later views that share points, computed by the caller (which holds
+/// the tracks), a view at a time so the pair list is never held whole.
+pub type PairsOf<'a> = &'a dyn Fn(usize) -> Vec<Shared>;
 
 /// The folder of every IMC scene of the export.
 const ROOT: &str = "imc2022/train";
@@ -47,7 +65,7 @@ const ROOT: &str = "imc2022/train";
 pub fn write(
     name: &str,
     views: &[ImcView],
-    info: &SceneInfo,
+    pairs_of: PairsOf,
     metres_per_unit: Option<f64>,
     staged: &Staged,
 ) -> Result<Vec<String>> {
@@ -69,12 +87,12 @@ pub fn write(
     }
     staged.write(
         &format!("{dir}/calibration.csv"),
-        calibration_csv(views, info).as_bytes(),
+        calibration_csv(views).as_bytes(),
     )?;
     let rel = format!("{dir}/pair_covisibility.csv");
     let path = staged.dir().join(&rel);
     staged.write_with(&rel, &mut |w| {
-        write_pairs(views, info, w).map_err(|e| ExportError::io(&path, e))
+        write_pairs(views, pairs_of, w).map_err(|e| ExportError::io(&path, e))
     })?;
     Ok(match metres_per_unit {
         Some(s) => {
@@ -106,13 +124,11 @@ fn nums<const N: usize>(xs: [f64; N]) -> String {
 }
 
 /// `calibration.csv`: one row a view, in scene_info's order.
-fn calibration_csv(views: &[ImcView], info: &SceneInfo) -> String {
+fn calibration_csv(views: &[ImcView]) -> String {
     let mut out = String::from("image_id,camera_intrinsics,rotation_matrix,translation_vector\n");
-    for (i, v) in views.iter().enumerate() {
-        let (k, r, t) = krt(info, i);
-        let k: [f64; 9] = flat(k);
-        let r: [f64; 9] = flat(r);
-        out += &format!("{},{},{},{}\n", v.id, nums(k), nums(r), nums(t));
+    for v in views {
+        let (k, r) = (flat(v.k), flat(v.r));
+        out += &format!("{},{},{},{}\n", v.id, nums(k), nums(r), nums(v.t));
     }
     out
 }
@@ -126,33 +142,28 @@ fn flat(m: [[f64; 3]; 3]) -> [f64; 9] {
     out
 }
 
-/// View i's K, R and T from scene_info's intrinsics and world-to-camera pose.
-fn krt(info: &SceneInfo, i: usize) -> ([[f64; 3]; 3], [[f64; 3]; 3], [f64; 3]) {
-    let p = &info.poses[i];
-    let r = [0, 1, 2].map(|row| [p[row][0], p[row][1], p[row][2]]);
-    let t = [p[0][3], p[1][3], p[2][3]];
-    (info.intrinsics[i], r, t)
+/// A view's K, R and T, as `fundamental` takes them.
+fn krt(v: &ImcView) -> (Mat3, Mat3, [f64; 3]) {
+    (v.k, v.r, v.t)
 }
 
 /// `pair_covisibility.csv`, a view's pairs at a time.
-fn write_pairs(
+pub fn write_pairs(
     views: &[ImcView],
-    info: &SceneInfo,
+    pairs_of: PairsOf,
     w: &mut dyn std::io::Write,
 ) -> std::io::Result<()> {
     w.write_all(b"pair,covisibility,fundamental_matrix\n")?;
-    let share = |k: usize, b: &crate::megadepth::Bbox| {
-        b.area() / (views[k].width as f64 * views[k].height as f64)
-    };
-    for i in 0..info.len() {
-        for p in info.pairs_of(i) {
-            let covisibility = share(p.i, &p.boxes[0]).min(share(p.j, &p.boxes[1]));
+    let share = |k: usize, area: f64| area / (views[k].width as f64 * views[k].height as f64);
+    for i in 0..views.len() {
+        for p in pairs_of(i) {
+            let covisibility = share(p.i, p.areas[0]).min(share(p.j, p.areas[1]));
             let (a, b) = if views[p.i].id > views[p.j].id {
                 (p.i, p.j)
             } else {
                 (p.j, p.i)
             };
-            let f: [f64; 9] = flat(fundamental(krt(info, a), krt(info, b)));
+            let f: [f64; 9] = flat(fundamental(krt(&views[a]), krt(&views[b])));
             writeln!(
                 w,
                 "{}-{},{},{}",
@@ -165,8 +176,6 @@ fn write_pairs(
     }
     Ok(())
 }
-
-type Mat3 = [[f64; 3]; 3];
 
 /// The organisers' `ComputeFundamentalMatrix(K1, K2, R1, R2, T1, T2)`, step for step:
 /// dR = R2 R1ᵀ, dT = T2 − dR T1, A = K1 dRᵀ dT, F = K2⁻ᵀ (dR (K1ᵀ [A]×)).

@@ -116,17 +116,14 @@ impl LayoutWriter for Megadepth {
         write_pair_indices(name, &info, staged)?;
         let imc: Vec<ImcView> = views
             .values()
-            .map(|v| ImcView {
-                id: &v.stem,
-                jpg: &v.jpg,
-                width: v.camera.width,
-                height: v.camera.height,
-            })
+            .enumerate()
+            .map(|(i, v)| info.imc_view(i, &v.stem, &v.jpg, v.camera.width, v.camera.height))
             .collect();
+        let pairs_of = |i: usize| info.shared_pairs_of(i);
         let unit = job.cfg.metres_per_unit;
         summary
             .warnings
-            .extend(crate::imc::write(name, &imc, &info, unit, staged)?);
+            .extend(crate::imc::write(name, &imc, &pairs_of, unit, staged)?);
         summary.warnings.extend(consumer_warnings(&views));
         summary.depth_source = Some(job.depth_source());
         Ok(())
@@ -262,14 +259,7 @@ fn write_dust3r_view(
 /// that share SfM points, scored by the smaller of their two overlaps (our choice: DUSt3R
 /// publishes its pairs, not how they were scored).
 fn dust3r_metadata(name: &str, views: &BTreeMap<u32, View>, info: &SceneInfo) -> Option<Vec<u8>> {
-    let stems: Vec<String> = views
-        .values()
-        .map(|v| {
-            v.file
-                .rsplit_once('.')
-                .map_or(v.file.clone(), |(s, _)| s.to_string())
-        })
-        .collect();
+    let stems: Vec<String> = views.values().map(|v| v.stem.clone()).collect();
     let pairs = info.scored_pairs();
     let mut body = Vec::with_capacity(pairs.len() * 16);
     for (i, j, score) in &pairs {
@@ -415,22 +405,22 @@ pub const LOFTR_BANDS: [(f64, f64); 3] = [(0.1, 0.3), (0.3, 0.5), (0.5, 0.7)];
 type Candidate = (f64, u64, [f64; 2], [f64; 2]);
 
 /// Two views (i < j) that share SfM points.
-pub(crate) struct PairInfo {
-    pub i: usize,
-    pub j: usize,
+struct PairInfo {
+    i: usize,
+    j: usize,
     /// The smaller of the two views' overlaps.
-    pub score: f64,
+    score: f64,
     /// One shared point in D2-Net's `central_match` layout: [y_i, x_i, y_j, x_j].
     central: [f64; 4],
     /// The bounding boxes of the shared points' positions in view i and in view j.
-    pub boxes: [Bbox; 2],
+    boxes: [Bbox; 2],
 }
 
 /// An axis-aligned box of image positions, grown a point at a time.
 #[derive(Clone, Copy)]
-pub(crate) struct Bbox {
-    pub min: DVec2,
-    pub max: DVec2,
+struct Bbox {
+    min: DVec2,
+    max: DVec2,
 }
 
 impl Bbox {
@@ -448,30 +438,61 @@ impl Bbox {
     }
 
     /// The box's area in square pixels (0 for one point or a line).
-    pub fn area(&self) -> f64 {
+    fn area(&self) -> f64 {
         let d = self.max - self.min;
         d.x * d.y
     }
 }
 
+/// One view as scene_info takes it: where its files are, its camera and what it observes.
+pub struct SceneView {
+    pub image_path: String,
+    pub depth_path: String,
+    /// PINHOLE fx, fy, cx, cy.
+    pub pinhole: [f64; 4],
+    /// World-to-camera rotation as written in images.txt: (qw, qx, qy, qz).
+    pub qvec: [f64; 4],
+    pub tvec: [f64; 3],
+    /// Each observed point once, in the script's order: id, [x, y] in the view's pixels, and
+    /// the point's world position.
+    pub points: Vec<(u64, [f64; 2], DVec3)>,
+}
+
 impl SceneInfo {
     /// The scene info of the written views, in images.txt order (image id).
     fn of(views: &BTreeMap<u32, View>, rec: &Reconstruction) -> SceneInfo {
-        let n = views.len();
+        SceneInfo::new(views.values().map(|v| {
+            let points = first_seen_last_value(&v.points2d)
+                .into_iter()
+                .map(|(id, at)| (id, at, rec.points[&id].xyz))
+                .collect();
+            let p = &v.camera.params;
+            SceneView {
+                image_path: v.image_path.clone(),
+                depth_path: v.depth_path.clone(),
+                pinhole: [p[0], p[1], p[2], p[3]],
+                qvec: v.qvec,
+                tvec: v.tvec,
+                points,
+            }
+        }))
+    }
+
+    /// The scene info of `views`, in their order.
+    pub fn new(views: impl IntoIterator<Item = SceneView>) -> SceneInfo {
         let mut info = SceneInfo {
-            image_paths: Vec::with_capacity(n),
-            depth_paths: Vec::with_capacity(n),
-            intrinsics: Vec::with_capacity(n),
-            poses: Vec::with_capacity(n),
-            n_points3d: Vec::with_capacity(n),
-            points3d_id_to_2d: Vec::with_capacity(n),
-            points3d_id_to_ndepth: Vec::with_capacity(n),
-            axes: Vec::with_capacity(n),
+            image_paths: Vec::new(),
+            depth_paths: Vec::new(),
+            intrinsics: Vec::new(),
+            poses: Vec::new(),
+            n_points3d: Vec::new(),
+            points3d_id_to_2d: Vec::new(),
+            points3d_id_to_ndepth: Vec::new(),
+            axes: Vec::new(),
             seen: HashMap::new(),
         };
-        for (i, v) in views.values().enumerate() {
-            let p = &v.camera.params;
-            let (fx, fy, cx, cy) = (p[0], p[1], p[2], p[3]);
+        for (i, v) in views.into_iter().enumerate() {
+            let [fx, fy, cx, cy] = v.pinhole;
             info.intrinsics
                 .push([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]);
             let r = rotation(v.qvec);
@@ -484,28 +505,66 @@ impl SceneInfo {
             pose[3][3] = 1.0;
             info.poses.push(pose);
             info.axes.push(DVec3::from_array(r[2]));
-            let xy = first_seen_last_value(&v.points2d);
-            let mut nd = Vec::with_capacity(xy.len());
-            for &(id, at) in &xy {
-                let x = rec.points[&id].xyz;
+            let mut nd = Vec::with_capacity(v.points.len());
+            let mut xy = Vec::with_capacity(v.points.len());
+            for &(id, at, x) in &v.points {
                 let z = r[2][0] * x.x + r[2][1] * x.y + r[2][2] * x.z + t[2];
                 let d = z / (0.5 * (fx + fy));
                 info.seen.entry(id).or_default().push((i, d, at));
                 nd.push((id, DictValue::Scalar(d)));
+                xy.push((id, DictValue::Pair(at)));
             }
-            info.n_points3d.push(xy.len() as i64);
-            let pairs = xy.iter().map(|&(id, p)| (id, DictValue::Pair(p))).collect();
-            info.points3d_id_to_2d.push(pairs);
+            info.n_points3d.push(v.points.len() as i64);
+            info.points3d_id_to_2d.push(xy);
             info.points3d_id_to_ndepth.push(nd);
-            info.image_paths.push(v.image_path.clone());
-            info.depth_paths.push(v.depth_path.clone());
+            info.image_paths.push(v.image_path);
+            info.depth_paths.push(v.depth_path);
         }
         info
     }
 
     /// Views in the scene.
-    pub(crate) fn len(&self) -> usize {
+    pub fn len(&self) -> usize {
         self.n_points3d.len()
+    }
+
+    /// View i as IMC 2022's files take it: its id, JPEG and size, with scene_info's K and pose.
+    pub fn imc_view<'a>(
+        &self,
+        i: usize,
+        id: &'a str,
+        jpg: &'a str,
+        width: u64,
+        height: u64,
+    ) -> ImcView<'a> {
+        let p = &self.poses[i];
+        ImcView {
+            id,
+            jpg,
+            width,
+            height,
+            k: self.intrinsics[i],
+            r: [0, 1, 2].map(|row| [p[row][0], p[row][1], p[row][2]]),
+            t: [p[0][3], p[1][3], p[2][3]],
+        }
+    }
+
+    /// View i's pairs with later views sharing points, with the shared points' bounding-box
+    /// areas in both (IMC 2022's covisibility).
+    pub fn shared_pairs_of(&self, i: usize) -> Vec<crate::imc::Shared> {
+        self.pairs_of(i)
+            .into_iter()
+            .map(|p| crate::imc::Shared {
+                i: p.i,
+                j: p.j,
+                areas: [p.boxes[0].area(), p.boxes[1].area()],
+            })
+            .collect()
+    }
+
+    /// Whether the scene has no view.
+    pub fn is_empty(&self) -> bool {
+        self.n_points3d.is_empty()
     }
 
     /// For view `i`, the points it shares with every view and the smallest scale ratio over
@@ -577,7 +636,7 @@ impl SceneInfo {
     /// View i's pairs with the views after it that share points, in view order: the smaller
     /// of the two overlaps, and the central match (the shared point nearest view i's
     /// principal point; the smaller point id on a tie). Costs the track lengths of i's points.
-    pub(crate) fn pairs_of(&self, i: usize) -> Vec<PairInfo> {
+    fn pairs_of(&self, i: usize) -> Vec<PairInfo> {
         let n = self.len();
         let (cx, cy) = (self.intrinsics[i][0][2], self.intrinsics[i][1][2]);
         let mut common = vec![0u64; n];
@@ -645,7 +704,11 @@ impl SceneInfo {
     /// LoFTR's index of the pairs whose score is in [lo, hi): the views' keys and
     /// `pair_infos`, a list of `(array([i, j]), score, central_matches (1 × 4))`, written a
     /// view's pairs at a time.
-    fn write_loftr(&self, (lo, hi): (f64, f64), w: &mut dyn std::io::Write) -> std::io::Result<()> {
+    pub fn write_loftr(
+        &self,
+        (lo, hi): (f64, f64),
+        w: &mut dyn std::io::Write,
+    ) -> std::io::Result<()> {
         let mut p = Pickler::new(w)?;
         p.dict()?;
         self.pickle_views(&mut p)?;
@@ -670,7 +733,7 @@ impl SceneInfo {
 
     /// RoMa's (and DKM's) scene info: the views' keys, `pairs` (P × 2 int64) and `overlaps`
     /// (P float64) of every pair sharing points, streamed (one pass counts P).
-    fn write_roma(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+    pub fn write_roma(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
         let n = self.len();
         let count: usize = (0..n).map(|i| self.pairs_of(i).len()).sum();
         w.write_all(&npz::npy_header("'|O'", &[]))?;
@@ -709,7 +772,7 @@ impl SceneInfo {
 
     /// Write the `.npz` into `w`, with the arrays `np.savez` makes of the script's lists; the
     /// matrices a row at a time.
-    fn write_npz<W: std::io::Write + std::io::Seek>(&self, w: W) -> std::io::Result<W> {
+    pub fn write_npz<W: std::io::Write + std::io::Seek>(&self, w: W) -> std::io::Result<W> {
         let n = self.len();
         let flat = |m: &[[[f64; 3]; 3]]| m.iter().flatten().flatten().copied().collect::<Vec<_>>();
         let poses: Vec<f64> = self.poses.iter().flatten().flatten().copied().collect();

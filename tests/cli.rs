@@ -67,6 +67,26 @@ fn nrw(args: &[&str]) -> Output {
         .expect("binary runs")
 }
 
+/// tests/SCRIPT run by the interpreter `python` with `args`; the one JSON object it prints
+/// (its standard error in the failure message).
+fn script_json(python: &std::ffi::OsStr, script: &str, args: &[&Path]) -> serde_json::Value {
+    let run = std::process::Command::new(python)
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../tests")
+                .join(script),
+        )
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{script}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&run.stdout).unwrap()
+}
+
 fn ok(args: &[&str]) -> String {
     let o = nrw(args);
     assert!(

@@ -182,23 +182,9 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
     );
 }
 
-/// Run tests/SCRIPT with `args`; the one JSON object it prints.
+/// tests/SCRIPT run by python3 with `args`; the one JSON object it prints.
 fn script_json(script: &str, args: &[&Path]) -> serde_json::Value {
-    let run = std::process::Command::new("python3")
-        .arg(
-            Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../tests")
-                .join(script),
-        )
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{script}: {}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    serde_json::from_slice(&run.stdout).unwrap()
+    super::script_json("python3".as_ref(), script, args)
 }
 
 /// LoFTR's and RoMa's loaders, transcribed (tests/megadepth_matchers.py), read the export's

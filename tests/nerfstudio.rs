@@ -258,17 +258,7 @@ fn nerfstudio_itself_reads_the_nerfstudio_and_gsplat_exports() {
     let ns = tmp.path().join("ns");
     let o = export(&ds, &ns);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let run = std::process::Command::new(py)
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/nerfstudio_torch.py"))
-        .args([&ns, &gs])
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let got: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let got = super::script_json(&py, "nerfstudio_torch.py", &[&ns, &gs]);
     let n = &got["nerfstudio"];
     assert_eq!(
         (n["train"].as_u64(), n["val"].as_u64()),

@@ -25,41 +25,7 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
-    let scene = tmp.path().join("scene");
-    // Views of 200 px and more: depth files over the script's 100 KiB mask threshold.
-    let mut spec = nrw_synth::SceneSpec::demo().shrunk(6, (200, 220), 60_000);
-    spec.cameras.model = "SIMPLE_RADIAL".into();
-    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
-    let ds = tmp.path().join("ds");
-    ok(&[
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        ds.to_str().unwrap(),
-        "--undistort",
-        "--min-photo-side",
-        "100",
-        "--min-dim",
-        "200",
-        "--max-empty",
-        "1.0",
-        "--quiet",
-    ]);
-    ok(&["split", ds.to_str().unwrap(), "--val", "1"]);
-    let out = tmp.path().join("md");
-    let o = ok(&[
-        "export",
-        ds.to_str().unwrap(),
-        "--layout",
-        "megadepth",
-        "--name",
-        SCENE,
-        "--metres-per-unit",
-        METRES_PER_UNIT,
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(!o.contains("warning"), "{o}");
+    let (scene, ds, out) = exported(tmp.path(), 60_000);
     let theirs_dir = tmp.path().join("theirs");
     std::fs::create_dir_all(&theirs_dir).unwrap();
     let run = std::process::Command::new("python3")
@@ -180,6 +146,103 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
         got["angles"]["max_abs"].as_f64().unwrap(),
         got["scale_ratio_matrix"]["max_abs"].as_f64().unwrap()
     );
+}
+
+/// RoMa itself (romatch 0.1.2, which needs torch: never in CI) reads the export through its
+/// `MegadepthBuilder` and `MegadepthScene` (tests/megadepth_roma_torch.py), and its own
+/// ground-truth warp carries every shared SfM observation of view A onto view B's observation
+/// of the same point. Runs where `NRW_TORCH_PYTHON` names a Python with torch and romatch;
+/// skips and says so elsewhere (CI keeps the transcription in tests/megadepth_matchers.py).
+#[test]
+fn roma_itself_reads_the_export_and_warps_onto_the_tracks() {
+    let Some(py) = std::env::var_os("NRW_TORCH_PYTHON") else {
+        eprintln!(
+            "skipped: NRW_TORCH_PYTHON is not set (a Python with torch and romatch 0.1.2); CI \
+             keeps the transcribed loader"
+        );
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, _, out) = exported(tmp.path(), 600_000);
+    let got = super::script_json(
+        py.as_ref(),
+        "megadepth_roma_torch.py",
+        &[&out, Path::new(SCENE)],
+    );
+    assert_eq!(got["problems"], serde_json::json!([]), "{got}");
+    assert_eq!(got["scenes"], 1, "{got}");
+    assert_eq!(
+        got["pairs"], got["stored_pairs"],
+        "RoMa keeps every pair: {got}"
+    );
+    let (n, valid) = (
+        got["observations"].as_u64().unwrap(),
+        got["valid"].as_u64().unwrap(),
+    );
+    assert!(
+        n > 0 && valid * 2 >= n,
+        "RoMa's warp valid at {valid} of {n}: {got}"
+    );
+    // RoMa's warp as close to B's observations as the export's own numbers allow: its
+    // bilinear depth costs a little over the independent warp's nearest pixel.
+    let (median, theirs) = (
+        got["median_px"].as_f64().unwrap(),
+        got["independent_median_px"].as_f64().unwrap(),
+    );
+    assert!(
+        median <= 1.25 * theirs,
+        "RoMa's median {median} px vs {theirs} px independently, on its grid: {got}"
+    );
+    eprintln!(
+        "RoMa itself: {} pairs, its warp valid at {valid} of {n} observations whose depth holds \
+         their point, landing {median:.3} px (median; 90th percentile {:.3} px) from view B's \
+         own on its {} grid; warped independently from scene_info.npz: {theirs:.3} px",
+        got["pairs"], got["p90_px"], got["grid"]
+    );
+}
+
+/// The synthetic scene (SIMPLE_RADIAL, 6 views of 200 px and more), its undistorted dataset and
+/// that dataset's `--layout megadepth` export under `tmp`: (scene, dataset, export).
+fn exported(
+    tmp: &Path,
+    points: usize,
+) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    let scene = tmp.join("scene");
+    // Views of 200 px and more: depth files over the script's 100 KiB mask threshold.
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(6, (200, 220), points);
+    spec.cameras.model = "SIMPLE_RADIAL".into();
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let ds = tmp.join("ds");
+    ok(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        ds.to_str().unwrap(),
+        "--undistort",
+        "--min-photo-side",
+        "100",
+        "--min-dim",
+        "200",
+        "--max-empty",
+        "1.0",
+        "--quiet",
+    ]);
+    ok(&["split", ds.to_str().unwrap(), "--val", "1"]);
+    let out = tmp.join("md");
+    let o = ok(&[
+        "export",
+        ds.to_str().unwrap(),
+        "--layout",
+        "megadepth",
+        "--name",
+        SCENE,
+        "--metres-per-unit",
+        METRES_PER_UNIT,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.contains("warning"), "{o}");
+    (scene, ds, out)
 }
 
 /// tests/SCRIPT run by python3 with `args`; the one JSON object it prints.

@@ -221,7 +221,8 @@ def sgbm_partner(rec, ref):
 
 def sgbm_peer(ws, out, min_pixels=5):
     """The SGBM peer over our workspace's views into a copy `out`, fused by COLMAP with
-    `min_pixels`; (seconds per view, peak MB of this process, fused points)."""
+    `min_pixels`; (seconds per view of the stereo loop, peak MB of this process, fused points,
+    seconds per view of COLMAP's fusion)."""
     # The model (sparse/*.bin) is copied; our maps and cloud are not.
     shutil.copytree(ws, out, ignore=lambda d, names: [
         n for n in names if n.startswith("fused.ply") or (n.endswith(".bin") and "stereo" in d)])
@@ -244,14 +245,16 @@ def sgbm_peer(ws, out, min_pixels=5):
         views += 1
     secs = time.perf_counter() - started
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    fusion_started = time.perf_counter()
     fused = subprocess.run(["colmap", "stereo_fusion", "--workspace_path", out, "--input_type",
                             "geometric", "--output_path", os.path.join(out, "fused.ply"),
                             "--StereoFusion.min_num_pixels", str(min_pixels)],
                            capture_output=True, text=True)
+    fusion = time.perf_counter() - fusion_started
     m = re.search(r"Number of fused points: (\d+)", fused.stdout + fused.stderr)
     if not m:
         print("colmap stereo_fusion said:", (fused.stdout + fused.stderr)[-2000:], file=sys.stderr)
-    return secs / max(views, 1), peak, int(m.group(1)) if m else 0
+    return secs / max(views, 1), peak, int(m.group(1)) if m else 0, fusion / max(views, 1)
 
 
 def sfm_median(ws):
@@ -310,12 +313,89 @@ def real_scene(binary, scene, tmp, min_pixels, window, peer, size=800):
              rss / 1024, median, n, points, kept, total or views)]
     if peer:
         sgbm = out + "_sgbm"
-        spv, mb, pts = sgbm_peer(out, sgbm, min_pixels)
+        spv, mb, pts, _ = sgbm_peer(out, sgbm, min_pixels)
         median, n = sfm_median(sgbm)
         kept, total = kept_views(binary, scene, os.path.join(sgbm, "fused.ply"), sgbm + "_ds")
         rows.append((f"{size} ({mp:.2f} MP)", f"{min_pixels} (COLMAP)", "**peer: SGBM**", spv, mb,
                      median, n, pts, kept, total or views))
     return rows
+
+
+# Our cheap settings for the equal-time comparison: (longer side, iterations, window radius,
+# scales, source views, geometric pass).
+FAST = [(60, 1, 2, 1, 4, False), (60, 2, 2, 1, 3, False), (80, 2, 2, 1, 3, False),
+        (100, 1, 2, 1, 4, False), (120, 2, 2, 1, 4, False), (120, 1, 2, 1, 8, True),
+        (180, 2, 2, 1, 3, True)]
+# The peer's image sizes for the same comparison.
+PEER_SIZES = [120, 240, 360, 480]
+
+
+def describe(size, iterations, window, scales, sources, geometric):
+    return (f"{size} px, {iterations} it., radius {window}, {scales} scale{'s' if scales > 1 else ''}, "
+            f"{sources} sources, geometric {'on' if geometric else 'off'}")
+
+
+def equal_time(binary, scene, truth, tmp, repeats):
+    """Ours at the FAST settings and the SGBM peer at PEER_SIZES, seconds a view the median of
+    `repeats` runs (the maps are the same bytes every run, so each is scored once):
+    ([(setting, s/view, F1)], [(size, stereo s/view, fusion s/view, F1)])."""
+    ours = []
+    out = os.path.join(tmp, "fast")
+    for size, it, w, sc, src, geo in FAST:
+        args = ["--max-image-size", str(size), "--iterations", str(it), "--window-radius", str(w),
+                "--scales", str(sc), "--max-sources", str(src)] + ([] if geo else ["--no-geometric"])
+        times = []
+        for _ in range(repeats):
+            secs, _, views, _ = run(binary, scene, out, args)
+            times.append(secs / max(views, 1))
+        f1 = score(out, truth)[2]
+        ours.append((describe(size, it, w, sc, src, geo), float(np.median(times)), f1))
+        print(ours[-1], file=sys.stderr)
+    peers = []
+    for size in PEER_SIZES:
+        ws = os.path.join(tmp, f"peer_ws_{size}")
+        # Only the workspace's undistorted views and source lists are the peer's input.
+        run(binary, scene, ws, ["--max-image-size", str(size), "--iterations", "1",
+                                "--window-radius", "1", "--scales", "1", "--no-geometric"])
+        stereo, fusion = [], []
+        for _ in range(repeats):
+            sg = os.path.join(tmp, f"peer_{size}")
+            shutil.rmtree(sg, ignore_errors=True)
+            spv, _, _, fpv = sgbm_peer(ws, sg)
+            stereo.append(spv)
+            fusion.append(fpv)
+        peers.append((size, float(np.median(stereo)), float(np.median(fusion)), score(sg, truth)[2]))
+        print("SGBM", peers[-1], file=sys.stderr)
+    return ours, peers
+
+
+def write_equal_time(f, fast, settings, peers, repeats):
+    """The equal-time table: for each peer size, our best F1 in no more seconds a view among
+    the cheap settings `fast` and the settings rows `settings`."""
+    ours = fast + settings
+    f.write("\n## Equal time: the peer's F1 against ours in no more seconds a view\n\n"
+            f"Same synthetic scene; seconds a view are the median of {repeats} runs (the settings rows "
+            "above: one run each). Ours: the whole "
+            "`nrw-etl densify` process (start, undistortion, stereo, fusion). The peer: its stereo "
+            "loop alone (as above), and beside it with COLMAP's `stereo_fusion` added (its process, "
+            "per view). \"Ours\" is our best F1 among the settings below and the table above whose "
+            "seconds a view are at most the peer's stereo loop alone.\n\n")
+    f.write("| peer: SGBM at px | peer s / view (stereo) | peer s / view (+ COLMAP fusion) | peer F1 1% "
+            "| ours: best F1 1% in no more time | our setting | our s / view | verdict |\n")
+    f.write("|---|---|---|---|---|---|---|---|\n")
+    for size, spv, fpv, pf1 in peers:
+        fits = [o for o in ours if o[1] <= spv]
+        if fits:
+            name, t, f1 = max(fits, key=lambda o: o[2])
+            verdict = "ours better" if f1 > pf1 else "peer better"
+            f.write(f"| {size} | {spv:.3f} | {spv + fpv:.3f} | {pf1:.3f} | {f1:.3f} | {name} | {t:.3f} | {verdict} |\n")
+        else:
+            fastest = min(ours, key=lambda o: o[1])
+            f.write(f"| {size} | {spv:.3f} | {spv + fpv:.3f} | {pf1:.3f} | none | (fastest: {fastest[0]}, "
+                    f"F1 {fastest[2]:.3f}) | {fastest[1]:.3f} | no setting of ours is this fast |\n")
+    f.write("\nOur cheap settings:\n\n| setting | s / view | F1 1% |\n|---|---|---|\n")
+    for name, t, f1 in fast:
+        f.write(f"| {name} | {t:.3f} | {f1:.3f} |\n")
 
 
 def main():
@@ -362,10 +442,14 @@ def main():
     base_args = ["--max-image-size", str(base["size"])]
     ours = os.path.join(tmp, "ours")
     run(a.bin, scene, ours, base_args)
-    spv, mb, pts = sgbm_peer(ours, os.path.join(tmp, "sgbm"))
+    spv, mb, pts, _ = sgbm_peer(ours, os.path.join(tmp, "sgbm"))
     acc, comp, f1 = score(os.path.join(tmp, "sgbm"), truth)
     peer = (spv, mb, acc, comp, f1, pts)
     print("SGBM", f"{spv:.2f} s/view", f"F1 {f1:.3f}", file=sys.stderr)
+    repeats = 1 if a.quick else 3
+    fast, peers = equal_time(a.bin, scene, truth, tmp, repeats)
+    settings = [(describe(v["size"], v["iterations"], v["window"], v["scales"], 8, v["geometric"]), t, f)
+             for v, t, _, _, _, f, _ in rows]
     real = []
     data = os.path.join(ROOT, "..", "shared", "data")
     if not a.quick and os.path.isdir(data):
@@ -404,6 +488,7 @@ def main():
         f.write("\nThe peer's seconds are its Python loop (rectify, SGBM, back to the view's pixels, one "
                 "thread per view as OpenCV runs it); its peak memory is the script's. Our first row and the "
                 "peer's share their undistorted views and source lists.\n")
+        write_equal_time(f, fast, settings, peers, repeats)
         if real:
             f.write("\n## Real scenes (../shared/data), default settings (800 px) and 0.5 MP\n\n"
                     "SfM: median relative difference between the geometric depth at each SfM observation's "

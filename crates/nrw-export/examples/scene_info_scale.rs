@@ -94,7 +94,7 @@ fn peak_mb() -> f64 {
 }
 
 /// One row of the report: N, seconds of each file, bytes written, peak memory.
-fn row(n: usize, dir: &std::path::Path) -> String {
+fn row(n: usize, dir: &std::path::Path, keep: Option<&std::path::Path>) -> String {
     let t = Instant::now();
     let views = scene(n);
     let observations: usize = views.iter().map(|v| v.points.len()).sum();
@@ -109,7 +109,10 @@ fn row(n: usize, dir: &std::path::Path) -> String {
         file.flush().unwrap();
         let s = t.elapsed().as_secs_f64();
         bytes += std::fs::metadata(&path).unwrap().len();
-        std::fs::remove_file(&path).unwrap();
+        match keep {
+            Some(to) if name == "scene_info.npz" => std::fs::rename(&path, to).unwrap(),
+            _ => std::fs::remove_file(&path).unwrap(),
+        }
         s
     };
     let npz = timed("scene_info.npz", &|f| info.write_npz(f).map(|_| ()));
@@ -138,12 +141,19 @@ fn row(n: usize, dir: &std::path::Path) -> String {
 }
 
 fn main() {
-    let ns: Vec<usize> = std::env::args()
-        .skip(1)
+    // `--keep-npz PATH` keeps the last row's scene_info.npz there (for numpy to read it back).
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let keep = args.iter().position(|a| a == "--keep-npz").map(|i| {
+        let path = std::path::PathBuf::from(args.get(i + 1).expect("--keep-npz PATH"));
+        args.drain(i..i + 2);
+        path
+    });
+    let ns: Vec<usize> = args
+        .iter()
         .map(|a| a.parse().expect("N: a number of views"))
         .collect();
     let ns = if ns.is_empty() {
-        vec![1000, 2000, 4000, 7711]
+        vec![1000, 2000, 4000, 7711, 13500]
     } else {
         ns
     };
@@ -170,8 +180,9 @@ fn main() {
          RoMa's .npy s | IMC pair_covisibility.csv s | total s | MB written | peak MB |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    for n in ns {
-        let line = row(n, &dir);
+    for (k, n) in ns.iter().enumerate() {
+        let last = k + 1 == ns.len();
+        let line = row(*n, &dir, keep.as_deref().filter(|_| last));
         eprintln!("{line}");
         println!("{line}");
     }
@@ -179,8 +190,7 @@ fn main() {
     println!(
         "\nEvery file is streamed (the N × N matrices a row at a time, the pair lists a view's \
          pairs at a time); memory is the tracks' (per-view dicts and each point's views), growing \
-         with the observations. scene_info.npz is written without ZIP64, so an export whose .npz \
-         would pass 4 GiB is refused: its three matrices alone are 24 N² bytes, which passes \
-         4 GiB near N = 13,000."
+         with the observations. Its three matrices alone are 24 N² bytes, which passes 4 GiB near \
+         N = 13,000: from there scene_info.npz carries ZIP64 records (numpy's zipfile reads them)."
     );
 }

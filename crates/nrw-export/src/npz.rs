@@ -113,13 +113,13 @@ pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
 }
 
 /// An `.npz` of `members` (name without `.npy`, bytes of an `.npy`), stored uncompressed as
-/// `np.savez` does; None when it would need ZIP64 (a member or the archive over 4 GiB).
-pub fn npz(members: &[(&str, Vec<u8>)]) -> Option<Vec<u8>> {
+/// `np.savez` does (ZIP64 records where a member or the archive passes 4 GiB).
+pub fn npz(members: &[(&str, Vec<u8>)]) -> Vec<u8> {
     let mut z = NpzWriter::new(std::io::Cursor::new(Vec::new()));
     for (name, data) in members {
-        z.member(name, data).ok()?;
+        z.member(name, data).expect("writing to memory");
     }
-    Some(z.finish().ok()?.into_inner())
+    z.finish().expect("writing to memory").into_inner()
 }
 
 /// An `.npz` written member by member, a member's bytes streamed in pieces (its CRC patched
@@ -127,16 +127,37 @@ pub fn npz(members: &[(&str, Vec<u8>)]) -> Option<Vec<u8>> {
 pub struct NpzWriter<W: std::io::Write + std::io::Seek> {
     w: W,
     central: Vec<u8>,
-    count: u16,
+    count: u64,
     offset: u64,
+    zip64_from: u64,
 }
 
 /// Where a ZIP local header keeps its CRC-32.
 const CRC_AT: u64 = 14;
 
-/// A member or an offset past 4 GiB, which only ZIP64 can hold.
-fn zip64() -> std::io::Error {
-    std::io::Error::other("the .npz would pass 4 GiB, which needs ZIP64 (not written)")
+/// The 32-bit field value that says "the value is in the ZIP64 extra field" (APPNOTE 4.4.8).
+const IN_ZIP64: u32 = u32::MAX;
+
+/// The version a reader needs: 2.0, or 4.5 for ZIP64 records (APPNOTE 4.4.3).
+fn version(zip64: bool) -> u16 {
+    if zip64 {
+        45
+    } else {
+        20
+    }
+}
+
+/// A ZIP64 extended-information extra field (tag 0x0001) holding `values` (APPNOTE 4.5.3).
+fn zip64_extra(values: &[u64]) -> Vec<u8> {
+    if values.is_empty() {
+        return Vec::new();
+    }
+    let mut e = 1u16.to_le_bytes().to_vec();
+    e.extend_from_slice(&((values.len() * 8) as u16).to_le_bytes());
+    for v in values {
+        e.extend_from_slice(&v.to_le_bytes());
+    }
+    e
 }
 
 impl<W: std::io::Write + std::io::Seek> NpzWriter<W> {
@@ -147,6 +168,23 @@ impl<W: std::io::Write + std::io::Seek> NpzWriter<W> {
             central: Vec::new(),
             count: 0,
             offset: 0,
+            zip64_from: IN_ZIP64 as u64,
+        }
+    }
+
+    /// Write ZIP64 records for every size, offset or count from `limit` up (4 GiB − 1, where a
+    /// 32-bit field ends, unless lowered to test a reader on small archives).
+    pub fn zip64_from(mut self, limit: u64) -> Self {
+        self.zip64_from = limit;
+        self
+    }
+
+    /// The 32-bit field for `v`, and whether it overflows into the ZIP64 extra field.
+    fn field(&self, v: u64) -> (u32, bool) {
+        if v >= self.zip64_from {
+            (IN_ZIP64, true)
+        } else {
+            (v as u32, false)
         }
     }
 
@@ -163,29 +201,43 @@ impl<W: std::io::Write + std::io::Seek> NpzWriter<W> {
         fill: impl FnOnce(&mut dyn FnMut(&[u8]) -> std::io::Result<()>) -> std::io::Result<()>,
     ) -> std::io::Result<()> {
         let name = format!("{name}.npy");
-        let offset = u32::try_from(self.offset).map_err(|_| zip64())?;
-        let size = u32::try_from(len).map_err(|_| zip64())?;
-        let header = |crc: u32, central: bool| {
+        let (size, size64) = self.field(len);
+        let (offset, offset64) = self.field(self.offset);
+        // The local header: both sizes in the extra field when they overflow (APPNOTE 4.5.3).
+        let sizes = [len, len];
+        let local_extra = zip64_extra(if size64 { &sizes[..] } else { &[] });
+        // The central header: the overflowing ones of (size, size, offset), in that order.
+        let mut central_values = Vec::new();
+        if size64 {
+            central_values.extend([len, len]);
+        }
+        if offset64 {
+            central_values.push(self.offset);
+        }
+        let central_extra = zip64_extra(&central_values);
+        let header = |crc: u32, central: bool, extra: &[u8]| {
+            let zip64 = !extra.is_empty();
             let mut h = if central { 0x0201_4b50u32 } else { 0x0403_4b50 }
                 .to_le_bytes()
                 .to_vec();
             if central {
-                h.extend_from_slice(&20u16.to_le_bytes()); // made by
+                h.extend_from_slice(&version(zip64).to_le_bytes()); // made by
             }
-            // Version 2.0, no flags, stored, 1980-01-01 00:00.
-            for v in [20u16, 0, 0, 0, 0x21] {
+            // No flags, stored, 1980-01-01 00:00.
+            for v in [version(zip64), 0, 0, 0, 0x21] {
                 h.extend_from_slice(&v.to_le_bytes());
             }
             for v in [crc, size, size] {
                 h.extend_from_slice(&v.to_le_bytes());
             }
             h.extend_from_slice(&(name.len() as u16).to_le_bytes());
-            h.extend_from_slice(&0u16.to_le_bytes()); // extra
+            h.extend_from_slice(&(extra.len() as u16).to_le_bytes());
             h
         };
-        let local = header(0, false);
+        let local = header(0, false, &local_extra);
         self.w.write_all(&local)?;
         self.w.write_all(name.as_bytes())?;
+        self.w.write_all(&local_extra)?;
         let mut crc = crc32fast::Hasher::new();
         let mut written = 0u64;
         {
@@ -202,34 +254,58 @@ impl<W: std::io::Write + std::io::Seek> NpzWriter<W> {
             "a streamed member gives the bytes it announced"
         );
         let crc = crc.finalize();
-        let end = self.offset + (local.len() + name.len()) as u64 + len;
+        let end = self.offset + (local.len() + name.len() + local_extra.len()) as u64 + len;
         self.w
             .seek(std::io::SeekFrom::Start(self.offset + CRC_AT))?;
         self.w.write_all(&crc.to_le_bytes())?;
         self.w.seek(std::io::SeekFrom::Start(end))?;
-        self.central.extend(header(crc, true));
+        self.central.extend(header(crc, true, &central_extra));
         for v in [0u16, 0, 0] {
             self.central.extend_from_slice(&v.to_le_bytes()); // comment, disk, internal
         }
         self.central.extend_from_slice(&0u32.to_le_bytes()); // external attributes
         self.central.extend_from_slice(&offset.to_le_bytes());
         self.central.extend_from_slice(name.as_bytes());
+        self.central.extend_from_slice(&central_extra);
         self.offset = end;
-        self.count = self.count.checked_add(1).ok_or_else(zip64)?;
+        self.count += 1;
         Ok(())
     }
 
-    /// Write the central directory; the writer back.
+    /// Write the central directory (after it the ZIP64 end records, where a count, size or
+    /// offset overflows the classic one); the writer back.
     pub fn finish(mut self) -> std::io::Result<W> {
-        let cd_offset = u32::try_from(self.offset).map_err(|_| zip64())?;
-        let cd_len = u32::try_from(self.central.len()).map_err(|_| zip64())?;
+        let cd_offset = self.offset;
+        let cd_len = self.central.len() as u64;
         self.w.write_all(&self.central)?;
+        let (len32, len64) = self.field(cd_len);
+        let (offset32, offset64) = self.field(cd_offset);
+        let count64 = self.count >= (u16::MAX as u64).min(self.zip64_from);
+        let count16 = if count64 { u16::MAX } else { self.count as u16 };
+        if len64 || offset64 || count64 {
+            // The ZIP64 end of central directory record (APPNOTE 4.3.14) and its locator.
+            let at = cd_offset + cd_len;
+            let mut z = 0x0606_4b50u32.to_le_bytes().to_vec();
+            z.extend_from_slice(&44u64.to_le_bytes()); // the record's size after this field
+            z.extend_from_slice(&45u16.to_le_bytes()); // made by
+            z.extend_from_slice(&45u16.to_le_bytes()); // needed
+            z.extend_from_slice(&0u32.to_le_bytes()); // this disk
+            z.extend_from_slice(&0u32.to_le_bytes()); // the directory's disk
+            for v in [self.count, self.count, cd_len, cd_offset] {
+                z.extend_from_slice(&v.to_le_bytes());
+            }
+            z.extend_from_slice(&0x0706_4b50u32.to_le_bytes());
+            z.extend_from_slice(&0u32.to_le_bytes()); // the record's disk
+            z.extend_from_slice(&at.to_le_bytes());
+            z.extend_from_slice(&1u32.to_le_bytes()); // disks
+            self.w.write_all(&z)?;
+        }
         let mut end = 0x0605_4b50u32.to_le_bytes().to_vec();
-        for v in [0u16, 0, self.count, self.count] {
+        for v in [0u16, 0, count16, count16] {
             end.extend_from_slice(&v.to_le_bytes()); // disk, cd disk, entries here, entries
         }
-        end.extend_from_slice(&cd_len.to_le_bytes());
-        end.extend_from_slice(&cd_offset.to_le_bytes());
+        end.extend_from_slice(&len32.to_le_bytes());
+        end.extend_from_slice(&offset32.to_le_bytes());
         end.extend_from_slice(&0u16.to_le_bytes()); // comment
         self.w.write_all(&end)?;
         self.w.flush()?;
@@ -257,7 +333,7 @@ mod tests {
 
     #[test]
     fn the_archive_ends_with_its_directory() {
-        let z = npz(&[("a", Array::i64(&[1, 2]).npy())]).unwrap();
+        let z = npz(&[("a", Array::i64(&[1, 2]).npy())]);
         let end = z.len() - 22;
         assert_eq!(&z[end..end + 4], &0x0605_4b50u32.to_le_bytes());
         assert_eq!(&z[..4], &0x0403_4b50u32.to_le_bytes());

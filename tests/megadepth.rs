@@ -148,56 +148,76 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
     );
 }
 
-/// RoMa itself (romatch 0.1.2, which needs torch: never in CI) reads the export through its
-/// `MegadepthBuilder` and `MegadepthScene` (tests/megadepth_roma_torch.py), and its own
-/// ground-truth warp carries every shared SfM observation of view A onto view B's observation
-/// of the same point. Runs where `NRW_TORCH_PYTHON` names a Python with torch and romatch;
-/// skips and says so elsewhere (CI keeps the transcription in tests/megadepth_matchers.py).
+/// RoMa itself (romatch 0.1.2) and LoFTR itself (its `src/`, where `NRW_LOFTR_SRC` names a
+/// checkout), which need torch (never in CI), read the export through their own datasets, and
+/// each one's own ground-truth warp carries every SfM observation of view A whose depth the
+/// file holds onto view B's observation of the same point, as closely as the export's numbers
+/// allow (tests/megadepth_torch.py). Runs where `NRW_TORCH_PYTHON` names a Python with torch
+/// and romatch; skips and says so elsewhere (CI keeps the transcriptions in
+/// tests/megadepth_matchers.py).
 #[test]
-fn roma_itself_reads_the_export_and_warps_onto_the_tracks() {
+fn roma_and_loftr_themselves_read_the_export_and_warp_onto_the_tracks() {
     let Some(py) = std::env::var_os("NRW_TORCH_PYTHON") else {
         eprintln!(
             "skipped: NRW_TORCH_PYTHON is not set (a Python with torch and romatch 0.1.2); CI \
-             keeps the transcribed loader"
+             keeps the transcribed loaders"
         );
         return;
     };
+    let loftr = std::env::var_os("NRW_LOFTR_SRC");
+    if loftr.is_none() {
+        eprintln!("LoFTR skipped: NRW_LOFTR_SRC does not name a checkout of zju3dv/LoFTR");
+    }
     let tmp = tempfile::tempdir().unwrap();
+    // A dense cloud: depth files with few holes, so a warp has depth to read.
     let (_, _, out) = exported(tmp.path(), 600_000);
-    let got = super::script_json(
-        py.as_ref(),
-        "megadepth_roma_torch.py",
-        &[&out, Path::new(SCENE)],
-    );
-    assert_eq!(got["problems"], serde_json::json!([]), "{got}");
-    assert_eq!(got["scenes"], 1, "{got}");
+    let mut args: Vec<&Path> = vec![&out, Path::new(SCENE)];
+    if let Some(src) = &loftr {
+        args.push(Path::new(src));
+    }
+    let got = super::script_json(py.as_ref(), "megadepth_torch.py", &args);
+    let roma = &got["roma"];
+    assert_eq!(roma["scenes"], 1, "{roma}");
     assert_eq!(
-        got["pairs"], got["stored_pairs"],
-        "RoMa keeps every pair: {got}"
+        roma["pairs"], roma["stored_pairs"],
+        "RoMa keeps every pair: {roma}"
     );
+    warps_onto_the_tracks("RoMa", roma);
+    if loftr.is_some() {
+        let l = &got["loftr"];
+        assert_eq!(l["bands"], 3, "{l}");
+        assert!(l["pairs"].as_u64().unwrap() > 0, "{l}");
+        warps_onto_the_tracks("LoFTR", l);
+    }
+}
+
+/// A consumer's warp (`got` from tests/megadepth_torch.py): no problem reading, valid at half
+/// the observations or more, and its median distance to B's observations within 1.25 times the
+/// independent warp's (RoMa resamples depth bilinearly, LoFTR rounds the keypoint).
+fn warps_onto_the_tracks(who: &str, got: &serde_json::Value) {
+    assert_eq!(got["problems"], serde_json::json!([]), "{who}: {got}");
     let (n, valid) = (
         got["observations"].as_u64().unwrap(),
         got["valid"].as_u64().unwrap(),
     );
     assert!(
         n > 0 && valid * 2 >= n,
-        "RoMa's warp valid at {valid} of {n}: {got}"
+        "{who}'s warp valid at {valid} of {n}: {got}"
     );
-    // RoMa's warp as close to B's observations as the export's own numbers allow: its
-    // bilinear depth costs a little over the independent warp's nearest pixel.
     let (median, theirs) = (
         got["median_px"].as_f64().unwrap(),
         got["independent_median_px"].as_f64().unwrap(),
     );
     assert!(
         median <= 1.25 * theirs,
-        "RoMa's median {median} px vs {theirs} px independently, on its grid: {got}"
+        "{who}'s median {median} px vs {theirs} px independently: {got}"
     );
     eprintln!(
-        "RoMa itself: {} pairs, its warp valid at {valid} of {n} observations whose depth holds \
+        "{who} itself: {} pairs, its warp valid at {valid} of {n} observations whose depth holds \
          their point, landing {median:.3} px (median; 90th percentile {:.3} px) from view B's \
-         own on its {} grid; warped independently from scene_info.npz: {theirs:.3} px",
-        got["pairs"], got["p90_px"], got["grid"]
+         own; warped independently from scene_info.npz: {theirs:.3} px",
+        got["pairs"],
+        got["p90_px"].as_f64().unwrap()
     );
 }
 

@@ -148,15 +148,16 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
     );
 }
 
-/// RoMa itself (romatch 0.1.2) and LoFTR itself (its `src/`, where `NRW_LOFTR_SRC` names a
-/// checkout), which need torch (never in CI), read the export through their own datasets, and
-/// each one's own ground-truth warp carries every SfM observation of view A whose depth the
-/// file holds onto view B's observation of the same point, as closely as the export's numbers
-/// allow (tests/megadepth_torch.py). Runs where `NRW_TORCH_PYTHON` names a Python with torch
-/// and romatch; skips and says so elsewhere (CI keeps the transcriptions in
-/// tests/megadepth_matchers.py).
+/// RoMa itself (romatch 0.1.2), LoFTR and DUSt3R themselves (their sources, where
+/// `NRW_LOFTR_SRC` and `NRW_DUST3R_SRC` name checkouts), which need torch (never in CI), read
+/// the export through their own datasets: RoMa's and LoFTR's own ground-truth warps carry every
+/// SfM observation of view A whose depth the file holds onto view B's observation of the same
+/// point, and DUSt3R's point maps hold the SfM points, as closely as the export's numbers allow
+/// (tests/megadepth_torch.py). Runs where `NRW_TORCH_PYTHON` names a Python with torch and
+/// romatch; skips and says so elsewhere (CI keeps the transcriptions in
+/// tests/megadepth_matchers.py and tests/megadepth_dust3r.py).
 #[test]
-fn roma_and_loftr_themselves_read_the_export_and_warp_onto_the_tracks() {
+fn roma_loftr_and_dust3r_themselves_read_the_export() {
     let Some(py) = std::env::var_os("NRW_TORCH_PYTHON") else {
         eprintln!(
             "skipped: NRW_TORCH_PYTHON is not set (a Python with torch and romatch 0.1.2); CI \
@@ -168,11 +169,17 @@ fn roma_and_loftr_themselves_read_the_export_and_warp_onto_the_tracks() {
     if loftr.is_none() {
         eprintln!("LoFTR skipped: NRW_LOFTR_SRC does not name a checkout of zju3dv/LoFTR");
     }
+    let dust3r = std::env::var_os("NRW_DUST3R_SRC");
+    if dust3r.is_none() {
+        eprintln!("DUSt3R skipped: NRW_DUST3R_SRC does not name a checkout of naver/dust3r");
+    }
     let tmp = tempfile::tempdir().unwrap();
     // A dense cloud: depth files with few holes, so a warp has depth to read.
     let (_, _, out) = exported(tmp.path(), 600_000);
+    let none = std::ffi::OsString::from("-");
     let mut args: Vec<&Path> = vec![&out, Path::new(SCENE)];
-    if let Some(src) = &loftr {
+    args.push(Path::new(loftr.as_ref().unwrap_or(&none)));
+    if let Some(src) = &dust3r {
         args.push(Path::new(src));
     }
     let got = super::script_json(py.as_ref(), "megadepth_torch.py", &args);
@@ -188,6 +195,37 @@ fn roma_and_loftr_themselves_read_the_export_and_warp_onto_the_tracks() {
         assert_eq!(l["bands"], 3, "{l}");
         assert!(l["pairs"].as_u64().unwrap() > 0, "{l}");
         warps_onto_the_tracks("LoFTR", l);
+    }
+    if dust3r.is_some() {
+        let d = &got["dust3r"];
+        assert_eq!(d["problems"], serde_json::json!([]), "{d}");
+        assert!(
+            d["k_max_abs"].as_f64().unwrap() < 1e-4,
+            "DUSt3R's opencv_to_colmap_intrinsics of our K is the view's COLMAP K (float32): {d}"
+        );
+        let (n, valid) = (
+            d["observations"].as_u64().unwrap(),
+            d["valid"].as_u64().unwrap(),
+        );
+        assert!(
+            n > 0 && valid * 2 >= n,
+            "DUSt3R's valid_mask at {valid} of {n}: {d}"
+        );
+        let (median, theirs) = (
+            d["median_rel"].as_f64().unwrap(),
+            d["independent_median_rel"].as_f64().unwrap(),
+        );
+        assert!(
+            median <= 1.25 * theirs,
+            "DUSt3R's point maps {median} of depth from the SfM points vs {theirs} independently: {d}"
+        );
+        eprintln!(
+            "DUSt3R itself: {} pairs, its point map valid at {valid} of {n} SfM points whose depth \
+             the view holds, {median:.2e} of depth from the point (median) against {theirs:.2e} \
+             from scene_info.npz; its K back in COLMAP's within {:.1e}",
+            d["pairs"],
+            d["k_max_abs"].as_f64().unwrap()
+        );
     }
 }
 
@@ -354,7 +392,7 @@ fn imc2022_reads_its_folder(out: &Path, theirs: &Path) {
 
 /// DUSt3R's loader, transcribed (tests/megadepth_dust3r.py) with OpenCV's own readers, on the
 /// export's `dust3r/` folder: every pair's views open; depth is the dataset's bit for bit; K is
-/// the view's; cam2world inverts the view's world-to-camera pose; the JPEG is the photo within
+/// the view's in OpenCV's convention; cam2world inverts the view's world-to-camera pose; the JPEG is the photo within
 /// JPEG's error.
 fn dust3r_reads_its_folder(out: &Path, dump: &Path, d: &Dataset) {
     let got = script_json("megadepth_dust3r.py", &[&out.join("dust3r"), dump]);
@@ -390,13 +428,15 @@ fn dust3r_reads_its_folder(out: &Path, dump: &Path, d: &Dataset) {
             .map(|z| *z as f64)
             .collect();
         assert!(depth == want, "{stem}: depth");
+        // DUSt3R's K is in OpenCV's convention: the view's (COLMAP's) principal point - 0.5,
+        // which its `opencv_to_colmap_intrinsics` (+0.5) turns back into the view's.
         let p = &view.params;
         let k: Vec<Vec<f64>> = serde_json::from_value(v["intrinsics"].clone()).unwrap();
         assert_eq!(
             k,
             vec![
-                vec![p[0] as f32 as f64, 0.0, p[2] as f32 as f64],
-                vec![0.0, p[1] as f32 as f64, p[3] as f32 as f64],
+                vec![p[0] as f32 as f64, 0.0, (p[2] - 0.5) as f32 as f64],
+                vec![0.0, p[1] as f32 as f64, (p[3] - 0.5) as f32 as f64],
                 vec![0.0, 0.0, 1.0],
             ]
         );

@@ -1,6 +1,7 @@
-"""RoMa and LoFTR themselves (they need torch: never in CI) read a `--layout megadepth` export,
-and each one's own ground-truth warp carries view A's SfM observations onto view B's. Prints
-one JSON object: {"roma": …, "loftr": … or null}.
+"""RoMa, LoFTR and DUSt3R themselves (they need torch: never in CI) read a `--layout megadepth`
+export: RoMa's and LoFTR's own ground-truth warps carry view A's SfM observations onto view B's,
+and DUSt3R's own point maps hold the SfM points. Prints one JSON object:
+{"roma": …, "loftr": … or null, "dust3r": … or null}.
 
 Their code, not a transcription:
 - RoMa (romatch 0.1.2 from PyPI): `MegadepthBuilder(data_root=EXPORT)` lists
@@ -14,6 +15,13 @@ Their code, not a transcription:
   training settings (mode "train", min_overlap_score 0, img_resize 640, df 8, image and depth
   padding), then `src.loftr.utils.geometry.warp_kpts` (what its coarse supervision runs;
   nearest depth, depths agreeing within 20%) at the original resolution, as LoFTR warps.
+- DUSt3R (naver/dust3r's `dust3r/`, a checkout named by DUST3R_SRC; not packaged): its
+  `MegaDepth` dataset over `dust3r/` (split None, resolution 512 x 384, seed 777), whose
+  `__getitem__` crops and resizes each view around its principal point and computes `pts3d`
+  (world points a pixel) and `valid_mask` with its own geometry; each SfM point whose depth the
+  view's file holds is projected with DUSt3R's final K and cam2world, and the point map there
+  is compared with the point. And its `opencv_to_colmap_intrinsics` turns each view's K back
+  into the view's COLMAP K.
 
 Only observations whose pixel in A's depth file holds the point's own depth (within 1%, the
 point from the export's Undistorted_SfM model) are warped: elsewhere the file holds another
@@ -21,7 +29,7 @@ surface or a hole, and no warp could land on B's observation. The same observati
 independently (numpy, the export's scene_info.npz: nearest depth, K and poses at the stored
 size) give the error the data itself allows.
 
-usage: megadepth_torch.py EXPORT SCENE [LOFTR_SRC]
+usage: megadepth_torch.py EXPORT SCENE [LOFTR_SRC|- [DUST3R_SRC]]
 """
 
 import json
@@ -34,7 +42,8 @@ import torch
 from PIL import Image
 
 root, scene = sys.argv[1], sys.argv[2]
-loftr_src = sys.argv[3] if len(sys.argv) > 3 else None
+loftr_src = sys.argv[3] if len(sys.argv) > 3 and sys.argv[3] != "-" else None
+dust3r_src = sys.argv[4] if len(sys.argv) > 4 else None
 ours = np.load(os.path.join(root, "scene_info", f"{scene}.npz"), allow_pickle=True)
 tracks = ours["points3D_id_to_2D"]
 depths = [np.array(h5py.File(os.path.join(root, p), "r")["depth"]) for p in ours["depth_paths"]]
@@ -173,4 +182,63 @@ def loftr():
     return tally.into(out)
 
 
-json.dump({"roma": roma(), "loftr": loftr() if loftr_src else None}, sys.stdout)
+def dust3r():
+    sys.path.insert(0, dust3r_src)
+    from dust3r.datasets.megadepth import MegaDepth
+    from dust3r.utils.geometry import opencv_to_colmap_intrinsics
+
+    ds = MegaDepth(split=None, ROOT=os.path.join(root, "dust3r"), resolution=(512, 384), seed=777)
+    stems = {os.path.splitext(os.path.basename(p))[0]: i for i, p in enumerate(ours["image_paths"])}
+    colmap_k = {}
+    for line in open(os.path.join(root, "Undistorted_SfM", scene, "sparse-txt", "cameras.txt")):
+        if line.strip() and not line.startswith("#"):
+            f = line.split()
+            fx, fy, cx, cy = (float(v) for v in f[4:8])
+            colmap_k[int(f[0])] = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+    camera_of = {}
+    for line in open(os.path.join(root, "Undistorted_SfM", scene, "sparse-txt", "images.txt")):
+        f = line.split()
+        if len(f) == 10 and not line.startswith("#"):
+            camera_of[os.path.splitext(f[9])[0]] = int(f[8])
+    out = {"pairs": len(ds), "problems": [], "k_max_abs": 0.0}
+    rel, independent, observations, valid = [], [], 0, 0
+    for k in range(len(ds)):
+        for v in ds[k]:
+            idx = stems[v["instance"]]
+            # The npz's K (OpenCV's) back in COLMAP's, by DUSt3R's own conversion.
+            npz = np.load(os.path.join(root, "dust3r", scene, "0", v["instance"] + ".npz"))
+            back = opencv_to_colmap_intrinsics(npz["intrinsics"])
+            diff = float(np.abs(back - colmap_k[camera_of[v["instance"]]]).max())
+            out["k_max_abs"] = max(out["k_max_abs"], diff)
+            kk, c2w, pts, mask = v["camera_intrinsics"], v["camera_pose"], v["pts3d"], v["valid_mask"]
+            h, w = mask.shape
+            if v["img"].shape[1:] != (h, w) or pts.shape != (h, w, 3):
+                out["problems"].append(f"{v['instance']}: shapes {v['img'].shape} {pts.shape}")
+            r, t = c2w[:3, :3].astype(np.float64), c2w[:3, 3].astype(np.float64)
+            pose = ours["poses"][idx]
+            for p in tracks[idx]:
+                if not holds_the_point(idx, p):
+                    continue
+                cam = r.T @ (points[p] - t)
+                u = kk.astype(np.float64) @ cam
+                col, row = int(round(u[0] / u[2])), int(round(u[1] / u[2]))
+                if not (0 <= col < w and 0 <= row < h):
+                    continue
+                observations += 1
+                z = cam[2]
+                if mask[row, col]:
+                    valid += 1
+                    rel.append(np.linalg.norm(pts[row, col] - points[p]) / z)
+                # The same point from the export's scene_info.npz and depth at the stored size.
+                x, y = tracks[idx][p]
+                ray = np.linalg.inv(ours["intrinsics"][idx]) @ np.array([x, y, 1.0]) * depths[idx][int(y), int(x)]
+                world = pose[:3, :3].T @ (ray - pose[:3, 3])
+                independent.append(np.linalg.norm(world - points[p]) / z)
+    out.update(observations=observations, valid=valid,
+               median_rel=float(np.median(rel)) if rel else None,
+               independent_median_rel=float(np.median(independent)) if independent else None)
+    return out
+
+
+json.dump({"roma": roma(), "loftr": loftr() if loftr_src else None,
+           "dust3r": dust3r() if dust3r_src else None}, sys.stdout)

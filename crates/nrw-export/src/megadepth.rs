@@ -232,7 +232,9 @@ fn write_dust3r_view(
     let exr = nrw_dataset::depth::encode_exr_channel(depth, "Y")?;
     staged.write(&format!("{dir}.exr"), &exr)?;
     let p = &camera.params;
-    let k = [p[0], 0.0, p[2], 0.0, p[1], p[3], 0.0, 0.0, 1.0];
+    // OpenCV's convention (pixel centres at whole numbers), DUSt3R's: its preprocessing takes K
+    // from cv2.getOptimalNewCameraMatrix and its cropping moves K to COLMAP's by +0.5 and back.
+    let k = [p[0], 0.0, p[2] - 0.5, 0.0, p[1], p[3] - 0.5, 0.0, 0.0, 1.0];
     let r = rotation(image.cam_from_world.qvec());
     let t = image.cam_from_world.translation.to_array();
     let mut c2w = [0.0; 16];

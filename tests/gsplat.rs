@@ -227,6 +227,88 @@ fn masks_depth_priors_and_pyramids_hold_what_they_claim() {
     assert_eq!(lists("test_list.txt"), 1);
 }
 
+/// graphdeco's own loader (its `scene/` and `utils/` at the checkout `NRW_GRAPHDECO_SRC` names;
+/// torch, so never in CI; tests/gsplat_graphdeco_torch.py) reads the export as `train.py -d
+/// depths` does: every camera at the view's size and field of view, every depth prior
+/// reliable and, after its scale and offset, 1 / z of the render within half the PNG's step
+/// (0 where the render has no depth), and the initialisation cloud with its normals.
+#[test]
+fn graphdeco_itself_reads_the_depth_priors() {
+    let (Some(py), Some(src)) = (
+        std::env::var_os("NRW_TORCH_PYTHON"),
+        std::env::var_os("NRW_GRAPHDECO_SRC"),
+    ) else {
+        eprintln!(
+            "skipped: NRW_TORCH_PYTHON and NRW_GRAPHDECO_SRC (a checkout of \
+             graphdeco-inria/gaussian-splatting) are not both set; CI keeps the transcription"
+        );
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, ds_dir, out) = exported(tmp.path());
+    let ds = Dataset::open(ds_dir.as_path()).unwrap();
+    let dump = tmp.path().join("dump");
+    std::fs::create_dir_all(&dump).unwrap();
+    let got = super::script_json(
+        py.as_ref(),
+        "gsplat_graphdeco_torch.py",
+        &[&out, Path::new(&src), &dump],
+    );
+    let params: BTreeMap<String, serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(out.join("sparse/0/depth_params.json")).unwrap())
+            .unwrap();
+    let rec = nrw_colmap::read_model(&out.join("sparse/0"), None).unwrap();
+    let cameras = got["cameras"].as_array().unwrap();
+    let views = files(&ds);
+    assert_eq!(cameras.len(), views.len(), "every view trains: {got}");
+    let mut pixels = 0usize;
+    for (id, file) in views {
+        let cam = cameras
+            .iter()
+            .find(|c| c["image_name"] == file.as_str())
+            .unwrap_or_else(|| panic!("{file} not among graphdeco's cameras: {got}"));
+        let v = ds.get(id).unwrap();
+        assert_eq!(cam["size"], serde_json::json!([v.width, v.height]), "{cam}");
+        assert_eq!(
+            cam["depth_shape"],
+            serde_json::json!([v.height, v.width]),
+            "{cam}"
+        );
+        assert_eq!(cam["reliable"], true, "{file}: the prior is used: {cam}");
+        assert_eq!(cam["depth_mask_zeros"], 0, "{cam}");
+        let colmap = &rec.cameras[&rec.images[&id].camera_id];
+        let fovx = 2.0 * (v.width as f64 / (2.0 * colmap.params[0])).atan();
+        assert!(
+            (cam["fovx"].as_f64().unwrap() - fovx).abs() < 1e-12,
+            "{cam}"
+        );
+        let scale = params[file.trim_end_matches(".png")]["scale"]
+            .as_f64()
+            .unwrap();
+        let inv = super::npy::read_npy_f64(&dump.join(file.replace(".png", ".npy")));
+        let depth = v.depth().unwrap();
+        assert_eq!(inv.len(), depth.data.len(), "{file}");
+        for (got, z) in inv.iter().zip(&depth.data) {
+            if *z > 0.0 {
+                let want = 1.0 / *z as f64;
+                // Half the PNG's step, and float32 (graphdeco's arrays) on top.
+                let tol = scale / 65536.0 / 2.0 + want * 1e-6;
+                assert!((got - want).abs() <= tol, "{file}: {got} vs 1/z = {want}");
+                pixels += 1;
+            } else {
+                assert_eq!(*got, 0.0, "{file}: no depth reads as 0");
+            }
+        }
+    }
+    let points = got["points"].as_u64().unwrap();
+    assert!(points > 0 && got["normals_nonzero"] == points, "{got}");
+    eprintln!(
+        "graphdeco itself: {} cameras, every prior reliable; {pixels} depth pixels read back \
+         as 1 / z within half a step; {points} initialisation points, every one with a normal",
+        cameras.len()
+    );
+}
+
 #[test]
 fn nerfbaselines_reads_the_split_images_masks_and_points() {
     if !python::python_runs(

@@ -160,6 +160,25 @@ fn zip64_extra(values: &[u64]) -> Vec<u8> {
     e
 }
 
+/// The ZIP64 end of central directory record (APPNOTE 4.3.14) and its locator (4.3.15), for a
+/// directory of `count` entries and `len` bytes at `offset`, written right after it.
+fn zip64_end(count: u64, len: u64, offset: u64) -> Vec<u8> {
+    let mut z = 0x0606_4b50u32.to_le_bytes().to_vec();
+    z.extend_from_slice(&44u64.to_le_bytes()); // the record's size after this field
+    z.extend_from_slice(&45u16.to_le_bytes()); // made by
+    z.extend_from_slice(&45u16.to_le_bytes()); // needed
+    z.extend_from_slice(&0u32.to_le_bytes()); // this disk
+    z.extend_from_slice(&0u32.to_le_bytes()); // the directory's disk
+    for v in [count, count, len, offset] {
+        z.extend_from_slice(&v.to_le_bytes());
+    }
+    z.extend_from_slice(&0x0706_4b50u32.to_le_bytes());
+    z.extend_from_slice(&0u32.to_le_bytes()); // the record's disk
+    z.extend_from_slice(&(offset + len).to_le_bytes()); // where the record starts
+    z.extend_from_slice(&1u32.to_le_bytes()); // disks
+    z
+}
+
 impl<W: std::io::Write + std::io::Seek> NpzWriter<W> {
     /// An empty archive written into `w` from its current position 0.
     pub fn new(w: W) -> Self {
@@ -283,22 +302,8 @@ impl<W: std::io::Write + std::io::Seek> NpzWriter<W> {
         let count64 = self.count >= (u16::MAX as u64).min(self.zip64_from);
         let count16 = if count64 { u16::MAX } else { self.count as u16 };
         if len64 || offset64 || count64 {
-            // The ZIP64 end of central directory record (APPNOTE 4.3.14) and its locator.
-            let at = cd_offset + cd_len;
-            let mut z = 0x0606_4b50u32.to_le_bytes().to_vec();
-            z.extend_from_slice(&44u64.to_le_bytes()); // the record's size after this field
-            z.extend_from_slice(&45u16.to_le_bytes()); // made by
-            z.extend_from_slice(&45u16.to_le_bytes()); // needed
-            z.extend_from_slice(&0u32.to_le_bytes()); // this disk
-            z.extend_from_slice(&0u32.to_le_bytes()); // the directory's disk
-            for v in [self.count, self.count, cd_len, cd_offset] {
-                z.extend_from_slice(&v.to_le_bytes());
-            }
-            z.extend_from_slice(&0x0706_4b50u32.to_le_bytes());
-            z.extend_from_slice(&0u32.to_le_bytes()); // the record's disk
-            z.extend_from_slice(&at.to_le_bytes());
-            z.extend_from_slice(&1u32.to_le_bytes()); // disks
-            self.w.write_all(&z)?;
+            let records = zip64_end(self.count, cd_len, cd_offset);
+            self.w.write_all(&records)?;
         }
         let mut end = 0x0605_4b50u32.to_le_bytes().to_vec();
         for v in [0u16, 0, count16, count16] {

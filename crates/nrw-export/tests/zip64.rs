@@ -1,5 +1,6 @@
-//! The `.npz` writer's ZIP64 records, read by their consumer: Python's `zipfile` (CRC check,
-//! sizes, offsets) and `np.load` (every array back). A real archive past 4 GiB is too big for
+//! The `.npz` writer's ZIP64 records, read by their consumers: Python's `zipfile` (CRC check,
+//! sizes, offsets) and `np.load` (every array back), and Info-ZIP's `unzip -t` and `zipinfo`
+//! where they are installed (zipinfo follows the ZIP64 locator, which zipfile does not read). A real archive past 4 GiB is too big for
 //! a test, so the records are forced from a lower threshold: everything, and a mid-archive
 //! threshold where later members overflow only their offset and one member its size.
 
@@ -59,6 +60,30 @@ print(json.dumps({
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// Info-ZIP's reading of the archive: `unzip -t` (every CRC) passes and `zipinfo -v` (which
+/// follows the ZIP64 locator) reports no error; None where Info-ZIP is not installed.
+fn info_zip_reads(path: &std::path::Path) -> Option<Result<(), String>> {
+    let test = std::process::Command::new("unzip")
+        .arg("-tq")
+        .arg(path)
+        .output()
+        .ok()?;
+    let info = std::process::Command::new("zipinfo")
+        .arg("-v")
+        .arg(path)
+        .output()
+        .ok()?;
+    let said =
+        String::from_utf8_lossy(&info.stdout).to_string() + &String::from_utf8_lossy(&info.stderr);
+    if !test.status.success() {
+        return Some(Err(String::from_utf8_lossy(&test.stdout).into()));
+    }
+    match said.lines().find(|l| l.contains("error")) {
+        Some(line) => Some(Err(line.into())),
+        None => Some(Ok(())),
+    }
+}
+
 /// Where each local header starts, found by walking the archive's own headers.
 fn local_offsets(bytes: &[u8]) -> Vec<u64> {
     let (mut at, mut offsets) = (0usize, Vec::new());
@@ -79,7 +104,7 @@ fn local_offsets(bytes: &[u8]) -> Vec<u64> {
 }
 
 #[test]
-fn python_reads_the_zip64_records() {
+fn python_and_info_zip_read_the_zip64_records() {
     if !python::python_has("import numpy, zipfile") {
         return;
     }
@@ -111,6 +136,9 @@ fn python_reads_the_zip64_records() {
             .collect();
         assert_eq!(offsets, local_offsets(&bytes), "{label}: {got}");
         assert_eq!(got["big"][999], 999, "{label}");
+        if let Some(read) = info_zip_reads(&path) {
+            assert_eq!(read, Ok(()), "{label}: Info-ZIP");
+        }
         assert_eq!(got["names"], serde_json::json!(["a", "béta"]), "{label}");
         let arrays = (got["m"].clone(), got["names"].clone(), got["big"].clone());
         match &want {

@@ -99,9 +99,10 @@ class Tally:
 
     def into(self, out):
         med = lambda e: float(np.median(e)) if e else None
-        out.update(observations=self.observations, valid=self.valid, median_px=med(self.errors),
+        # Medians in pixels (RoMa's grid, LoFTR's stored size).
+        out.update(observations=self.observations, valid=self.valid, median=med(self.errors),
                    p90_px=float(np.percentile(self.errors, 90)) if self.errors else None,
-                   independent_median_px=med(self.independent))
+                   independent_median=med(self.independent))
         return out
 
 
@@ -235,8 +236,9 @@ def dust3r():
                 world = pose[:3, :3].T @ (ray - pose[:3, 3])
                 independent.append(np.linalg.norm(world - points[p]) / z)
     out.update(observations=observations, valid=valid,
-               median_rel=float(np.median(rel)) if rel else None,
-               independent_median_rel=float(np.median(independent)) if independent else None)
+               # Medians relative to the point's depth.
+               median=float(np.median(rel)) if rel else None,
+               independent_median=float(np.median(independent)) if independent else None)
     return out
 
 

@@ -10,6 +10,8 @@ mod clean;
 mod colmap_dense;
 #[path = "densify.rs"]
 mod densify;
+#[path = "export_models.rs"]
+mod export_models;
 #[path = "golden.rs"]
 mod golden;
 #[path = "gsplat.rs"]

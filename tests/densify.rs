@@ -326,6 +326,103 @@ fn colmap_fuses_the_same_cloud(ws: &Workspace, ours: &[DVec3], cams: &[Cam], min
     );
 }
 
+/// COLMAP 3.8's `image_undistorter`, run here on the scene's model and photos at `size`, and
+/// our workspace's `sparse/` agree: the same cameras (1e-9 px), poses, tracks, and every
+/// keypoint within 1e-4 px — every keypoint that has a viewing ray through its distorted
+/// camera; where one has none (a fisheye's corner past 90°, a noisy keypoint of a point seen
+/// at 89.9°), COLMAP's iterative undistortion does not converge (it writes 1e13 px and
+/// beyond), so those are counted, not compared. The largest keypoint difference.
+fn undistorter_agrees(model: &Path, images: &Path, size: Option<u32>, ours: &Path) -> f64 {
+    if !colmap_present() {
+        return 0.0;
+    }
+    let out = tempfile::tempdir().unwrap();
+    let mut cmd = std::process::Command::new("colmap");
+    cmd.arg("image_undistorter")
+        .arg("--image_path")
+        .arg(images)
+        .arg("--input_path")
+        .arg(model)
+        .arg("--output_path")
+        .arg(out.path())
+        .args(["--output_type", "COLMAP"]);
+    if let Some(s) = size {
+        cmd.args(["--max_image_size", &s.to_string()]);
+    }
+    let o = cmd.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let theirs = nrw_colmap::read_model(&out.path().join("sparse"), None).unwrap();
+    let ours = nrw_colmap::read_model(ours, None).unwrap();
+    let distorted = nrw_colmap::read_model(model, None).unwrap();
+    assert_eq!(
+        theirs.cameras.keys().collect::<Vec<_>>(),
+        ours.cameras.keys().collect::<Vec<_>>()
+    );
+    for (id, t) in &theirs.cameras {
+        let o = &ours.cameras[id];
+        assert_eq!(
+            (t.model, t.width, t.height),
+            (o.model, o.width, o.height),
+            "camera {id}"
+        );
+        for (a, b) in t.params.iter().zip(&o.params) {
+            assert!(
+                (a - b).abs() <= 1e-9,
+                "camera {id}: {:?} vs ours {:?}",
+                t.params,
+                o.params
+            );
+        }
+    }
+    assert_eq!(theirs.images.len(), ours.images.len());
+    let (mut worst, mut keypoints, mut no_ray, mut tracked_no_ray) = (0.0f64, 0, 0, 0);
+    for (id, t) in &theirs.images {
+        let o = &ours.images[id];
+        assert_eq!((&t.name, t.camera_id), (&o.name, o.camera_id), "image {id}");
+        let (tq, oq) = (t.cam_from_world.qvec(), o.cam_from_world.qvec());
+        let (tt, ot) = (t.cam_from_world.translation, o.cam_from_world.translation);
+        assert!(
+            tq.iter().zip(oq).all(|(a, b)| (a - b).abs() <= 1e-12) && (tt - ot).length() <= 1e-9,
+            "image {id}: pose {tq:?} {tt} vs ours {oq:?} {ot}"
+        );
+        assert_eq!(t.points2d.len(), o.points2d.len(), "image {id}: keypoints");
+        let d_img = &distorted.images[id];
+        let lens = &distorted.cameras[&d_img.camera_id];
+        for (k, (a, b)) in t.points2d.iter().zip(&o.points2d).enumerate() {
+            assert_eq!(a.point3d_id, b.point3d_id, "image {id} keypoint {k}");
+            if lens.cam_ray_from_img(d_img.points2d[k].xy).is_none() {
+                no_ray += 1;
+                tracked_no_ray += a.has_point3d() as usize;
+                continue;
+            }
+            let d = (a.xy - b.xy).length();
+            assert!(
+                d <= 1e-4,
+                "image {id} keypoint {k}: COLMAP {} vs ours {} ({d} px)",
+                a.xy,
+                b.xy
+            );
+            worst = worst.max(d);
+            keypoints += 1;
+        }
+    }
+    assert_eq!(theirs.points.len(), ours.points.len());
+    for (id, t) in &theirs.points {
+        assert_eq!(t.track, ours.points[id].track, "point {id}");
+    }
+    eprintln!(
+        "COLMAP's image_undistorter and our sparse/ agree: {} cameras, {} images, {keypoints} keypoints, the largest difference {worst:.2e} px ({no_ray} keypoints without a ray, {tracked_no_ray} of them observing a point, not compared)",
+        theirs.cameras.len(),
+        theirs.images.len()
+    );
+    assert!(keypoints > 0, "no keypoint compared");
+    assert!(
+        no_ray * 100 <= keypoints,
+        "{no_ray} keypoints without a ray against {keypoints} compared"
+    );
+    worst
+}
+
 /// Whether `colmap` runs here; CI (NRW_REQUIRE_COLMAP=1) fails instead of skipping.
 fn colmap_present() -> bool {
     let found = std::process::Command::new("colmap")
@@ -581,13 +678,19 @@ fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
     let (code, dense_line) = run("dense_ds", &["--dense-out", dense.to_str().unwrap()]);
     assert_eq!(code, Some(0), "{dense_line}");
     real_workspace_agrees("sacre_coeur", &dense, 480, 2);
+    undistorter_agrees(
+        &data.join("sparse/0"),
+        &data.join("images"),
+        Some(480),
+        &Workspace::new(&dense).sparse(),
+    );
     let kept: usize = dense_line
         .split(", ")
         .find_map(|part| part.strip_suffix(" kept"))
         .and_then(|n| n.trim().parse().ok())
         .unwrap_or_else(|| panic!("no kept count in: {dense_line}"));
     eprintln!("sacre_coeur after densify: {dense_line}");
-    assert!(kept >= 1, "{dense_line}");
+    assert!(kept >= 5, "{dense_line}");
 }
 
 #[test]
@@ -742,6 +845,44 @@ fn densify_far_from_the_origin_gives_the_maps_of_the_same_scene_at_the_origin() 
     let same = share_near(&moved_back, &near_cloud, 0.01, &cams(&near));
     eprintln!("{same:.4} of the far cloud's points lie within 1% of depth of the near cloud's");
     assert!(same >= 0.99, "{same}");
+}
+
+#[test]
+fn densify_writes_the_model_colmaps_undistorter_writes_for_a_distorted_scene() {
+    // OPENCV lenses (k1 −0.2, k2 0.04, tangential terms) and a size cap, so keypoints move by
+    // the lens and by the rescale. (A fisheye whose corners look past 90° is not compared:
+    // COLMAP 3.8 lifts those border pixels by a Newton iteration that does not converge and
+    // clips the view to min_scale — 53 × 71 px from 267 × 356 — where ours, like COLMAP's
+    // later releases, stops the border at the lens's last valid radius.)
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = textured_scene_with(
+        tmp.path(),
+        3,
+        &[(
+            "model = \"PINHOLE\"",
+            "model = \"OPENCV\"\ndistortion = 5.0",
+        )],
+    );
+    let dense = tmp.path().join("dense");
+    ok(&[
+        "densify",
+        scene.to_str().unwrap(),
+        "-q",
+        "--max-image-size",
+        "200",
+        "--iterations",
+        "1",
+        "--out",
+        dense.to_str().unwrap(),
+    ]);
+    let ws = Workspace::new(&dense);
+    let worst = undistorter_agrees(
+        &scene.join("sparse/0"),
+        &scene.join("images"),
+        Some(200),
+        &ws.sparse(),
+    );
+    assert!(worst <= 1e-4);
 }
 
 #[test]

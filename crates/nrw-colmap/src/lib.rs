@@ -34,5 +34,8 @@ pub use ply::{read_ply, read_ply_file_into, read_ply_from, write_ply, PointCloud
 pub use pose::{LocalRigid3, Rigid3};
 pub use scene::Scene;
 pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};
-pub use undistort::{undistort_camera, UndistortError, UndistortOptions};
+pub use undistort::{
+    undistort_camera, undistort_reconstruction, undistorted_keypoint, UndistortError,
+    UndistortOptions,
+};
 pub use write::write_model;

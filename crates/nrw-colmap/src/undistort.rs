@@ -12,9 +12,12 @@
 //! [`min_scale`]: UndistortOptions::min_scale
 //! [`max_scale`]: UndistortOptions::max_scale
 
+use std::collections::BTreeMap;
+
 use glam::DVec2;
 
 use crate::camera::{Camera, CameraModel};
+use crate::model::Reconstruction;
 
 /// COLMAP's `UndistortCameraOptions` that shape the pinhole camera; [`Default`] is COLMAP's.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,6 +59,9 @@ pub enum UndistortError {
     /// Options outside their meaning.
     #[error("undistortion options: {0}")]
     Options(String),
+    /// An image names a camera the model does not have.
+    #[error("image {image} names camera {camera}, which the model does not have")]
+    MissingCamera { image: u32, camera: u32 },
 }
 
 /// The normalised image-plane point (x/z, y/z) whose projection is `px` (COLMAP's
@@ -163,6 +169,54 @@ pub fn undistort_camera(
         }
     }
     Ok(out)
+}
+
+/// The model COLMAP 3.8's `image_undistorter` writes into `dense/sparse` (its
+/// `UndistortReconstruction`): every camera replaced by its pinhole camera
+/// ([`undistort_camera`]) and every keypoint carried through the distorted camera's
+/// unprojection and the pinhole camera's projection (which includes the size change), so the
+/// keypoints lie where the undistorted photos show them. Returns the distorted cameras.
+pub fn undistort_reconstruction(
+    rec: &mut Reconstruction,
+    options: &UndistortOptions,
+) -> Result<BTreeMap<u32, Camera>, UndistortError> {
+    let distorted = rec.cameras.clone();
+    for cam in rec.cameras.values_mut() {
+        *cam = undistort_camera(cam, options)?;
+    }
+    for image in rec.images.values_mut() {
+        let missing = UndistortError::MissingCamera {
+            image: image.id,
+            camera: image.camera_id,
+        };
+        let (Some(from), Some(to)) = (
+            distorted.get(&image.camera_id),
+            rec.cameras.get(&image.camera_id),
+        ) else {
+            return Err(missing);
+        };
+        for p in image.points2d.iter_mut() {
+            p.xy = undistorted_keypoint(from, to, p.xy)
+                .unwrap_or_else(|| undistortion_ignored(from, to, p.xy));
+        }
+    }
+    Ok(distorted)
+}
+
+/// Where a keypoint that has no viewing ray (past a fisheye's 90°, beyond the fold of a
+/// strong radial distortion; a noisy keypoint of a point seen at 89.9° can land there) goes:
+/// the pinhole projection of its distortion-free lift, finite and deterministic. COLMAP's
+/// iterative undistortion does not converge there and writes an arbitrary position (seen:
+/// 1e13 px and beyond), so no reader can use either.
+fn undistortion_ignored(from: &Camera, to: &Camera, xy: DVec2) -> DVec2 {
+    let lift = (xy - from.principal_point()) / from.focal();
+    lift * to.focal() + to.principal_point()
+}
+
+/// A pixel of camera `from` carried to camera `to` through its viewing ray (COLMAP's
+/// `to.WorldToImage(from.ImageToWorld(xy))`); `None` where `from` has no ray there.
+pub fn undistorted_keypoint(from: &Camera, to: &Camera, xy: DVec2) -> Option<DVec2> {
+    to.img_from_cam(from.cam_ray_from_img(xy)?)
 }
 
 fn check_options(o: &UndistortOptions) -> Result<(), UndistortError> {

@@ -14,7 +14,9 @@
 //! OUT/depths_{2,4,8}/FILE            the inverse-depth pyramid, same scale per view
 //! OUT/depth_masks/FILE               255 = the depth prior has depth at the pixel, 0 = none
 //! OUT/depth_confidence/FILE          with densify's depth: its confidence, 0–255 for 0–1
-//! OUT/sparse/0/{cameras,images,points3D}.bin
+//! OUT/sparse/0/{cameras,images,points3D}.bin   the SfM points the images observe, with
+//!                                    their tracks (`crate::colmap_model`)
+//! OUT/sparse/0/points3D.ply          the initialisation cloud ingest rendered, with normals
 //! OUT/sparse/0/depth_params.json     {stem: {scale, offset, med_scale}}, graphdeco's
 //! OUT/train_list.txt, test_list.txt  the split, as nerfbaselines' colmap loader reads it
 //! ```
@@ -25,6 +27,12 @@
 //! Cameras are PINHOLE, one per image with the image's id (graphdeco, gsplat and
 //! Splatfacto-W read `params[0..4]` as fx, fy, cx, cy; loaders that look cameras up by image id
 //! find the right one): a distorted camera is refused by name (ingest with `--undistort`).
+//!
+//! Where the initialisation cloud goes: graphdeco reads `sparse/0/points3D.ply` before
+//! `points3D.bin` (and writes the ply from the bin only when there is none), so the cloud
+//! ingest rendered — a dense cloud with its normals — is that ply; gsplat's `Parser`,
+//! OpenSplat and nerfbaselines read `points3D.bin`, so they start from the SfM points and
+//! find every image's observations there (gsplat's `point_indices`, its depth supervision).
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;
@@ -52,20 +60,23 @@ pub struct Gsplat;
 impl LayoutWriter for Gsplat {
     fn check(&self, job: &Job) -> Result<()> {
         job.require_train("")?;
+        crate::colmap_model::scene_model(job)?;
         job.points().map(|_| ())
     }
 
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
+        let scene = crate::colmap_model::scene_model(job)?;
         let own = own_depth_scales(job)?;
         let (depth, above) = inverse_depth::params(&own);
         let enc = Encoder {
             job,
+            scene,
             depth,
             model: Mutex::new(BTreeMap::new()),
         };
         write_views(job, staged, &enc, summary)?;
         let model = enc.model.into_inner().expect("no encoder panicked");
-        write_model(&model, job.points()?, staged)?;
+        write_model(&model, scene, staged)?;
         write_init_ply(job.points()?, staged)?;
         write_depth_params(&model, &enc.depth, staged)?;
         write_split_lists(&summary.splits, staged)?;
@@ -102,6 +113,8 @@ struct ModelView {
 /// Encodes one view's files and remembers its camera and image.
 struct Encoder<'a> {
     job: &'a Job<'a>,
+    /// The scene model, whose observations each image carries.
+    scene: &'a Reconstruction,
     depth: BTreeMap<u32, DepthParams>,
     model: Mutex<BTreeMap<u32, ModelView>>,
 }
@@ -114,7 +127,8 @@ impl ViewEncoder for Encoder<'_> {
     fn encode(&self, v: &ViewRow, _split: &str, _index: &str) -> Result<Encoded> {
         let file = crate::nerfw::file_name(&v.name);
         let camera = crate::nerfw::pinhole(v)?;
-        let image = crate::nerfw::model_image(v, &file)?;
+        let mut image = crate::nerfw::model_image(v, &file)?;
+        image.points2d = crate::colmap_model::observations(v, self.scene, &camera)?;
         let mut out: Encoded = vec![(format!("images/{file}"), v.photo_png.clone())];
         let photo = v.photo()?;
         for f in FACTORS {
@@ -237,18 +251,16 @@ fn depth_trust_files(v: &ViewRow, prior: &crate::Prior, file: &str) -> Result<En
     Ok(out)
 }
 
-/// `sparse/0`: one PINHOLE camera per image, the images, the scene's points (no tracks).
+/// `sparse/0`: one PINHOLE camera per image, the images with their observations, the SfM
+/// points they observe with their tracks.
 fn write_model(
     model: &BTreeMap<u32, ModelView>,
-    points: &[ScenePoint],
+    scene: &Reconstruction,
     staged: &Staged,
 ) -> Result<()> {
-    let mut rec = Reconstruction::default();
-    for (id, m) in model {
-        rec.cameras.insert(*id, m.camera.clone());
-        rec.images.insert(*id, m.image.clone());
-    }
-    crate::nerfw::write_binary_model(rec, points, staged, "sparse/0")
+    let views = model.values().map(|m| (m.camera.clone(), m.image.clone()));
+    let rec = crate::colmap_model::with_tracks(views, scene);
+    crate::colmap_model::write(&rec, staged, "sparse/0", nrw_colmap::Format::Binary)
 }
 
 /// `sparse/0/points3D.ply` with the cloud's normals, which graphdeco reads in preference to

@@ -9,6 +9,7 @@
 //! ([`staging::Staged`]: the name check and the collision check) and the export is published
 //! whole, to a local folder or under an object-store URL.
 
+mod colmap_model;
 pub mod error;
 pub mod files;
 pub mod gsplat;

@@ -38,7 +38,7 @@
 use std::collections::{BTreeMap, HashMap};
 
 use glam::{DVec2, DVec3};
-use nrw_colmap::{Camera, Point2D, Point3D, Reconstruction, TrackElement};
+use nrw_colmap::{Camera, Point2D, Reconstruction};
 use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
@@ -58,7 +58,7 @@ pub struct Megadepth;
 
 impl LayoutWriter for Megadepth {
     fn check(&self, job: &Job) -> Result<()> {
-        scene_model(job).map(|_| ())?;
+        crate::colmap_model::scene_model(job).map(|_| ())?;
         let name = &job.cfg.name;
         if name.is_empty() || name.contains(['/', '\\']) || name.contains(char::is_whitespace) {
             return Err(ExportError::refused(
@@ -76,7 +76,7 @@ impl LayoutWriter for Megadepth {
     }
 
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
-        let rec = scene_model(job)?;
+        let rec = crate::colmap_model::scene_model(job)?;
         let name = &job.cfg.name;
         let mut views = BTreeMap::new();
         for (split, n) in &job.splits {
@@ -126,16 +126,6 @@ impl LayoutWriter for Megadepth {
         summary.depth_source = Some(job.depth_source());
         Ok(())
     }
-}
-
-/// The scene model the dataset was ingested from, which carries the tracks.
-fn scene_model<'a>(job: &Job<'a>) -> Result<&'a Reconstruction> {
-    job.inputs.model.ok_or_else(|| {
-        ExportError::refused(
-            &job.cfg.out,
-            "the megadepth layout needs the scene's model (Inputs::model) for its tracks",
-        )
-    })
 }
 
 /// The folder of a scene's model and photos.
@@ -201,7 +191,7 @@ fn write_view(
     let image = crate::nerfw::model_image(v, &file)?;
     let jpg = write_dust3r_view(v, &depth, &camera, &image, name, stem, staged)?;
     Ok(View {
-        points2d: observations(v, rec, &camera)?,
+        points2d: crate::colmap_model::observations(v, rec, &camera)?,
         qvec: image.cam_from_world.qvec(),
         tvec: image.cam_from_world.translation.to_array(),
         depth_bytes: h5.len(),
@@ -282,39 +272,6 @@ fn dust3r_metadata(name: &str, views: &BTreeMap<u32, View>, info: &SceneInfo) ->
     ])
 }
 
-/// The scene model's observations of view `v`, carried into the stored view's pixels: each
-/// keypoint's ray through the photo's camera, projected by the stored camera. Keypoints
-/// without a ray (past a fisheye's fold) are dropped.
-fn observations(v: &ViewRow, rec: &Reconstruction, stored: &Camera) -> Result<Vec<Point2D>> {
-    let missing = |what: &str| ExportError::Value {
-        path: v.name.clone().into(),
-        record: format!("image {}", v.image_id),
-        field: "image_id".into(),
-        problem: format!("the scene model has no {what} for this view"),
-    };
-    let img = rec
-        .images
-        .get(&v.image_id)
-        .ok_or_else(|| missing("image"))?;
-    let photo = rec
-        .cameras
-        .get(&img.camera_id)
-        .ok_or_else(|| missing("camera"))?;
-    Ok(img
-        .points2d
-        .iter()
-        .filter(|p| p.point3d_id != nrw_colmap::NO_POINT3D)
-        .filter_map(|p| {
-            let ray = photo.cam_ray_from_img(p.xy)?;
-            let xy: DVec2 = stored.img_from_cam(ray)?;
-            Some(Point2D {
-                xy,
-                point3d_id: p.point3d_id,
-            })
-        })
-        .collect())
-}
-
 /// `sparse-txt`: the views' PINHOLE cameras and images with their observations, and the
 /// points they observe with tracks rebuilt from those observations.
 fn write_sparse_txt(
@@ -323,43 +280,22 @@ fn write_sparse_txt(
     name: &str,
     staged: &Staged,
 ) -> Result<()> {
-    let mut out = Reconstruction::default();
-    for (&id, v) in views {
-        out.cameras.insert(id, v.camera.clone());
+    let model = views.iter().map(|(&id, v)| {
         let (cam_from_world, norm) =
             nrw_colmap::Rigid3::from_colmap(v.qvec, v.tvec).expect("a pose read from the dataset");
-        out.images.insert(
+        let image = nrw_colmap::Image {
             id,
-            nrw_colmap::Image {
-                id,
-                name: v.file.clone(),
-                camera_id: id,
-                cam_from_world,
-                stored_quat_norm: norm,
-                points2d: v.points2d.clone(),
-            },
-        );
-        for (idx, p) in v.points2d.iter().enumerate() {
-            let point = out.points.entry(p.point3d_id).or_insert_with(|| {
-                let src = &rec.points[&p.point3d_id];
-                Point3D {
-                    track: Vec::new(),
-                    ..src.clone()
-                }
-            });
-            point.track.push(TrackElement {
-                image_id: id,
-                point2d_idx: idx as u32,
-            });
-        }
-    }
+            name: v.file.clone(),
+            camera_id: id,
+            cam_from_world,
+            stored_quat_norm: norm,
+            points2d: v.points2d.clone(),
+        };
+        (v.camera.clone(), image)
+    });
+    let out = crate::colmap_model::with_tracks(model, rec);
     let dir = format!("{}/sparse-txt", sfm_dir(name));
-    for file in ["cameras.txt", "images.txt", "points3D.txt"] {
-        staged.claim(&format!("{dir}/{file}"))?;
-    }
-    let path = staged.dir().join(&dir);
-    nrw_colmap::write_model(&out, &path, nrw_colmap::Format::Text)
-        .map_err(|e| ExportError::io(&path, e))
+    crate::colmap_model::write(&out, staged, &dir, nrw_colmap::Format::Text)
 }
 
 /// MegaDepth's `scene_info`, computed as preprocess_scene.py computes it from the files this

@@ -4,7 +4,8 @@
 //!
 //! ```text
 //! OUT/images/FILE                 each view's photo as stored (FILE = its name with .png)
-//! OUT/sparse/{cameras,images,points3D}.bin   PINHOLE, one camera per image, the scene's points
+//! OUT/sparse/{cameras,images,points3D}.bin   PINHOLE, one camera per image, the SfM points the
+//!                                 images observe with their tracks (`crate::colmap_model`)
 //! OUT/masks/FILE                  with labels: 255 = use the pixel, 0 = ignore (transient)
 //! OUT/nerfw_split.csv             NeRF-W's split file (tab-separated: filename id split dataset)
 //! OUT/train_list.txt, test_list.txt   the split as the loader reads it (test = our val)
@@ -14,23 +15,26 @@
 //!
 //! `nb-info.json`'s id `phototourism` is what selects the methods' in-the-wild settings
 //! (appearance embeddings, the NeRF-W evaluation that optimises an embedding on the left half of
-//! each test image); `scene` is the export's name.
+//! each test image); `scene` is the export's name. The loader reads its initialisation points
+//! from `points3D.bin` only (as it does on the Phototourism release, whose model is COLMAP's
+//! SfM), so a dense cloud the dataset was rendered from is not written here: the gsplat layout
+//! carries it for graphdeco.
 
 use serde_json::json;
 
 use crate::error::Result;
 use crate::nerfw::{write_phototourism, Places};
 use crate::staging::Staged;
-use crate::writer::{Job, ScenePoint, WithPoints};
+use crate::writer::{Job, WithModel};
 use crate::SplitExport;
 
 /// nerfbaselines' Phototourism layout.
-pub static NERFBASELINES: WithPoints = WithPoints(write);
+pub static NERFBASELINES: WithModel = WithModel(write);
 
 /// Write the layout into `staged`. Returns the splits written and the consumer warnings.
 fn write(
     job: &Job,
-    points: &[ScenePoint],
+    model: &nrw_colmap::Reconstruction,
     staged: &Staged,
 ) -> Result<(Vec<SplitExport>, Vec<String>)> {
     let places = Places {
@@ -44,7 +48,7 @@ fn write(
         }
         Ok(())
     };
-    let w = write_phototourism(job, points, staged, &places, &masks)?;
+    let w = write_phototourism(job, model, staged, &places, &masks)?;
     staged.write("nerfw_split.csv", crate::nerfw::tsv(&w.rows).as_bytes())?;
     crate::gsplat::write_split_lists(&w.splits, staged)?;
     let info = json!({

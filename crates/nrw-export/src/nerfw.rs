@@ -14,20 +14,24 @@
 //!   parameters would be silently misread: ingest with `--undistort`);
 //! - `filename` equals the model's image name and the file under `dense/images/`;
 //! - `split` is `train` or `test` (our `val`);
-//! - `points3D.bin` holds the scene's 3D points, from which the loaders derive each image's
-//!   near and far bounds (tracks are not written; images carry no 2D points).
+//! - `points3D.bin` holds the SfM points the exported images observe, with their tracks, and
+//!   each image its observations where the stored photo shows them (`crate::colmap_model`):
+//!   the loaders derive each image's near and far bounds from these points, as they do on
+//!   NeRF-W's own release, whose `dense/sparse` is COLMAP's undistorted SfM model. nerf_pl and
+//!   Ha-NeRF read no initialisation cloud, so a dense cloud the dataset was rendered from is
+//!   not written here.
 
 use nrw_dataset::split::VAL;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use nrw_colmap::{Camera, CameraModel, Image, Point3D, Reconstruction, Rigid3};
+use nrw_colmap::{Camera, CameraModel, Image, Reconstruction, Rigid3};
 
 use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
 use crate::staging::Staged;
-use crate::writer::{Job, ScenePoint, WithPoints};
+use crate::writer::{Job, WithModel};
 use crate::SplitExport;
 
 /// The tsv `split` value of one of our splits: NeRF-W's loaders call the held-out set `test`.
@@ -74,7 +78,7 @@ pub(crate) fn pinhole(v: &ViewRow) -> Result<Camera> {
     })
 }
 
-/// The model image of a view (no 2D points).
+/// The model image of a view (its 2D points are the caller's to fill in).
 pub(crate) fn model_image(v: &ViewRow, file: &str) -> Result<Image> {
     let (cam_from_world, norm) =
         Rigid3::from_colmap(v.qvec, v.tvec).ok_or_else(|| ExportError::Value {
@@ -94,7 +98,7 @@ pub(crate) fn model_image(v: &ViewRow, file: &str) -> Result<Image> {
 }
 
 /// NeRF-W's Phototourism layout.
-pub static NERFW: WithPoints = WithPoints(write);
+pub static NERFW: WithModel = WithModel(write);
 
 /// Where a Phototourism-style layout puts its photos and model.
 pub(crate) struct Places {
@@ -112,14 +116,14 @@ pub(crate) struct Written {
 /// Write the layout into `staged`: photos, model, tsv. Returns the splits written.
 fn write(
     job: &Job,
-    points: &[ScenePoint],
+    model: &Reconstruction,
     staged: &Staged,
 ) -> Result<(Vec<SplitExport>, Vec<String>)> {
     let places = Places {
         images: "dense/images",
         sparse: "dense/sparse",
     };
-    let w = write_phototourism(job, points, staged, &places, &|_, _| Ok(()))?;
+    let w = write_phototourism(job, model, staged, &places, &|_, _| Ok(()))?;
     staged.write(&format!("{}.tsv", job.cfg.name), tsv(&w.rows).as_bytes())?;
     let warnings = n_vocab_warning(w.max_id).into_iter().collect();
     Ok((w.splits, warnings))
@@ -134,13 +138,13 @@ pub(crate) fn tsv(rows: &[String]) -> String {
 /// the PINHOLE model of a Phototourism-style layout.
 pub(crate) fn write_phototourism(
     job: &Job,
-    points: &[ScenePoint],
+    model: &Reconstruction,
     staged: &Staged,
     places: &Places,
     extra: &dyn Fn(&ViewRow, &str) -> Result<()>,
 ) -> Result<Written> {
     let (ds, cfg, tick) = (job.ds, job.cfg, job.tick);
-    let mut rec = Reconstruction::default();
+    let mut views = Vec::new();
     let mut rows = Vec::new();
     let mut by_file: BTreeMap<String, u32> = BTreeMap::new();
     let mut out = Vec::new();
@@ -161,8 +165,10 @@ pub(crate) fn write_phototourism(
                     ),
                 ));
             }
-            rec.cameras.insert(id, pinhole(&v)?);
-            rec.images.insert(id, model_image(&v, &file)?);
+            let camera = pinhole(&v)?;
+            let mut image = model_image(&v, &file)?;
+            image.points2d = crate::colmap_model::observations(&v, model, &camera)?;
+            views.push((camera, image));
             let rel = format!("{}/{file}", places.images);
             staged.write(&rel, &v.photo_png)?;
             extra(&v, &file)?;
@@ -174,38 +180,21 @@ pub(crate) fn write_phototourism(
         }
         out.push(s);
     }
-    let max_id = rec.images.keys().max().copied();
-    write_binary_model(rec, points, staged, places.sparse)?;
+    let max_id = views.iter().map(|(_, i)| i.id).max();
+    let rec = crate::colmap_model::with_tracks(views, model);
+    if rec.points.is_empty() {
+        return Err(ExportError::refused(
+            &cfg.out,
+            "the exported images observe no SfM point: NeRF-W's loaders take each image's near \
+             and far bounds from the model's points",
+        ));
+    }
+    crate::colmap_model::write(&rec, staged, places.sparse, nrw_colmap::Format::Binary)?;
     Ok(Written {
         splits: out,
         rows,
         max_id,
     })
-}
-
-/// `rec` (cameras and images) with the scene's points, as COLMAP binaries under `dir`.
-pub(crate) fn write_binary_model(
-    mut rec: Reconstruction,
-    points: &[ScenePoint],
-    staged: &Staged,
-    dir: &str,
-) -> Result<()> {
-    for p in points {
-        let point = Point3D {
-            id: p.id,
-            xyz: p.xyz.into(),
-            rgb: p.rgb,
-            error: p.error,
-            track: Vec::new(),
-        };
-        rec.points.insert(p.id, point);
-    }
-    for file in ["cameras.bin", "images.bin", "points3D.bin"] {
-        staged.claim(&format!("{dir}/{file}"))?;
-    }
-    let sparse = staged.dir().join(dir);
-    nrw_colmap::write_model(&rec, &sparse, nrw_colmap::Format::Binary)
-        .map_err(|e| ExportError::io(&sparse, e))
 }
 
 /// nerf_pl's default `--N_vocab` (opt.py).

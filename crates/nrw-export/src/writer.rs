@@ -119,7 +119,7 @@ pub trait LayoutWriter: Sync {
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()>;
 }
 
-/// A layout that carries the scene's points (nerfw, nerfstudio): its writer, given the job
+/// A layout that carries the scene's points (nerfstudio): its writer, given the job
 /// and the points, returns the splits written and the consumer warnings.
 pub type PointsWriter = fn(&Job, &[ScenePoint], &Staged) -> Result<(Vec<SplitExport>, Vec<String>)>;
 
@@ -139,6 +139,29 @@ impl LayoutWriter for WithPoints {
         if job.cfg.layout.writes_depth_priors() {
             summary.depth_source = Some(job.depth_source());
         }
+        Ok(())
+    }
+}
+
+/// A layout that carries the scene's model (nerfw, nerfbaselines): its writer, given the job
+/// and the model, returns the splits written and the consumer warnings.
+pub type ModelWriter =
+    fn(&Job, &nrw_colmap::Reconstruction, &Staged) -> Result<(Vec<SplitExport>, Vec<String>)>;
+
+/// The [`LayoutWriter`] of a layout with the scene's model: it needs train views and the
+/// model, and lists the splits without views as empty.
+pub struct WithModel(pub ModelWriter);
+
+impl LayoutWriter for WithModel {
+    fn check(&self, job: &Job) -> Result<()> {
+        job.require_train("")?;
+        crate::colmap_model::scene_model(job).map(|_| ())
+    }
+
+    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
+        summary.empty_splits = job.empty_splits();
+        let model = crate::colmap_model::scene_model(job)?;
+        (summary.splits, summary.warnings) = (self.0)(job, model, staged)?;
         Ok(())
     }
 }

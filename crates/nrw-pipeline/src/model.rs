@@ -17,23 +17,18 @@ pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(Scene, Recons
     Ok((scene, rec))
 }
 
-/// The model with every camera replaced by the PINHOLE camera COLMAP's `image_undistorter`
-/// gives it, and the original cameras; ingest and finalize both derive it this way.
+/// The model as COLMAP's `image_undistorter` writes it (PINHOLE cameras, keypoints carried
+/// into the undistorted images), and the original cameras; ingest, densify and finalize all
+/// derive it this way.
 pub fn undistort_model(
     rec: &mut Reconstruction,
     options: &UndistortOptions,
     model_dir: &Path,
 ) -> Result<BTreeMap<u32, nrw_colmap::Camera>> {
-    let distorted = rec.cameras.clone();
-    for cam in rec.cameras.values_mut() {
-        *cam = nrw_colmap::undistort_camera(cam, options).map_err(|source| {
-            PipelineError::Undistort {
-                path: model_dir.into(),
-                source,
-            }
-        })?;
-    }
-    Ok(distorted)
+    nrw_colmap::undistort_reconstruction(rec, options).map_err(|source| PipelineError::Undistort {
+        path: model_dir.into(),
+        source,
+    })
 }
 
 /// The photo resampled from its own camera `from` to the undistorted PINHOLE camera `to`

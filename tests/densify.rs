@@ -154,6 +154,9 @@ fn share_near(a: &[DVec3], b: &[DVec3], rel: f64, cams: &[Cam]) -> f64 {
     near as f64 / a.len().max(1) as f64
 }
 
+/// The F1 at 1% of depth that docs/densify.md states for this scene and denominator.
+const F1_AT_1PCT: f64 = 0.5;
+
 #[test]
 fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_our_maps() {
     let tmp = tempfile::tempdir().unwrap();
@@ -225,14 +228,7 @@ fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_
             .count()
     };
     let counts: Vec<usize> = truth.iter().map(views_seeing).collect();
-    // Fusion makes a point of at least min_num_pixels (5) pixels, one per view at most along
-    // a walk: completeness counts the true points that many views see.
-    let fusable: Vec<DVec3> = truth
-        .iter()
-        .zip(&counts)
-        .filter(|(_, n)| **n >= 5)
-        .map(|(p, _)| *p)
-        .collect();
+    // ETH3D's denominator: every true point at least two photos see.
     let two: Vec<DVec3> = truth
         .iter()
         .zip(&counts)
@@ -240,16 +236,15 @@ fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_
         .map(|(p, _)| *p)
         .collect();
     let accuracy = share_near(&fused, &truth, 0.01, &cams);
-    let completeness = share_near(&fusable, &fused, 0.01, &cams);
+    let completeness = share_near(&two, &fused, 0.01, &cams);
     let f1 = 2.0 * accuracy * completeness / (accuracy + completeness);
     eprintln!(
-        "fused {} points: accuracy {accuracy:.4}, completeness {completeness:.4} of the {} true points five views see ({:.4} of the {} two views see), F1 {f1:.4}",
+        "fused {} points: accuracy {accuracy:.4} (of the fused points), completeness \
+         {completeness:.4} (of the {} true points two photos see), F1 {f1:.4} at 1% of depth",
         fused.len(),
-        fusable.len(),
-        share_near(&two, &fused, 0.01, &cams),
         two.len()
     );
-    assert!(f1 >= 0.8, "F1 at 1% is {f1:.4}");
+    assert!(f1 >= F1_AT_1PCT, "F1 at 1% is {f1:.4}");
 
     // Visibility: one entry per point, image indices of the workspace model.
     let vis = nrw_colmap::dense::visibility_from_bytes(
@@ -289,7 +284,7 @@ fn densify_gets_the_true_depth_and_surface_of_a_textured_scene_and_colmap_fuses_
             .unwrap_or("")
     );
 
-    colmap_fuses_the_same_cloud(&ws, &fused, &cams, 5);
+    colmap_fuses_the_same_cloud(&ws, &fused, &cams, 2);
 }
 
 /// COLMAP 3.8's `stereo_fusion --input_type geometric` over our workspace: its cloud and ours
@@ -636,18 +631,16 @@ fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let dense = tmp.path().join("dense");
-    // The paper pipeline's [densify] and [ingest] tables, with a smaller size and, for ten
-    // photos, 2 pixels a point (a wall three of them see makes no point at COLMAP's 5).
+    // The paper pipeline's [densify] and [ingest] tables, with a smaller size (its 2 pixels a
+    // point matter here: a wall three of ten photos see makes no point at COLMAP's 5).
     let paper = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/paper.toml"),
     )
     .unwrap();
     let tables = &paper[paper.find("[densify]").unwrap()..paper.find("[split]").unwrap()];
-    assert!(tables.contains("max_image_size = 800") && tables.contains("min_num_pixels = 5"));
+    assert!(tables.contains("max_image_size = 800") && tables.contains("min_num_pixels = 2"));
     let pipeline = tmp.path().join("densify-ingest.toml");
-    let tables = tables
-        .replace("max_image_size = 800", "max_image_size = 480")
-        .replace("min_num_pixels = 5", "min_num_pixels = 2");
+    let tables = tables.replace("max_image_size = 800", "max_image_size = 480");
     std::fs::write(&pipeline, format!("name = \"densify-ingest\"\n{tables}")).unwrap();
     let run = |out: &str, extra: &[&str]| {
         let out = tmp.path().join(out);

@@ -691,7 +691,7 @@ fn check(cfg: &DensifyConfig) -> Result<()> {
     if cfg.fusion.min_num_pixels == 0 {
         return Err(PipelineError::config(
             Setting::MinNumPixels,
-            "is 0; a fused point needs at least 1 pixel (COLMAP's default is 5)",
+            "is 0; a fused point needs at least 1 pixel (the default is 2, COLMAP's 5)",
         ));
     }
     if cfg.max_image_size == Some(0) {

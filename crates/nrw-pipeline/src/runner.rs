@@ -42,8 +42,11 @@ pub struct DensifyTable {
     pub window_radius: usize,
     pub scales: usize,
     pub geometric: bool,
-    /// The fewest pixels fusion merges into a point (COLMAP's `min_num_pixels`, 5).
+    /// The fewest pixels fusion merges into a point (COLMAP's `min_num_pixels`).
     pub min_num_pixels: usize,
+    /// The fewest agreeing source views that keep a depth (COLMAP's
+    /// `filter_min_num_consistent`).
+    pub min_consistent: usize,
     /// The most MiB of maps fusion holds at once (the cloud does not depend on it).
     pub fusion_cache_mb: usize,
     /// Replace an existing SCENE/dense.
@@ -61,6 +64,7 @@ impl Default for DensifyTable {
             scales: c.stereo.scales,
             geometric: c.geometric,
             min_num_pixels: c.fusion.min_num_pixels,
+            min_consistent: c.stereo.filter_min_consistent,
             fusion_cache_mb: c.fusion_cache_bytes >> 20,
             overwrite: false,
         }
@@ -111,6 +115,7 @@ pub fn densify_config(d: &DensifyTable, scene: &Path) -> crate::densify::Densify
     c.stereo.scales = d.scales;
     c.geometric = d.geometric;
     c.fusion.min_num_pixels = d.min_num_pixels;
+    c.stereo.filter_min_consistent = d.min_consistent;
     c.fusion_cache_bytes = d.fusion_cache_mb.saturating_mul(1 << 20);
     c.overwrite = d.overwrite;
     c

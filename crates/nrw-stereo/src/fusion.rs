@@ -18,10 +18,12 @@ use glam::DVec3;
 
 use crate::view::Pinhole;
 
-/// COLMAP's `StereoFusionOptions` that this fusion reads, with COLMAP's defaults.
+/// COLMAP's `StereoFusionOptions` that this fusion reads, with COLMAP's defaults but for
+/// `min_num_pixels`.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FusionOptions {
-    /// Least pixels fused into a point (5).
+    /// Least pixels (of different views) fused into a point: 2, OpenMVS's `nMinViewsFuse`
+    /// (COLMAP's 5 drops every surface fewer than five photos see: see docs/densify.md).
     pub min_num_pixels: usize,
     /// Most pixels fused into a point (10000).
     pub max_num_pixels: usize,
@@ -38,7 +40,7 @@ pub struct FusionOptions {
 impl Default for FusionOptions {
     fn default() -> Self {
         FusionOptions {
-            min_num_pixels: 5,
+            min_num_pixels: 2,
             max_num_pixels: 10_000,
             max_traversal_depth: 100,
             max_reproj_error: 2.0,

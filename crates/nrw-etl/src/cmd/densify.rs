@@ -52,10 +52,15 @@ pub struct DensifyArgs {
     #[arg(long, default_value_t = 2)]
     pub scales: usize,
     /// The fewest pixels (of different views) fusion merges into a point: COLMAP's
-    /// min_num_pixels. Fewer gives a denser, noisier cloud; with few photos of a scene, 2 or 3
-    /// keeps the walls that 5 drops
-    #[arg(long, default_value_t = 5)]
+    /// min_num_pixels (COLMAP: 5). The default 2 is OpenMVS's: a surface two photos see makes
+    /// points; 5 gives a sparser, cleaner cloud of what many photos see
+    #[arg(long, default_value_t = nrw_pipeline::runner::DensifyTable::default().min_num_pixels)]
     pub min_num_pixels: usize,
+    /// The fewest source views whose depth must agree with a pixel's for it to keep its depth
+    /// (COLMAP's filter_min_num_consistent, 2). 1 (OpenMVS's adjusted filter) keeps surfaces
+    /// only two photos see, and more wrong depths with them: see docs/densify.md
+    #[arg(long, default_value_t = nrw_pipeline::runner::DensifyTable::default().min_consistent)]
+    pub min_consistent: usize,
     /// The most MiB of depth, normal and colour maps fusion holds at once (COLMAP's
     /// cache_size): views beyond it are read again when a walk needs them. The cloud is the
     /// same whatever the size; only the time is not
@@ -96,6 +101,7 @@ pub fn run(args: &DensifyArgs) -> Result<()> {
         scales: args.scales,
         geometric: !args.no_geometric,
         min_num_pixels: args.min_num_pixels,
+        min_consistent: args.min_consistent,
         fusion_cache_mb: args.fusion_cache_mb,
         overwrite: args.overwrite,
     };

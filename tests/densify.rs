@@ -1033,7 +1033,15 @@ fn exports_take_their_depth_priors_from_densify_when_the_dataset_was_rendered_fr
     // Photos of 240 px: rendered at 240 px (the workspace's size) and at 180 px (scaled, and
     // the cloud cleaned of outliers before rendering).
     let scene = textured_scene_with(tmp.path(), 5, &[("max_size = 280", "max_size = 240")]);
-    ok(&["densify", scene.to_str().unwrap(), "-q"]);
+    // COLMAP's 5 pixels a point: a sparser cloud, whose renders cover less than the MVS maps
+    // (what tells the two depth sources apart below).
+    ok(&[
+        "densify",
+        scene.to_str().unwrap(),
+        "-q",
+        "--min-num-pixels",
+        "5",
+    ]);
     let ws = Workspace::new(&scene.join("dense"));
     for side in [240u32, 180] {
         let ds = tmp.path().join(format!("ds{side}"));
@@ -1069,19 +1077,22 @@ fn exports_take_their_depth_priors_from_densify_when_the_dataset_was_rendered_fr
             "--quiet",
         ]);
         check_mvs_priors(&scene, &ws, &ds, &out);
-        // The initialisation cloud is the dense cloud ingest rendered (cleaned as ingest
-        // cleaned it), with its normals.
+        // The initialisation cloud (graphdeco's points3D.ply) is the dense cloud ingest
+        // rendered (cleaned as ingest cleaned it), with its normals; points3D.bin holds the SfM
+        // points the views observe, each with its track.
         let fused = nrw_colmap::read_ply(&ws.fused_ply()).unwrap();
         let init = nrw_colmap::read_ply(&out.join("sparse/0/points3D.ply")).unwrap();
         let bin = nrw_colmap::read_model(&out.join("sparse/0"), None).unwrap();
         let manifest: serde_json::Value =
             serde_json::from_slice(&std::fs::read(ds.join("manifest.json")).unwrap()).unwrap();
         let rendered = manifest["parameters"]["points"].as_u64().unwrap() as usize;
-        assert_eq!(
-            (init.len(), bin.points.len()),
-            (rendered, rendered),
-            "the rendered cloud"
-        );
+        assert_eq!(init.len(), rendered, "the rendered cloud");
+        let sfm = nrw_colmap::read_model(&scene.join("sparse/0"), None).unwrap();
+        assert!(!bin.points.is_empty());
+        for (id, p) in &bin.points {
+            assert!(!p.track.is_empty(), "point {id} has no observation");
+            assert_eq!(p.xyz, sfm.points[id].xyz, "point {id} is the SfM point");
+        }
         let fused_normal: HashMap<[u64; 3], [f32; 3]> = fused
             .positions
             .iter()

@@ -15,20 +15,6 @@ use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
 use crate::staging::Staged;
-use crate::writer::Job;
-
-/// The scene model the dataset was ingested from, which carries the tracks.
-pub(crate) fn scene_model<'a>(job: &Job<'a>) -> Result<&'a Reconstruction> {
-    job.inputs.model.ok_or_else(|| {
-        ExportError::refused(
-            &job.cfg.out,
-            format!(
-                "the {} layout needs the scene's model (Inputs::model) for its tracks",
-                job.cfg.layout
-            ),
-        )
-    })
-}
 
 /// The scene model's observations of view `v`, carried into the stored view's pixels: each
 /// keypoint's ray through the photo's camera, projected by the stored camera. Keypoints

@@ -60,12 +60,12 @@ pub struct Gsplat;
 impl LayoutWriter for Gsplat {
     fn check(&self, job: &Job) -> Result<()> {
         job.require_train("")?;
-        crate::colmap_model::scene_model(job)?;
+        job.scene_model()?;
         job.points().map(|_| ())
     }
 
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
-        let scene = crate::colmap_model::scene_model(job)?;
+        let scene = job.scene_model()?;
         let own = own_depth_scales(job)?;
         let (depth, above) = inverse_depth::params(&own);
         let enc = Encoder {

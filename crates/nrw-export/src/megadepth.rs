@@ -58,7 +58,7 @@ pub struct Megadepth;
 
 impl LayoutWriter for Megadepth {
     fn check(&self, job: &Job) -> Result<()> {
-        crate::colmap_model::scene_model(job).map(|_| ())?;
+        job.scene_model().map(|_| ())?;
         let name = &job.cfg.name;
         if name.is_empty() || name.contains(['/', '\\']) || name.contains(char::is_whitespace) {
             return Err(ExportError::refused(
@@ -76,7 +76,7 @@ impl LayoutWriter for Megadepth {
     }
 
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
-        let rec = crate::colmap_model::scene_model(job)?;
+        let rec = job.scene_model()?;
         let name = &job.cfg.name;
         let mut views = BTreeMap::new();
         for (split, n) in &job.splits {

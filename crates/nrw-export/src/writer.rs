@@ -32,7 +32,7 @@ pub struct Job<'a> {
     pub tick: &'a (dyn Fn() + Sync),
 }
 
-impl Job<'_> {
+impl<'a> Job<'a> {
     /// Refuse a dataset without train views, which every layout but `files` needs.
     pub fn require_train(&self, advice: &str) -> Result<()> {
         if self.splits.iter().any(|(s, n)| s == TRAIN && *n > 0) {
@@ -64,6 +64,20 @@ impl Job<'_> {
                 ),
             )),
         }
+    }
+
+    /// The scene model the dataset was ingested from, which carries the tracks the layouts'
+    /// COLMAP models keep: refused when not given.
+    pub fn scene_model(&self) -> Result<&'a nrw_colmap::Reconstruction> {
+        self.inputs.model.ok_or_else(|| {
+            ExportError::refused(
+                &self.cfg.out,
+                format!(
+                    "the {} layout needs the scene's model (Inputs::model) for its tracks",
+                    self.cfg.layout
+                ),
+            )
+        })
     }
 
     /// A view's depth prior: the caller's (densify's MVS) where it has one, else the render's
@@ -155,12 +169,12 @@ pub struct WithModel(pub ModelWriter);
 impl LayoutWriter for WithModel {
     fn check(&self, job: &Job) -> Result<()> {
         job.require_train("")?;
-        crate::colmap_model::scene_model(job).map(|_| ())
+        job.scene_model().map(|_| ())
     }
 
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
         summary.empty_splits = job.empty_splits();
-        let model = crate::colmap_model::scene_model(job)?;
+        let model = job.scene_model()?;
         (summary.splits, summary.warnings) = (self.0)(job, model, staged)?;
         Ok(())
     }

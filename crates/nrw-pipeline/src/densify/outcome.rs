@@ -1,0 +1,66 @@
+//! What densify did: each view's verdict, and the reports of the stage and of a work unit.
+
+use std::path::PathBuf;
+
+use nrw_colmap::dense::MapPass;
+
+use crate::Unit;
+
+/// Why a view has (or has no) depth map.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ViewVerdict {
+    /// Depth kept at `pixels` pixels of the final map.
+    Densified { pixels: usize },
+    /// No other view shares enough points at a wide enough angle.
+    NoSourceView,
+    /// The view sees no sparse point in front of it, so stereo has no depth range.
+    NoDepthRange,
+    /// The photo could not be read or undistorted.
+    Unreadable(String),
+}
+
+/// One view's outcome.
+#[derive(Debug, Clone)]
+pub struct ViewOutcome {
+    pub image_id: u32,
+    pub name: String,
+    pub width: u64,
+    pub height: u64,
+    pub verdict: ViewVerdict,
+}
+
+/// What densify did (the whole stage, or `finalize` after its work units).
+#[derive(Debug, Clone)]
+pub struct DensifyReport {
+    pub out: PathBuf,
+    pub views: Vec<ViewOutcome>,
+    pub points: usize,
+    /// Seconds of each phase this process ran: undistortion, photometric, geometric, fusion.
+    pub seconds: [Option<f64>; 4],
+}
+
+impl DensifyReport {
+    /// How many views got a depth map.
+    pub fn densified(&self) -> usize {
+        self.views
+            .iter()
+            .filter(|v| matches!(v.verdict, ViewVerdict::Densified { .. }))
+            .count()
+    }
+}
+
+/// What one work unit of a stereo pass did.
+#[derive(Debug, Clone)]
+pub struct UnitReport {
+    /// The folder the units build the workspace in (published by `finalize`).
+    pub staging: PathBuf,
+    pub pass: MapPass,
+    pub unit: Unit,
+    /// Views this unit owns, of all views with sources.
+    pub owned: usize,
+    pub planned: usize,
+    /// Views matched by this run, and views found done by an earlier (interrupted) one.
+    pub computed: usize,
+    pub resumed: usize,
+    pub seconds: f64,
+}

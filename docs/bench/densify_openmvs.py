@@ -126,8 +126,9 @@ def seen_by_two(scene, truth):
         pc = truth @ pose.rotation.matrix().T + pose.translation
         front = pc[:, 2] > 0
         uv = np.full((len(truth), 2), -1.0)
-        uv[front] = np.array(cam.img_from_cam(pc[front]))
+        uv[front] = np.nan_to_num(np.array(cam.img_from_cam(pc[front])), nan=-1.0, posinf=-1.0, neginf=-1.0)
         sx, sy = t.shape[1] / cam.width, t.shape[0] / cam.height
+        uv = np.clip(uv, -1.0, 1e9)
         col = np.floor(uv[:, 0] * sx).astype(np.int64)
         row = np.floor(uv[:, 1] * sy).astype(np.int64)
         ok = front & (col >= 0) & (row >= 0) & (col < t.shape[1]) & (row < t.shape[0])
@@ -202,7 +203,7 @@ def sfm_agreement(model_dir, cloud):
 
 
 def kept_views(binary, scene, cloud, out):
-    r = subprocess.run([binary, "ingest", scene, "--points", cloud, "--out", out, "--quiet"],
+    r = subprocess.run([binary, "ingest", scene, "--points", cloud, "--out", out],
                        capture_output=True, text=True)
     m = re.search(r"(\d+) registered, (\d+) kept", r.stderr)
     if not m:

@@ -89,6 +89,13 @@ fn check_reader(
     (images.len(), all.len(), all[all.len() / 2])
 }
 
+/// A layout, its model folder, and nerfbaselines' images and colmap folders where it reads it.
+type Layout = (
+    &'static str,
+    &'static str,
+    Option<(&'static str, &'static str)>,
+);
+
 #[test]
 fn every_layouts_colmap_model_keeps_the_sfm_observations_where_the_views_show_them() {
     if !python::python_runs(
@@ -107,8 +114,7 @@ fn every_layouts_colmap_model_keeps_the_sfm_observations_where_the_views_show_th
         .iter()
         .map(|(_, n)| n)
         .sum();
-    // (layout, model folder, nerfbaselines' images and colmap folders where it reads the layout)
-    let layouts: [(&str, &str, Option<(&str, &str)>); 4] = [
+    let layouts: [Layout; 4] = [
         ("gsplat", "sparse/0", Some(("images", "sparse/0"))),
         ("nerfbaselines", "sparse", Some(("images", "sparse"))),
         ("nerfw", "dense/sparse", None),

@@ -509,3 +509,94 @@ fn a_unit_killed_on_s3_leaves_nothing_the_manifest_lists_and_resumes() {
         "units on S3 equal one local process"
     );
 }
+
+#[test]
+fn densify_on_s3_as_units_and_finalize_gives_the_bytes_of_a_local_run_and_a_stopped_unit_resumes() {
+    let Some(m) = moto(false) else {
+        return;
+    };
+    m.bucket("nrw");
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = super::densify::textured_scene(tmp.path(), 4);
+    let s = scene.to_str().unwrap();
+    let local = tmp.path().join("local");
+    let url = "s3://nrw/scene/dense";
+    let args = |out: &str, extra: &[&str]| -> Vec<String> {
+        ["densify", s, "-q", "--max-image-size", "96", "--out", out]
+            .iter()
+            .chain(extra)
+            .map(|a| a.to_string())
+            .collect()
+    };
+    let run = |out: &str, extra: &[&str]| m.nrw(&super::strs(&args(out, extra)));
+    assert_ok(&run(local.to_str().unwrap(), &[]));
+
+    // A geometric unit before the photometric pass: refused, naming the map on the bucket.
+    let err = assert_fails(&run(url, &["--unit", "0/2", "--pass", "geometric"]));
+    assert!(
+        err.contains("s3://nrw/scene/.dense.partial/stereo/")
+            && err.contains("is missing: the photometric pass has not finished view"),
+        "{err}"
+    );
+    // Unit 0/2 of the photometric pass stops after one view (as a kill would), then resumes
+    // from the maps it shared: the machine's scratch folder is gone with the process.
+    let o = run(
+        url,
+        &[
+            "--unit",
+            "0/2",
+            "--pass",
+            "photometric",
+            "--stop-after-views",
+            "1",
+        ],
+    );
+    assert_eq!(
+        o.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let shared = m.files("s3://nrw/scene/.dense.partial");
+    assert!(
+        shared.contains_key(Path::new("densify.json"))
+            && shared.keys().filter(|k| k.starts_with("stereo")).count() == 2,
+        "the stopped unit shared its record and one view's two maps: {:?}",
+        shared.keys().collect::<Vec<_>>()
+    );
+    assert!(
+        m.files(url).is_empty(),
+        "nothing is published before finalize"
+    );
+    let o = run(url, &["--unit", "0/2", "--pass", "photometric"]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("2 of 4 views; 1 matched, 1 found done"),
+        "{err}"
+    );
+    assert_ok(&run(url, &["--unit", "1/2", "--pass", "photometric"]));
+    for unit in ["1/2", "0/2"] {
+        assert_ok(&run(url, &["--unit", unit, "--pass", "geometric"]));
+    }
+    let err = String::from_utf8_lossy(&run(url, &["--finalize", "--fusion-cache-mb", "0"]).stderr)
+        .into_owned();
+    assert!(err.contains("densified 4 of 4 views"), "{err}");
+    super::assert_same_files(
+        &super::files(&local),
+        &m.files(url),
+        "densify on S3 (2 units, a stopped one resumed, finalize) vs one local process",
+    );
+    assert!(
+        m.files("s3://nrw/scene/.dense.partial").is_empty(),
+        "finalize removes the staging prefix"
+    );
+    // A published workspace is kept unless --overwrite; with it, a whole run replaces it.
+    let err = assert_fails(&run(url, &[]));
+    assert!(err.contains(url) && err.contains("--overwrite"), "{err}");
+    assert_ok(&run(url, &["--overwrite"]));
+    super::assert_same_files(&super::files(&local), &m.files(url), "a whole run on S3");
+    // A bucket root leaves the units no place beside it.
+    let err = assert_fails(&run("s3://nrw", &[]));
+    assert!(err.contains("inside the bucket"), "{err}");
+}

@@ -17,6 +17,7 @@ pub mod panic_guard;
 pub mod parquet_io;
 pub mod payload;
 pub mod provenance;
+pub mod publish;
 pub mod reader;
 pub mod sampling;
 pub mod scene;

@@ -119,8 +119,13 @@ impl Staged {
     /// Make the finished export visible at its destination, replacing an earlier one whole.
     pub fn publish(self) -> Result<()> {
         let published = match &self.dest {
-            Destination::Folder(folder) => rename_into_place(&self.dir, folder),
-            Destination::Remote { store, earlier } => upload(&self.dir, store, earlier),
+            Destination::Folder(folder) => {
+                nrw_dataset::publish::rename_into_place(&self.dir, folder).map_err(Into::into)
+            }
+            Destination::Remote { store, earlier } => {
+                nrw_dataset::publish::upload_folder(&self.dir, store, earlier, EXPORT_JSON)
+                    .map_err(Into::into)
+            }
         };
         if published.is_ok() && self.dir.exists() {
             let _ = std::fs::remove_dir_all(&self.dir);
@@ -199,43 +204,6 @@ fn remote_staging() -> Result<PathBuf> {
     let dir = std::env::temp_dir().join(format!(".nrw-export-new-{}-{nanos}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| ExportError::io(&dir, e))?;
     Ok(dir)
-}
-
-/// Move the staged folder to `out`, replacing an earlier export whole.
-fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
-    let old = staged.with_file_name(
-        staged
-            .file_name()
-            .expect("named")
-            .to_string_lossy()
-            .replace(".export-new-", ".export-old-"),
-    );
-    nrw_dataset::atomic::before_commit(&out.into());
-    if out.exists() {
-        std::fs::rename(out, &old).map_err(|e| ExportError::io(out, e))?;
-    }
-    std::fs::rename(staged, out).map_err(|e| ExportError::io(out, e))?;
-    if old.exists() {
-        std::fs::remove_dir_all(&old).map_err(|e| ExportError::io(&old, e))?;
-    }
-    Ok(())
-}
-
-/// Upload the staged files under `store`: an earlier export's `export.json` goes first (so a
-/// half-replaced export is not taken for a whole one), every file but `export.json` next,
-/// `export.json` last, then the earlier export's files that this one does not have.
-fn upload(staged: &Path, store: &Store, earlier: &[String]) -> Result<()> {
-    let files = Store::local(staged).list("")?;
-    nrw_dataset::atomic::before_commit(&store.root());
-    store.delete(EXPORT_JSON)?;
-    for rel in files.iter().filter(|r| *r != EXPORT_JSON) {
-        store.upload(rel, &staged.join(rel))?;
-    }
-    store.upload(EXPORT_JSON, &staged.join(EXPORT_JSON))?;
-    for rel in earlier.iter().filter(|r| !files.contains(r)) {
-        store.delete(rel)?;
-    }
-    Ok(())
 }
 
 /// An output file name refused, naming the export folder.

@@ -343,7 +343,7 @@ pub fn densify(d: &crate::densify::DensifyReport) -> Report {
         .filter_map(|(what, s)| s.map(|s| format!("{s:.1} s {what}")))
         .collect();
     r.err(format!("fused {} points; {}", d.points, phases.join(", ")));
-    r.out(d.out.join("fused.ply").display().to_string());
+    r.out(d.out.join("fused.ply").to_string());
     r
 }
 
@@ -364,7 +364,7 @@ pub fn densify_unit(u: &crate::densify::UnitReport) -> Report {
         nrw_colmap::dense::MapPass::Photometric => "next, once every unit of this pass has run: the units of `--pass geometric` (or, with --no-geometric, `--finalize`)",
         nrw_colmap::dense::MapPass::Geometric => "next, once every unit of this pass has run: `densify SCENE --finalize` fuses the maps and publishes the workspace",
     }.to_string());
-    r.out(u.staging.display().to_string());
+    r.out(u.staging.to_string());
     r
 }
 

@@ -97,7 +97,7 @@ fn densify_before_ingest(
         ));
     } else {
         let mut cfg = densify_config(d, scene);
-        cfg.out = dense.map(Path::to_path_buf);
+        cfg.out = dense.map(Into::into);
         let r = crate::densify::densify(&cfg, progress)?;
         done(StageDone::Densify(&r));
     }

@@ -30,9 +30,10 @@ and publishes. Any split gives the bytes of one process; a rerun unit resumes.
 pub struct DensifyArgs {
     /// The scene folder (sparse model in sparse/0 or sparse/, photos in images/)
     pub scene: PathBuf,
-    /// Where to write the dense workspace [default: SCENE/dense]
+    /// Where to write the dense workspace: a folder or an object-store URL (s3://, gs://,
+    /// az://) [default: SCENE/dense]
     #[arg(long)]
-    pub out: Option<PathBuf>,
+    pub out: Option<nrw_dataset::Location>,
     /// Replace an existing workspace at the output folder (never replaced otherwise)
     #[arg(long)]
     pub overwrite: bool,

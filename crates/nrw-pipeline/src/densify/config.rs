@@ -22,8 +22,8 @@ pub const DEFAULT_FUSION_CACHE_MB: usize = 1024;
 pub struct DensifyConfig {
     /// The scene folder (or its model folder).
     pub scene: PathBuf,
-    /// The workspace folder; `SCENE/dense` when `None`.
-    pub out: Option<PathBuf>,
+    /// The workspace: a folder, or an object-store URL; `SCENE/dense` when `None`.
+    pub out: Option<nrw_dataset::Location>,
     /// Replace an existing workspace (a user's own COLMAP run is never touched otherwise).
     pub overwrite: bool,
     /// Longer side of the undistorted views (`None`: the photos' own size).

@@ -14,6 +14,7 @@ use super::record::publish;
 use super::views::{load_rgb, Entry, Plan};
 use crate::error::{PipelineError, Result};
 use crate::Progress;
+use nrw_dataset::Location;
 
 /// Fuse the final maps, write the configs, publish the workspace; the report.
 pub(super) fn finish(
@@ -28,8 +29,9 @@ pub(super) fn finish(
     };
     for p in &prep.plan {
         if !pass_done(prep, cfg, p, last)? {
+            let missing = last_map(&prep.ws, cfg, &prep.entries[p.0].name, last)?;
             return Err(PipelineError::input(
-                last_map(&prep.ws, cfg, &prep.entries[p.0].name, last)?,
+                shared_name(prep, &missing),
                 format!(
                     "is missing: the {} pass has not finished view {} (run every unit of `densify --unit I/N --pass {}` first)",
                     last.name(),
@@ -40,6 +42,9 @@ pub(super) fn finish(
         }
     }
     let timer = std::time::Instant::now();
+    if let Some(remote) = &prep.remote {
+        remote.fetch_maps(&prep.ws)?;
+    }
     write_cfgs(&prep.ws, &prep.entries, &prep.plan)?;
     progress.start("fusing", prep.plan.len() as u64, "views");
     let (points, pixels) = fuse(
@@ -52,7 +57,11 @@ pub(super) fn finish(
     )?;
     progress.finish();
     let fusing = timer.elapsed().as_secs_f64();
-    publish(&prep.staging, &prep.out)?;
+    match (&prep.remote, &prep.out) {
+        (Some(remote), _) => remote.publish(&prep.ws)?,
+        (None, Location::Local(out)) => publish(&prep.ws.root, out)?,
+        (None, Location::Url(_)) => unreachable!("a URL output always has its remote side"),
+    }
     let mut verdicts = prep.verdicts.clone();
     for (p, pixels) in prep.plan.iter().zip(pixels) {
         verdicts[p.0] = Some(ViewVerdict::Densified { pixels });
@@ -74,6 +83,14 @@ pub(super) fn finish(
         points,
         seconds: [None, None, None, Some(fusing)],
     })
+}
+
+/// A workspace file as the units share it: its local path, or its URL in the staging prefix.
+fn shared_name(prep: &Prepared, path: &std::path::Path) -> Location {
+    match &prep.remote {
+        Some(remote) => remote.staging.name(&super::remote::rel(&prep.ws, path)),
+        None => path.into(),
+    }
 }
 
 /// Reads a view's final (geometric) maps and colours from the workspace for fusion, and

@@ -140,12 +140,14 @@ pub(super) fn write_cfgs(ws: &Workspace, entries: &[Entry], plan: &[Plan]) -> Re
 pub(super) fn photometric_map(ws: &Workspace, kind: MapKind, name: &str) -> Result<DenseMap> {
     let path = map_path(ws, kind, MapPass::Photometric, name)?;
     if !path.exists() {
-        return Err(PipelineError::input(
-            &path,
-            format!(
-                "is missing: the photometric pass has not finished view {name} (every unit of `densify --unit I/N --pass photometric` must finish before the geometric pass)"
-            ),
-        ));
+        return Err(PipelineError::input(&path, photometric_unfinished(name)));
     }
     read_map(ws, kind, MapPass::Photometric, name)
+}
+
+/// Why a photometric map the geometric pass reads is missing.
+pub(super) fn photometric_unfinished(name: &str) -> String {
+    format!(
+        "is missing: the photometric pass has not finished view {name} (every unit of `densify --unit I/N --pass photometric` must finish before the geometric pass)"
+    )
 }

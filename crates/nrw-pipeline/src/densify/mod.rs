@@ -20,6 +20,7 @@ mod maps;
 mod outcome;
 mod plan;
 mod record;
+mod remote;
 mod views;
 
 use std::path::PathBuf;
@@ -31,8 +32,10 @@ use crate::error::{PipelineError, Result, Setting};
 use crate::{Progress, Unit};
 use config::{check, Settings};
 use fusion::finish;
+use nrw_dataset::{Location, Store};
 use plan::{plan, run_pass, Prepared};
-use record::{claim, read_record, settings_differ, staging_dir, Record};
+use record::{claim, read_record, record_bytes, settings_differ, staging_dir, Record, RECORD};
+use remote::Remote;
 use views::{entries, undistort_views};
 
 pub use config::{
@@ -97,70 +100,112 @@ pub fn finalize_densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<
     finish(&prep, cfg, progress)
 }
 
-/// Load and undistort the model, claim the output folder, and make sure the staging
-/// workspace holds the undistorted views under these settings (undistorting them if not).
+/// Load and undistort the model, claim the output, and make sure the workspace being built
+/// holds the undistorted views under these settings (undistorting them if not).
 fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<Prepared> {
     check(cfg)?;
     let (scene, mut rec) = crate::model::load_model(&cfg.scene, None)?;
-    let out = cfg.out.clone().unwrap_or_else(|| scene.dir.join("dense"));
-    claim(&out, cfg.overwrite)?;
+    let out = cfg
+        .out
+        .clone()
+        .unwrap_or_else(|| scene.dir.join("dense").into());
     let options = UndistortOptions {
         max_image_size: cfg.max_image_size,
         ..UndistortOptions::default()
     };
     let distorted = crate::model::undistort_model(&mut rec, &options, &scene.model_dir)?;
-    let staging = staging_dir(&out);
-    let ws = Workspace::new(&staging);
-    let entries = entries(&rec);
-    let settings = Settings::of(cfg);
-    let record = match (read_record(&ws)?, step) {
-        (Some(r), _) if r.settings == settings => Some(r),
-        (Some(r), Step::Whole) => {
-            drop(r);
-            None
+    let (ws, remote) = match &out {
+        Location::Local(dir) => {
+            claim(dir, cfg.overwrite)?;
+            (Workspace::new(&staging_dir(dir)), None)
         }
-        (Some(r), _) => return Err(settings_differ(&ws, &r.settings, &settings)),
+        Location::Url(_) => {
+            let remote = Remote::open(&out)?;
+            remote::claim(&out, &remote.out, cfg.overwrite)?;
+            (Workspace::new(&remote.scratch), Some(remote))
+        }
+    };
+    // The record lives where the units share the workspace: the staging folder or prefix.
+    let shared = match &remote {
+        Some(r) => r.staging.clone(),
+        None => Store::local(&ws.root),
+    };
+    let settings = Settings::of(cfg);
+    let record = match (read_record(&shared)?, step) {
+        (Some(r), _) if r.settings == settings => Some(r),
+        (Some(_), Step::Whole) => None,
+        (Some(r), _) => return Err(settings_differ(shared.name(RECORD), &r.settings, &settings)),
         (None, Step::Finalize) => {
             return Err(PipelineError::input(
-                &staging,
+                shared.root(),
                 "holds no densify work: run `densify --unit I/N --pass photometric`, then `--pass geometric`, before finalize",
             ))
         }
         (None, _) => None,
     };
+    if record.is_none() && step == Step::Whole {
+        // A whole run starts over; units share the folder, so they only add to it.
+        shared.delete_dir("")?;
+    }
+    let entries = entries(&rec);
     let mut undistort_seconds = None;
-    let unreadable = match record {
-        Some(r) => r.unreadable,
-        None => {
-            // A whole run starts over; units share the folder, so they only add to it.
-            if step == Step::Whole && staging.exists() {
-                std::fs::remove_dir_all(&staging).map_err(|e| PipelineError::io(&staging, e))?;
-            }
-            let timer = std::time::Instant::now();
-            let photos = photos_dir(cfg, &scene)?;
-            let unreadable =
-                undistort_views(&ws, cfg, &photos, &rec, &distorted, &entries, progress)?;
-            let text = serde_json::to_string_pretty(&Record {
+    // A local workspace with a record holds its views; a scratch folder never does.
+    let unreadable = if record.is_none() || remote.is_some() {
+        let timer = std::time::Instant::now();
+        let photos = photos_dir(cfg, &scene)?;
+        let here = undistort_views(&ws, cfg, &photos, &rec, &distorted, &entries, progress)?;
+        let record = match record {
+            Some(r) if r.unreadable != here => return Err(unreadable_differ(&shared, &r, &here)),
+            Some(r) => r,
+            None => Record {
                 settings,
-                unreadable: unreadable.clone(),
-            })
-            .expect("densify's record serialises");
-            nrw_dataset::atomic::write_bytes_atomic(&ws.settings(), text.as_bytes())?;
-            undistort_seconds = Some(timer.elapsed().as_secs_f64());
-            unreadable
+                unreadable: here,
+            },
+        };
+        let bytes = record_bytes(&record);
+        nrw_dataset::atomic::write_bytes_atomic(&ws.settings(), &bytes)?;
+        if remote.is_some() {
+            shared.write(RECORD, bytes)?;
         }
+        undistort_seconds = Some(timer.elapsed().as_secs_f64());
+        record.unreadable
+    } else {
+        record.map(|r| r.unreadable).unwrap_or_default()
     };
     let (plan, verdicts) = plan(cfg, &rec, &entries, &unreadable);
     Ok(Prepared {
         rec,
         out,
-        staging,
+        staging: shared.root(),
         ws,
+        remote,
         entries,
         plan,
         verdicts,
         undistort_seconds,
     })
+}
+
+/// The error for a machine that cannot read the photos the workspace's record says the
+/// first machine read (or the other way round): the units would plan different views.
+fn unreadable_differ(
+    shared: &Store,
+    record: &Record,
+    here: &std::collections::BTreeMap<String, String>,
+) -> PipelineError {
+    let differ: Vec<&String> = record
+        .unreadable
+        .keys()
+        .chain(here.keys())
+        .filter(|n| record.unreadable.get(*n) != here.get(*n))
+        .collect();
+    PipelineError::input(
+        shared.name(RECORD),
+        format!(
+            "lists other unreadable photos than this machine finds ({}): every unit must read the same photos",
+            differ.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", ")
+        ),
+    )
 }
 
 /// The photo folder: `--images`, else the scene's own.

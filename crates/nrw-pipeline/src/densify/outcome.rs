@@ -1,7 +1,5 @@
 //! What densify did: each view's verdict, and the reports of the stage and of a work unit.
 
-use std::path::PathBuf;
-
 use nrw_colmap::dense::MapPass;
 
 use crate::Unit;
@@ -32,7 +30,7 @@ pub struct ViewOutcome {
 /// What densify did (the whole stage, or `finalize` after its work units).
 #[derive(Debug, Clone)]
 pub struct DensifyReport {
-    pub out: PathBuf,
+    pub out: nrw_dataset::Location,
     pub views: Vec<ViewOutcome>,
     pub points: usize,
     /// Seconds of each phase this process ran: undistortion, photometric, geometric, fusion.
@@ -52,8 +50,8 @@ impl DensifyReport {
 /// What one work unit of a stereo pass did.
 #[derive(Debug, Clone)]
 pub struct UnitReport {
-    /// The folder the units build the workspace in (published by `finalize`).
-    pub staging: PathBuf,
+    /// Where the units build the workspace (published by `finalize`): a folder or a prefix.
+    pub staging: nrw_dataset::Location,
     pub pass: MapPass,
     pub unit: Unit,
     /// Views this unit owns, of all views with sources.

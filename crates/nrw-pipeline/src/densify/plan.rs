@@ -9,11 +9,16 @@ use nrw_colmap::Reconstruction;
 use nrw_stereo::StereoView;
 
 use super::config::DensifyConfig;
-use super::maps::{map_path, photometric_map, read_hypotheses, write_hypotheses, write_maps};
+use super::maps::{
+    map_path, photometric_map, photometric_unfinished, read_hypotheses, write_hypotheses,
+    write_maps,
+};
 use super::outcome::ViewVerdict;
+use super::remote::Remote;
 use super::views::{load_view, Entry, Plan};
 use crate::error::{PipelineError, Result};
 use crate::{Progress, Unit};
+use nrw_dataset::Location;
 
 /// The views stereo runs on (with their sources and depth range), and the verdict of every
 /// other view.
@@ -94,7 +99,16 @@ pub(super) fn run_pass(
         } else {
             match pass {
                 MapPass::Photometric => photometric_view(&prep.ws, &prep.entries, p, cfg)?,
-                MapPass::Geometric => geometric_view(&prep.ws, &prep.entries, p, cfg)?,
+                MapPass::Geometric => {
+                    fetch_inputs(prep, p)?;
+                    geometric_view(&prep.ws, &prep.entries, p, cfg)?
+                }
+            }
+            if let Some(remote) = &prep.remote {
+                remote.share(
+                    &prep.ws,
+                    &written(&prep.ws, cfg, &prep.entries[p.0].name, pass)?,
+                )?;
             }
             computed += 1;
             if cfg.stop_after_views == Some(computed) {
@@ -127,13 +141,64 @@ pub(super) fn last_map(
     }
 }
 
+/// The map files a view's pass writes, in the order it writes them ([`last_map`] last).
+fn written(ws: &Workspace, cfg: &DensifyConfig, name: &str, pass: MapPass) -> Result<Vec<PathBuf>> {
+    let (kinds, pass): (&[MapKind], _) = match pass {
+        MapPass::Photometric if cfg.geometric => {
+            (&[MapKind::Depth, MapKind::Normal], MapPass::Photometric)
+        }
+        _ => (
+            &[MapKind::Depth, MapKind::Normal, MapKind::Confidence],
+            MapPass::Geometric,
+        ),
+    };
+    kinds.iter().map(|&k| map_path(ws, k, pass, name)).collect()
+}
+
+/// Whether a view's pass is done: its last map is in the workspace (on object storage, in
+/// the staging prefix the units share).
 pub(super) fn pass_done(
     prep: &Prepared,
     cfg: &DensifyConfig,
     p: &Plan,
     pass: MapPass,
 ) -> Result<bool> {
-    Ok(last_map(&prep.ws, cfg, &prep.entries[p.0].name, pass)?.exists())
+    let last = last_map(&prep.ws, cfg, &prep.entries[p.0].name, pass)?;
+    match &prep.remote {
+        Some(remote) => remote.has(&prep.ws, &last),
+        None => Ok(last.exists()),
+    }
+}
+
+/// On object storage, fetch the photometric maps a view's geometric pass reads (its own
+/// and its sources' depth, its own normals) that this machine has not computed itself.
+fn fetch_inputs(prep: &Prepared, p: &Plan) -> Result<()> {
+    let Some(remote) = &prep.remote else {
+        return Ok(());
+    };
+    let name = |i: usize| prep.entries[i].name.as_str();
+    let mut wanted = vec![map_path(
+        &prep.ws,
+        MapKind::Normal,
+        MapPass::Photometric,
+        name(p.0),
+    )?];
+    for &i in std::iter::once(&p.0).chain(&p.1) {
+        wanted.push(map_path(
+            &prep.ws,
+            MapKind::Depth,
+            MapPass::Photometric,
+            name(i),
+        )?);
+    }
+    for (k, path) in wanted.iter().enumerate() {
+        if !remote.fetch(&prep.ws, path)? {
+            let view = name(if k < 2 { p.0 } else { p.1[k - 2] });
+            let url = remote.staging.name(&super::remote::rel(&prep.ws, path));
+            return Err(PipelineError::input(url, photometric_unfinished(view)));
+        }
+    }
+    Ok(())
 }
 
 /// A reference view and its sources, read back from the workspace.
@@ -206,9 +271,14 @@ pub(super) fn geometric_view(
 /// A workspace being built: the model, the views and the plan every step derives alike.
 pub(super) struct Prepared {
     pub(super) rec: Reconstruction,
-    pub(super) out: PathBuf,
-    pub(super) staging: PathBuf,
+    pub(super) out: Location,
+    /// Where the units share the workspace being built: the staging folder or prefix.
+    pub(super) staging: Location,
+    /// The workspace this process builds in (the staging folder, or on object storage a
+    /// local scratch folder).
     pub(super) ws: Workspace,
+    /// The object-store side, when `out` is a URL.
+    pub(super) remote: Option<Remote>,
     pub(super) entries: Vec<Entry>,
     pub(super) plan: Vec<Plan>,
     /// The verdict of each view stereo does not run on (`None` for planned views).

@@ -4,10 +4,13 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nrw_colmap::dense::Workspace;
+use nrw_dataset::{Location, Store};
 
 use super::config::Settings;
 use crate::error::{PipelineError, Result, Setting};
+
+/// The record's name in a workspace ([`nrw_colmap::dense::Workspace::settings`]).
+pub(super) const RECORD: &str = "densify.json";
 
 /// `densify.json`: the settings, and the photos undistortion could not read (name → why).
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -16,24 +19,29 @@ pub(super) struct Record {
     pub(super) unreadable: BTreeMap<String, String>,
 }
 
-/// The workspace's record, if it has one.
-pub(super) fn read_record(ws: &Workspace) -> Result<Option<Record>> {
-    let path = ws.settings();
-    let text = match std::fs::read_to_string(&path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(PipelineError::io(&path, e)),
+/// The record of the workspace being built (`densify.json` in the staging folder or prefix
+/// `store`), if it has one.
+pub(super) fn read_record(store: &Store) -> Result<Option<Record>> {
+    let Some(bytes) = store.read_opt(RECORD)? else {
+        return Ok(None);
     };
-    serde_json::from_str(&text).map(Some).map_err(|e| {
+    serde_json::from_slice(&bytes).map(Some).map_err(|e| {
         PipelineError::input(
-            &path,
+            store.name(RECORD),
             format!("is not densify's record ({e}); delete the folder to start over"),
         )
     })
 }
 
+/// The record's bytes (the same wherever it is written, so a published workspace is too).
+pub(super) fn record_bytes(record: &Record) -> Vec<u8> {
+    serde_json::to_string_pretty(record)
+        .expect("densify's record serialises")
+        .into_bytes()
+}
+
 /// The error for a unit whose settings are not the workspace's: names the first that differs.
-pub(super) fn settings_differ(ws: &Workspace, have: &Settings, want: &Settings) -> PipelineError {
+pub(super) fn settings_differ(record: Location, have: &Settings, want: &Settings) -> PipelineError {
     let flat = |s: &Settings| {
         let mut out = BTreeMap::new();
         flatten(
@@ -51,7 +59,7 @@ pub(super) fn settings_differ(ws: &Workspace, have: &Settings, want: &Settings) 
         .map(|(k, v)| format!("{k} = {} (this run: {v})", have.get(k).unwrap_or(&null)))
         .collect();
     PipelineError::input(
-        ws.settings(),
+        record,
         format!(
             "the workspace is being built with {}: run every unit and finalize with the same settings, or delete the folder to start over",
             differ.join(", ")
@@ -116,8 +124,5 @@ pub(super) fn staging_dir(out: &Path) -> PathBuf {
 
 /// Move the finished workspace into place (replacing an older one the caller may replace).
 pub(super) fn publish(staging: &Path, out: &Path) -> Result<()> {
-    if out.exists() {
-        std::fs::remove_dir_all(out).map_err(|e| PipelineError::io(out, e))?;
-    }
-    std::fs::rename(staging, out).map_err(|e| PipelineError::io(out, e))
+    Ok(nrw_dataset::publish::rename_into_place(staging, out)?)
 }

@@ -20,12 +20,14 @@ The workspace is COLMAP's: `colmap stereo_fusion --workspace_path DIR --input_ty
 reads it unchanged. stereo/confidence_maps/NAME.geometric.bin (ours) holds, per pixel, the mean
 NCC of the source views that agree with the kept depth and their count (0, 0 where no depth).
 
-Work units (a cluster, a Slurm array; the scene folder on a shared file system): every unit
-of the photometric pass, then every unit of the geometric pass, then finalize, which fuses
-and publishes. Any split gives the bytes of one process; a rerun unit resumes.
+Work units (a cluster, a Slurm array): every unit of the photometric pass, then every unit of
+the geometric pass, then finalize, which fuses and publishes. Any split gives the bytes of one
+process; a rerun unit resumes. The workspace is on a shared file system, or --out is an
+object-store URL and each node needs only the scene and the bucket (docs/densify.md):
   for i in 0 1 2 3; do nrw-etl densify SCENE --unit $i/4 --pass photometric; done
   for i in 0 1 2 3; do nrw-etl densify SCENE --unit $i/4 --pass geometric; done
   nrw-etl densify SCENE --finalize
+  nrw-etl densify SCENE --unit 0/4 --pass photometric --out s3://bucket/scene/dense   # and so on
 (units, passes and finalize take the same settings; a unit that differs is refused)")]
 pub struct DensifyArgs {
     /// The scene folder (sparse model in sparse/0 or sparse/, photos in images/)

@@ -19,6 +19,7 @@ pub mod payload;
 pub mod provenance;
 pub mod publish;
 pub mod reader;
+pub mod resume;
 pub mod sampling;
 pub mod scene;
 pub mod schema;

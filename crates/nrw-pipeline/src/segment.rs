@@ -7,6 +7,8 @@
 //! `finalize`.
 
 use std::path::{Path, PathBuf};
+
+use nrw_dataset::resume::Agreement;
 use std::time::Instant;
 
 use nrw_colmap::Format;
@@ -210,25 +212,26 @@ fn photo_list(cfg: &SegmentConfig) -> Result<(PathBuf, Vec<String>)> {
 
 /// Create the label folder or check that its maps came from the same model and mode.
 fn claim_folder(out: &Path, record: &SegmentRecord) -> Result<()> {
-    let path = out.join(RECORD);
-    if let Ok(text) = std::fs::read_to_string(&path) {
-        let found: SegmentRecord = serde_json::from_str(&text)
-            .map_err(|e| PipelineError::input(&path, format!("not a segment record: {e}")))?;
-        if found != *record {
-            return Err(PipelineError::input(
-                &path,
-                format!(
-                    "this folder holds label maps of model {} (mode {}), not of model {} (mode {}); write to another folder",
-                    found.model_sha256, found.mode, record.model_sha256, record.mode
-                ),
-            ));
+    let store = nrw_dataset::Store::local(out);
+    match nrw_dataset::resume::agree(&store, RECORD, record, itself)? {
+        Agreement::Same(_) => Ok(()),
+        Agreement::Differs { found, .. } => Err(PipelineError::input(
+            out.join(RECORD),
+            format!(
+                "this folder holds label maps of model {} (mode {}), not of model {} (mode {}); write to another folder",
+                found.model_sha256, found.mode, record.model_sha256, record.mode
+            ),
+        )),
+        Agreement::Fresh => {
+            std::fs::create_dir_all(out).map_err(|e| PipelineError::io(out, e))?;
+            Ok(nrw_dataset::resume::write_record(&store, RECORD, record)?)
         }
-        return Ok(());
     }
-    std::fs::create_dir_all(out).map_err(|e| PipelineError::io(out, e))?;
-    let text = serde_json::to_string_pretty(record).expect("record serialises");
-    nrw_dataset::atomic::write_bytes_atomic(&path, text.as_bytes())?;
-    Ok(())
+}
+
+/// The whole record is what every run must share.
+fn itself(r: &SegmentRecord) -> &SegmentRecord {
+    r
 }
 
 /// One photo's label map, written atomically; `Some(problem)` when the photo is unreadable.

@@ -32,9 +32,10 @@ use crate::error::{PipelineError, Result, Setting};
 use crate::{Progress, Unit};
 use config::{check, Settings};
 use fusion::finish;
+use nrw_dataset::resume::{agree, record_bytes, Agreement};
 use nrw_dataset::{Location, Store};
 use plan::{plan, run_pass, Prepared};
-use record::{claim, read_record, record_bytes, settings_differ, staging_dir, Record, RECORD};
+use record::{claim, settings_differ, settings_of, staging_dir, Record, RECORD};
 use remote::Remote;
 use views::{entries, undistort_views};
 
@@ -131,17 +132,19 @@ fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<P
         None => Store::local(&ws.root),
     };
     let settings = Settings::of(cfg);
-    let record = match (read_record(&shared)?, step) {
-        (Some(r), _) if r.settings == settings => Some(r),
-        (Some(_), Step::Whole) => None,
-        (Some(r), _) => return Err(settings_differ(shared.name(RECORD), &r.settings, &settings)),
-        (None, Step::Finalize) => {
+    let record = match (agree(&shared, RECORD, &settings, settings_of)?, step) {
+        (Agreement::Same(r), _) => Some(r),
+        (Agreement::Differs { .. }, Step::Whole) => None,
+        (Agreement::Differs { differ, .. }, _) => {
+            return Err(settings_differ(shared.name(RECORD), &differ))
+        }
+        (Agreement::Fresh, Step::Finalize) => {
             return Err(PipelineError::input(
                 shared.root(),
                 "holds no densify work: run `densify --unit I/N --pass photometric`, then `--pass geometric`, before finalize",
             ))
         }
-        (None, _) => None,
+        (Agreement::Fresh, _) => None,
     };
     if record.is_none() && step == Step::Whole {
         // A whole run starts over; units share the folder, so they only add to it.

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nrw_dataset::{Location, Store};
+use nrw_dataset::Location;
 
 use super::config::Settings;
 use crate::error::{PipelineError, Result, Setting};
@@ -19,45 +19,13 @@ pub(super) struct Record {
     pub(super) unreadable: BTreeMap<String, String>,
 }
 
-/// The record of the workspace being built (`densify.json` in the staging folder or prefix
-/// `store`), if it has one.
-pub(super) fn read_record(store: &Store) -> Result<Option<Record>> {
-    let Some(bytes) = store.read_opt(RECORD)? else {
-        return Ok(None);
-    };
-    serde_json::from_slice(&bytes).map(Some).map_err(|e| {
-        PipelineError::input(
-            store.name(RECORD),
-            format!("is not densify's record ({e}); delete the folder to start over"),
-        )
-    })
+/// The settings a record holds (what every unit and resumed run must share).
+pub(super) fn settings_of(r: &Record) -> &Settings {
+    &r.settings
 }
 
-/// The record's bytes (the same wherever it is written, so a published workspace is too).
-pub(super) fn record_bytes(record: &Record) -> Vec<u8> {
-    serde_json::to_string_pretty(record)
-        .expect("densify's record serialises")
-        .into_bytes()
-}
-
-/// The error for a unit whose settings are not the workspace's: names the first that differs.
-pub(super) fn settings_differ(record: Location, have: &Settings, want: &Settings) -> PipelineError {
-    let flat = |s: &Settings| {
-        let mut out = BTreeMap::new();
-        flatten(
-            "",
-            &serde_json::to_value(s).expect("settings serialise"),
-            &mut out,
-        );
-        out
-    };
-    let (have, want) = (flat(have), flat(want));
-    let null = serde_json::Value::Null;
-    let differ: Vec<String> = want
-        .iter()
-        .filter(|(k, v)| have.get(*k) != Some(*v))
-        .map(|(k, v)| format!("{k} = {} (this run: {v})", have.get(k).unwrap_or(&null)))
-        .collect();
+/// The error for a unit whose settings are not the workspace's: names each that differs.
+pub(super) fn settings_differ(record: Location, differ: &[String]) -> PipelineError {
     PipelineError::input(
         record,
         format!(
@@ -65,29 +33,6 @@ pub(super) fn settings_differ(record: Location, have: &Settings, want: &Settings
             differ.join(", ")
         ),
     )
-}
-
-/// A JSON object's leaves by dotted key.
-pub(super) fn flatten(
-    prefix: &str,
-    v: &serde_json::Value,
-    out: &mut BTreeMap<String, serde_json::Value>,
-) {
-    match v {
-        serde_json::Value::Object(m) => {
-            for (k, v) in m {
-                let key = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                flatten(&key, v, out);
-            }
-        }
-        _ => {
-            out.insert(prefix.to_string(), v.clone());
-        }
-    }
 }
 
 /// Refuse to replace a non-empty folder at `out` unless asked to.

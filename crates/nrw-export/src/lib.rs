@@ -10,29 +10,20 @@
 //! whole, to a local folder or under an object-store URL.
 
 mod colmap_model;
+pub mod encoders;
 pub mod error;
-pub mod files;
-pub mod gsplat;
-pub mod hdf5;
-pub mod imc;
-pub mod inverse_depth;
 pub mod layout;
-pub mod megadepth;
-pub mod nerfbaselines;
-pub mod nerfstudio;
-pub mod nerfw;
-pub mod npz;
-pub mod official;
-pub mod paper;
-pub mod pickle;
-pub mod published;
-pub mod pyramid;
-pub mod record;
+pub mod layouts;
 pub mod staging;
 pub mod stream;
 pub mod summary;
-pub mod tfrecord;
 pub mod writer;
+
+// The layouts and encoders by their short names (one path per module, whatever its folder).
+pub use encoders::{hdf5, inverse_depth, npz, pickle, pyramid, record};
+pub use layouts::megadepth::{self, imc};
+pub use layouts::paper::{self, official, published, tfrecord};
+pub use layouts::{files, gsplat, nerfbaselines, nerfstudio, nerfw};
 
 pub use error::{ExportError, Result};
 pub use layout::Layout;

@@ -8,7 +8,7 @@ use image::{GrayImage, RgbImage};
 use serde::Serialize;
 
 /// The official colour coding: `schemas/official_colors.csv`.
-pub const OFFICIAL_COLORS_CSV: &str = include_str!("../../../schemas/official_colors.csv");
+pub const OFFICIAL_COLORS_CSV: &str = include_str!("../../../../../schemas/official_colors.csv");
 
 /// RGB of each ADE20K id 0…150 in the official coding.
 pub fn official_colors() -> &'static [[u8; 3]; 151] {

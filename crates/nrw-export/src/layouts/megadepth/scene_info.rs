@@ -1,302 +1,18 @@
-//! MegaDepth's layout, as D2-Net's `megadepth_utils/preprocess_scene.py` reads a scene and as
-//! matcher trainers (D2-Net, LoFTR and its family) read the `scene_info` it writes:
-//!
-//! ```text
-//! OUT/Undistorted_SfM/NAME/images/FILE                       photos (FILE = name with .png)
-//! OUT/Undistorted_SfM/NAME/sparse-txt/{cameras,images,points3D}.txt
-//! OUT/phoenix/S6/zl548/MegaDepth_v1/NAME/dense0/depths/STEM.h5   key `depth`, float32 h × w,
-//!                                                           z in model units, 0 = none
-//! OUT/scene_info/NAME.npz                                   what preprocess_scene.py writes
-//! OUT/dust3r/NAME/0/STEM.{jpg,exr,npz}                       DUSt3R's preprocessed MegaDepth:
-//!                                                           photo, depth ("Y"), {intrinsics,
-//!                                                           cam2world}
-//! OUT/dust3r/all_metadata.npz                               scenes, images, scored pairs
-//! OUT/index/scene_info_0.1_0.7/NAME_LO_HI.npz                LoFTR's index, one file an overlap
-//!                                                           band (0.1_0.3, 0.3_0.5, 0.5_0.7)
-//! OUT/index/trainvaltest_list/train_list.txt                 those files' stems
-//! OUT/prep_scene_info/NAME.npy                               RoMa's / DKM's scene info: every
-//!                                                           pair sharing points, its overlap
-//! OUT/imc2022/train/…                                       IMC 2022's training layout: see
-//!                                                           [`crate::imc`]
-//! ```
-//!
-//! The model is PINHOLE, one camera per image with the image's id (the script reads
-//! `params[0..4]` as fx, fy, cx, cy), the views' poses, and each view's SfM observations: the
-//! scene model's keypoints carried into the stored view through its camera (scaled, and
-//! undistorted when the dataset was), so tracks and depth maps share one image frame.
-//! `scene_info` follows the script line by line (see [`SceneInfo`]); every view has a depth
-//! file, so no entry is `None`.
-//!
-//! A pair's overlap score in LoFTR's, RoMa's and DUSt3R's files is the smaller of its two
-//! `overlap_matrix` entries (shared points over each view's points): LoFTR publishes its index,
-//! not how it was scored. LoFTR's `central_matches` hold one match a pair in D2-Net's
-//! `central_match` layout `[y_i, x_i, y_j, x_j]`: the shared point nearest view i's principal
-//! point (D2-Net draws one at random; LoFTR's loader does not read it). LoFTR's and RoMa's
-//! files are pickled dicts as their loaders `np.load(…, allow_pickle=True)` them: LoFTR's a
-//! bare pickle (numpy falls back to `pickle.load`), RoMa's a 0-d object array in an `.npy`.
+//! D2-Net's `scene_info` (what `preprocess_scene.py` computes from the layout's files) and
+//! the pair files of LoFTR, RoMa and DUSt3R derived from it, a row of the N × N matrices at a
+//! time.
 
 use std::collections::{BTreeMap, HashMap};
 
 use glam::{DVec2, DVec3};
-use nrw_colmap::{Camera, Point2D, Reconstruction};
-use nrw_dataset::ViewRow;
+use nrw_colmap::{Point2D, Reconstruction};
 
+use super::view::View;
 use crate::error::{ExportError, Result};
 use crate::imc::ImcView;
 use crate::npz::{self, Array};
 use crate::pickle::{DictValue, Dtype, Pickler};
 use crate::staging::Staged;
-use crate::writer::{Job, LayoutWriter};
-use crate::{ExportSummary, SplitExport};
-
-/// The script's rule for a depth file: under this size it is taken for a mask and the image
-/// is dropped (`file_size < 100 * 1024`).
-pub const D2NET_MIN_DEPTH_BYTES: usize = 100 * 1024;
-
-/// The MegaDepth layout.
-pub struct Megadepth;
-
-impl LayoutWriter for Megadepth {
-    fn check(&self, job: &Job) -> Result<()> {
-        job.scene_model().map(|_| ())?;
-        let name = &job.cfg.name;
-        if name.is_empty() || name.contains(['/', '\\']) || name.contains(char::is_whitespace) {
-            return Err(ExportError::refused(
-                &job.cfg.out,
-                format!(
-                    "the scene name {name:?} (`--name`) must be one folder name without spaces: \
-                     MegaDepth's paths and preprocess_scene.py's --scene_id take it as one"
-                ),
-            ));
-        }
-        if job.splits.iter().all(|(_, n)| *n == 0) {
-            return Err(ExportError::refused(&job.ds.dir, "the dataset has no view"));
-        }
-        Ok(())
-    }
-
-    fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
-        let rec = job.scene_model()?;
-        let name = &job.cfg.name;
-        let mut views = BTreeMap::new();
-        for (split, n) in &job.splits {
-            if *n == 0 {
-                summary.empty_splits.push(split.clone());
-                continue;
-            }
-            let mut s = SplitExport::new(split);
-            for v in job.ds.iter_split(split)? {
-                let v = v?;
-                let view = write_view(job, &v, rec, name, staged)?;
-                s.image_ids.push(v.image_id);
-                s.names.push(v.name.clone());
-                s.files.push(view.image_path.clone());
-                views.insert(v.image_id, view);
-                (job.tick)();
-            }
-            summary.splits.push(s);
-        }
-        write_sparse_txt(&views, rec, name, staged)?;
-        let info = SceneInfo::of(&views, rec);
-        let path = staged.claim(&format!("scene_info/{name}.npz"))?;
-        let dir = path.parent().expect("a file under the export");
-        std::fs::create_dir_all(dir).map_err(|e| ExportError::io(dir, e))?;
-        let file = std::fs::File::create(&path).map_err(|e| ExportError::io(&path, e))?;
-        let file = info
-            .write_npz(std::io::BufWriter::with_capacity(1 << 20, file))
-            .map_err(|e| ExportError::io(&path, e))?;
-        let file = file
-            .into_inner()
-            .map_err(|e| ExportError::io(&path, e.into_error()))?;
-        file.sync_all().map_err(|e| ExportError::io(&path, e))?;
-        let meta = dust3r_metadata(name, &views, &info);
-        staged.write("dust3r/all_metadata.npz", &meta)?;
-        write_pair_indices(name, &info, staged)?;
-        let imc: Vec<ImcView> = views
-            .values()
-            .enumerate()
-            .map(|(i, v)| info.imc_view(i, &v.stem, &v.jpg, v.camera.width, v.camera.height))
-            .collect();
-        let pairs_of = |i: usize| info.shared_pairs_of(i);
-        let unit = job.cfg.metres_per_unit;
-        summary
-            .warnings
-            .extend(crate::imc::write(name, &imc, &pairs_of, unit, staged)?);
-        summary.warnings.extend(consumer_warnings(&views));
-        summary.depth_source = Some(job.depth_source());
-        Ok(())
-    }
-}
-
-/// The folder of a scene's model and photos.
-fn sfm_dir(name: &str) -> String {
-    format!("Undistorted_SfM/{name}")
-}
-
-/// The folder of a scene's depth files.
-fn depth_dir(name: &str) -> String {
-    format!("phoenix/S6/zl548/MegaDepth_v1/{name}/dense0/depths")
-}
-
-/// One written view: what the model and `scene_info` need of it.
-struct View {
-    file: String,
-    /// The file's stem: DUSt3R's and IMC's image id.
-    stem: String,
-    /// The export-relative path of DUSt3R's JPEG of the view.
-    jpg: String,
-    image_path: String,
-    depth_path: String,
-    depth_bytes: usize,
-    camera: Camera,
-    /// The pose as written in images.txt: normalised (qw, qx, qy, qz) and t.
-    qvec: [f64; 4],
-    tvec: [f64; 3],
-    /// Observations in the stored view's pixels, in the scene model's keypoint order.
-    points2d: Vec<Point2D>,
-}
-
-/// Write one view's photo and depth file; its model entries.
-fn write_view(
-    job: &Job,
-    v: &ViewRow,
-    rec: &Reconstruction,
-    name: &str,
-    staged: &Staged,
-) -> Result<View> {
-    let file = crate::nerfw::file_name(&v.name);
-    if file.contains(char::is_whitespace) {
-        return Err(ExportError::Value {
-            path: v.name.clone().into(),
-            record: format!("image {}", v.image_id),
-            field: "name".into(),
-            problem: "contains white space: COLMAP's text model and preprocess_scene.py split \
-                      lines on spaces, so the name would be misread"
-                .into(),
-        });
-    }
-    let camera = crate::nerfw::pinhole(v)?;
-    let image_path = format!("{}/images/{file}", sfm_dir(name));
-    staged.write(&image_path, &v.photo_png)?;
-    let depth = job.prior_depth(v)?;
-    let stem = file.rsplit_once('.').map_or(file.as_str(), |(s, _)| s);
-    let depth_path = format!("{}/{stem}.h5", depth_dir(name));
-    let h5 = crate::hdf5::float32_2d(
-        "depth",
-        depth.height as u64,
-        depth.width as u64,
-        &depth.data,
-    );
-    staged.write(&depth_path, &h5)?;
-    let image = crate::nerfw::model_image(v, &file)?;
-    let jpg = write_dust3r_view(v, &depth, &camera, &image, name, stem, staged)?;
-    Ok(View {
-        points2d: crate::colmap_model::observations(v, rec, &camera)?,
-        qvec: image.cam_from_world.qvec(),
-        tvec: image.cam_from_world.translation.to_array(),
-        depth_bytes: h5.len(),
-        stem: stem.to_string(),
-        jpg,
-        file,
-        image_path,
-        depth_path,
-        camera,
-    })
-}
-
-/// DUSt3R's three files of a view (its `preprocess_megadepth.py` output, at the stored size):
-/// the photo as JPEG (quality 90, as that script saves it), the depth as a one-channel "Y"
-/// EXR (OpenCV's reading), and `{intrinsics, cam2world}`; the JPEG's export-relative path.
-fn write_dust3r_view(
-    v: &ViewRow,
-    depth: &nrw_dataset::depth::DepthMap,
-    camera: &Camera,
-    image: &nrw_colmap::Image,
-    name: &str,
-    stem: &str,
-    staged: &Staged,
-) -> Result<String> {
-    let dir = format!("dust3r/{name}/0/{stem}");
-    let jpg = nrw_dataset::codec::encode_jpeg(&v.name, &v.photo()?, 90)?;
-    staged.write(&format!("{dir}.jpg"), &jpg)?;
-    let exr = nrw_dataset::depth::encode_exr_channel(depth, "Y")?;
-    staged.write(&format!("{dir}.exr"), &exr)?;
-    let p = &camera.params;
-    // OpenCV's convention (pixel centres at whole numbers), DUSt3R's: its preprocessing takes K
-    // from cv2.getOptimalNewCameraMatrix and its cropping moves K to COLMAP's by +0.5 and back.
-    let k = [p[0], 0.0, p[2] - 0.5, 0.0, p[1], p[3] - 0.5, 0.0, 0.0, 1.0];
-    let r = rotation(image.cam_from_world.qvec());
-    let t = image.cam_from_world.translation.to_array();
-    let mut c2w = [0.0; 16];
-    for row in 0..3 {
-        for col in 0..3 {
-            c2w[row * 4 + col] = r[col][row];
-        }
-        c2w[row * 4 + 3] = -(0..3).map(|m| r[m][row] * t[m]).sum::<f64>();
-    }
-    c2w[15] = 1.0;
-    let npz = npz::npz(&[
-        ("intrinsics", Array::f64(&[3, 3], &k).npy()),
-        ("cam2world", Array::f64(&[4, 4], &c2w).npy()),
-    ]);
-    staged.write(&format!("{dir}.npz"), &npz)?;
-    Ok(format!("{dir}.jpg"))
-}
-
-/// DUSt3R's `all_metadata.npz`: `scenes` ("NAME 0"), `images` (the views' stems, in
-/// scene_info's order) and `pairs` (scene_id, im1_id, im2_id, score) for every pair of views
-/// that share SfM points, scored by the smaller of their two overlaps (our choice: DUSt3R
-/// publishes its pairs, not how they were scored).
-fn dust3r_metadata(name: &str, views: &BTreeMap<u32, View>, info: &SceneInfo) -> Vec<u8> {
-    let stems: Vec<String> = views.values().map(|v| v.stem.clone()).collect();
-    let pairs = info.scored_pairs();
-    let mut body = Vec::with_capacity(pairs.len() * 16);
-    for (i, j, score) in &pairs {
-        body.extend_from_slice(&0i32.to_le_bytes());
-        body.extend_from_slice(&(*i as i32).to_le_bytes());
-        body.extend_from_slice(&(*j as i32).to_le_bytes());
-        // Precision given up here: DUSt3R's pairs hold float32 scores.
-        body.extend_from_slice(&(*score as f32).to_le_bytes());
-    }
-    let rows = pairs.len();
-    let fields = [
-        ("scene_id", "<i4"),
-        ("im1_id", "<i4"),
-        ("im2_id", "<i4"),
-        ("score", "<f4"),
-    ];
-    npz::npz(&[
-        ("scenes", Array::unicode(&[format!("{name} 0")]).npy()),
-        ("images", Array::unicode(&stems).npy()),
-        ("pairs", Array::records(&fields, rows, body).npy()),
-    ])
-}
-
-/// `sparse-txt`: the views' PINHOLE cameras and images with their observations, and the
-/// points they observe with tracks rebuilt from those observations.
-fn write_sparse_txt(
-    views: &BTreeMap<u32, View>,
-    rec: &Reconstruction,
-    name: &str,
-    staged: &Staged,
-) -> Result<()> {
-    let model = views.iter().map(|(&id, v)| {
-        let (cam_from_world, norm) =
-            nrw_colmap::Rigid3::from_colmap(v.qvec, v.tvec).expect("a pose read from the dataset");
-        let image = nrw_colmap::Image {
-            id,
-            name: v.file.clone(),
-            camera_id: id,
-            cam_from_world,
-            stored_quat_norm: norm,
-            points2d: v.points2d.clone(),
-        };
-        (v.camera.clone(), image)
-    });
-    let out = crate::colmap_model::with_tracks(model, rec);
-    let dir = format!("{}/sparse-txt", sfm_dir(name));
-    crate::colmap_model::write(&out, staged, &dir, nrw_colmap::Format::Text)
-}
 
 /// MegaDepth's `scene_info`, computed as preprocess_scene.py computes it from the files this
 /// layout writes: K from PINHOLE params; R from the re-normalised quaternion by the script's
@@ -395,7 +111,7 @@ pub struct SceneView {
 
 impl SceneInfo {
     /// The scene info of the written views, in images.txt order (image id).
-    fn of(views: &BTreeMap<u32, View>, rec: &Reconstruction) -> SceneInfo {
+    pub(super) fn of(views: &BTreeMap<u32, View>, rec: &Reconstruction) -> SceneInfo {
         SceneInfo::new(views.values().map(|v| {
             let points = first_seen_last_value(&v.points2d)
                 .into_iter()
@@ -561,7 +277,7 @@ impl SceneInfo {
     }
 
     /// Every pair (i < j) of views sharing points, scored by the smaller of their overlaps.
-    fn scored_pairs(&self) -> Vec<(usize, usize, f64)> {
+    pub(super) fn scored_pairs(&self) -> Vec<(usize, usize, f64)> {
         (0..self.len())
             .flat_map(|i| self.pairs_of(i))
             .map(|p| (p.i, p.j, p.score))
@@ -750,7 +466,7 @@ impl SceneInfo {
 }
 
 /// LoFTR's index (a file a band and the list of them) and RoMa's scene info.
-fn write_pair_indices(name: &str, info: &SceneInfo, staged: &Staged) -> Result<()> {
+pub(super) fn write_pair_indices(name: &str, info: &SceneInfo, staged: &Staged) -> Result<()> {
     let mut stems = Vec::new();
     for band in LOFTR_BANDS {
         let stem = format!("{name}_{}_{}", band.0, band.1);
@@ -796,7 +512,7 @@ fn objects(items: &[Vec<(u64, DictValue)>]) -> Vec<u8> {
 
 /// The rotation matrix of a quaternion as preprocess_scene.py builds it: re-normalised, then
 /// the explicit formula (not a library's), so the two agree to the last bits.
-fn rotation(q: [f64; 4]) -> [[f64; 3]; 3] {
+pub(super) fn rotation(q: [f64; 4]) -> [[f64; 3]; 3] {
     let norm = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
     let [w, x, y, z] = q.map(|c| c / norm);
     [
@@ -816,36 +532,4 @@ fn rotation(q: [f64; 4]) -> [[f64; 3]; 3] {
             1.0 - 2.0 * x * x - 2.0 * y * y,
         ],
     ]
-}
-
-/// Where D2-Net's script would silently misread or fail on this export.
-fn consumer_warnings(views: &BTreeMap<u32, View>) -> Vec<String> {
-    let mut out = Vec::new();
-    let small: Vec<&str> = views
-        .values()
-        .filter(|v| v.depth_bytes < D2NET_MIN_DEPTH_BYTES)
-        .map(|v| v.file.as_str())
-        .collect();
-    if let Some(first) = small.first() {
-        out.push(format!(
-            "D2-Net's preprocess_scene.py takes a depth file under 100 KiB for a mask and drops \
-             the image: {} view(s) (first {first}) are that small (render at a larger \
-             --min-dim); this export's scene_info keeps them",
-            small.len()
-        ));
-    }
-    let blind: Vec<&str> = views
-        .values()
-        .filter(|v| v.points2d.is_empty())
-        .map(|v| v.file.as_str())
-        .collect();
-    if let Some(first) = blind.first() {
-        out.push(format!(
-            "D2-Net's preprocess_scene.py divides by a view's number of SfM points and fails \
-             (ZeroDivisionError) on {} view(s) with none (first {first}); this export's \
-             scene_info gives them overlap 0",
-            blind.len()
-        ));
-    }
-    out
 }

@@ -2,6 +2,10 @@
 //! share: their checks, the depth levels, the centred crop, the published colour coding of
 //! the labels, and the summary fields they fill in.
 
+pub mod official;
+pub mod published;
+pub mod tfrecord;
+
 use nrw_dataset::split::{TRAIN, VAL};
 use std::path::PathBuf;
 

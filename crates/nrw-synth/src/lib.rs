@@ -11,6 +11,7 @@ pub mod geometry;
 pub mod look;
 pub mod render;
 pub mod spec;
+pub mod texture;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -33,9 +34,10 @@ pub use render::Counters;
 pub use spec::{Appearance, SceneSpec, MAX_POINTS};
 
 use crate::cameras::Shot;
-use crate::geometry::{hash64, to_srgb8, Landmark, SurfacePoint};
+use crate::geometry::{Landmark, SurfacePoint};
 use crate::look::{gauss, Look};
 use crate::render::{render, Person};
+use crate::texture::{hash64, to_srgb8};
 
 /// What a generated scene holds, and which simulation stages ran how often.
 #[derive(Debug, Clone, Serialize)]

@@ -10,8 +10,9 @@ use rand::Rng;
 use serde::Serialize;
 
 use crate::cameras::Shot;
-use crate::geometry::{hash64, to_srgb8, Landmark, Material, ADE_PERSON, ADE_SKY};
+use crate::geometry::{Landmark, Material, ADE_PERSON, ADE_SKY};
 use crate::look::Look;
+use crate::texture::{hash64, to_srgb8};
 
 /// How many times each simulation stage ran (pixels, rays or photos).
 #[derive(Debug, Default)]

@@ -27,54 +27,14 @@ impl From<nrw_pipeline::PipelineError> for EtlError {
     }
 }
 
-/// The command-line flag (or argument) of a stage setting.
+/// The command-line flag (or argument) of a stage setting ([`nrw_pipeline::Setting::flag`]).
 pub fn flag(s: nrw_pipeline::Setting) -> &'static str {
-    use nrw_pipeline::Setting as S;
-    match s {
-        S::RowsPerShard => "--rows-per-shard",
-        S::Radius => "--radius",
-        S::MaxEmpty => "--max-empty",
-        S::EstimateNormals => "--estimate-normals",
-        S::Undistort => "--undistort",
-        S::SegmentWeights => "--segment-weights",
-        S::SegmentMode => "--segment-mode",
-        S::PhotosPerPart => "--photos-per-part",
-        S::Tier => "--tier",
-        S::Weights => "--weights",
-        S::K => "--k",
-        S::Unit => "--unit",
-        S::UnitCount => "--unit-count",
-        S::Photos => "SCENE",
-        // Only a pipeline file has a [split] table.
-        S::Split => "[split]",
-        S::Images => "--images",
-        S::Semantics => "--semantics",
-        S::Points => "--points",
-        S::Overwrite => "--overwrite",
-        S::Val => "--val",
-        S::Crop => "--crop",
-        S::TfrecordFiles => "--tfrecord-files",
-        // The flag turns the setting off.
-        S::ExportSemantics => "--no-semantics",
-        S::Entries => "--entries",
-        S::FollowOutsideLinks => "--follow-outside-links",
-        S::DenseOut => "--out",
-        S::MaxSources => "--max-sources",
-        S::MaxImageSize => "--max-image-size",
-        S::Stereo => "--iterations/--window-radius/--scales",
-        S::MinNumPixels => "--min-num-pixels",
-    }
+    s.flag()
 }
 
-/// A library message as the CLI shows it: every setting it mentions (its key in backticks,
-/// as [`nrw_pipeline::Setting`] displays) shown as the flag that sets it.
+/// A library message as the CLI shows it ([`nrw_pipeline::error::flags`]).
 pub fn flags(text: &str) -> String {
-    if !text.contains('`') {
-        return text.to_string();
-    }
-    nrw_pipeline::Setting::ALL
-        .iter()
-        .fold(text.to_string(), |t, s| t.replace(&s.to_string(), flag(*s)))
+    nrw_pipeline::error::flags(text)
 }
 
 impl EtlError {

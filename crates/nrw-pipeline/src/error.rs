@@ -128,6 +128,8 @@ pub enum Setting {
     Crop,
     /// How many TFRecord files an export writes per split.
     TfrecordFiles,
+    /// Metres a model unit (IMC 2022's scaling factor).
+    MetresPerUnit,
     /// Whether an export writes the views' semantic labels.
     ExportSemantics,
     /// The corpus index's list of scenes and their outcomes.
@@ -148,7 +150,7 @@ pub enum Setting {
 
 impl Setting {
     /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 30] = [
+    pub const ALL: [Setting; 31] = [
         Setting::RowsPerShard,
         Setting::Radius,
         Setting::MaxEmpty,
@@ -171,6 +173,7 @@ impl Setting {
         Setting::Val,
         Setting::Crop,
         Setting::TfrecordFiles,
+        Setting::MetresPerUnit,
         Setting::ExportSemantics,
         Setting::Entries,
         Setting::FollowOutsideLinks,
@@ -206,6 +209,7 @@ impl Setting {
             Setting::Val => "split.val",
             Setting::Crop => "export.crop",
             Setting::TfrecordFiles => "export.tfrecord_files",
+            Setting::MetresPerUnit => "export.metres_per_unit",
             Setting::ExportSemantics => "export.semantics",
             Setting::Entries => "corpus.entries",
             Setting::FollowOutsideLinks => "follow_outside_links",
@@ -260,6 +264,60 @@ impl PipelineError {
             problem: problem.into(),
         }
     }
+}
+
+impl Setting {
+    /// The command-line flag (or argument) of the setting: what the CLI names where a
+    /// pipeline file names its key.
+    pub fn flag(self) -> &'static str {
+        use Setting as S;
+        match self {
+            S::RowsPerShard => "--rows-per-shard",
+            S::Radius => "--radius",
+            S::MaxEmpty => "--max-empty",
+            S::EstimateNormals => "--estimate-normals",
+            S::Undistort => "--undistort",
+            S::SegmentWeights => "--segment-weights",
+            S::SegmentMode => "--segment-mode",
+            S::PhotosPerPart => "--photos-per-part",
+            S::Tier => "--tier",
+            S::Weights => "--weights",
+            S::K => "--k",
+            S::Unit => "--unit",
+            S::UnitCount => "--unit-count",
+            S::Photos => "SCENE",
+            // Only a pipeline file has a [split] table.
+            S::Split => "[split]",
+            S::Images => "--images",
+            S::Semantics => "--semantics",
+            S::Points => "--points",
+            S::Overwrite => "--overwrite",
+            S::Val => "--val",
+            S::Crop => "--crop",
+            S::TfrecordFiles => "--tfrecord-files",
+            S::MetresPerUnit => "--metres-per-unit",
+            // The flag turns the setting off.
+            S::ExportSemantics => "--no-semantics",
+            S::Entries => "--entries",
+            S::FollowOutsideLinks => "--follow-outside-links",
+            S::DenseOut => "--out",
+            S::MaxSources => "--max-sources",
+            S::MaxImageSize => "--max-image-size",
+            S::Stereo => "--iterations/--window-radius/--scales",
+            S::MinNumPixels => "--min-num-pixels",
+        }
+    }
+}
+
+/// A library message as the CLI shows it: every setting it mentions (its key in backticks,
+/// as [`Setting`] displays) shown as the flag that sets it.
+pub fn flags(text: &str) -> String {
+    if !text.contains('`') {
+        return text.to_string();
+    }
+    Setting::ALL
+        .iter()
+        .fold(text.to_string(), |t, s| t.replace(&s.to_string(), s.flag()))
 }
 
 #[cfg(test)]

@@ -21,6 +21,7 @@ pub mod qa;
 pub mod report;
 pub mod runner;
 pub mod segment;
+pub mod settings;
 pub mod split;
 pub mod stage;
 pub mod style;

@@ -32,24 +32,8 @@ pub fn print_report(report: &nrw_pipeline::report::Report) {
     }
 }
 
-/// A clap parser over a library enum's names (`ALL`, `name`, `summary`), each value with its
-/// help line: the CLI, pipeline files and the library share one enum.
-pub fn names<T>(
-    all: &'static [T],
-    name: fn(T) -> &'static str,
-    summary: fn(T) -> &'static str,
-) -> impl clap::builder::TypedValueParser<Value = T>
-where
-    T: Copy + Send + Sync + std::str::FromStr + 'static,
-    T::Err: std::fmt::Debug,
-{
-    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-    PossibleValuesParser::new(
-        all.iter()
-            .map(|v| PossibleValue::new(name(*v)).help(crate::error::flags(summary(*v)))),
-    )
-    .map(|n| n.parse::<T>().expect("clap passes only the listed names"))
-}
+/// A clap parser over a library enum's names ([`nrw_pipeline::settings::names`]).
+pub use nrw_pipeline::settings::names;
 
 /// `--unit`/`--unit-count`: run one work unit of a stage instead of the whole stage.
 #[derive(Debug, Clone, Default, Args)]

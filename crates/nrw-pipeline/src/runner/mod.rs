@@ -211,44 +211,10 @@ impl Default for TripletsTable {
     }
 }
 
-/// `[export]`: the layout to write into DIR/export (the published code's own, `official`,
+/// `[export]`: the export into DIR/export, as `export`'s flags say it
+/// ([`crate::settings::export::ExportSettings`]; the published code's own layout, `official`,
 /// when left out).
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ExportTable {
-    /// Any layout `export --layout` takes, by the same name.
-    pub layout: nrw_export::Layout,
-    /// false: export without semantics (train with --use_semantic=False)
-    pub semantics: bool,
-    /// Centre crop of every channel (official, tfrecord): a side in pixels for
-    /// `--train_resolution`, or "none" to keep the stored size; the published 512 when absent.
-    pub crop: Option<CropSetting>,
-}
-
-impl Default for ExportTable {
-    fn default() -> Self {
-        ExportTable {
-            layout: crate::export::official(&Path::new("").into(), &Path::new("").into()).layout,
-            semantics: true,
-            crop: None,
-        }
-    }
-}
-
-/// `[export] crop`: a side in pixels, or the word "none".
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(untagged)]
-pub enum CropSetting {
-    Side(u32),
-    Word(NoCrop),
-}
-
-/// The one word `[export] crop` takes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum NoCrop {
-    None,
-}
+pub type ExportTable = crate::settings::export::ExportSettings;
 
 /// `[qa]`: the report into DIR/qa.
 #[derive(Debug, Clone, Deserialize)]
@@ -357,20 +323,11 @@ fn export_config(
     dataset: &Location,
     out: &Location,
     segmented: bool,
-) -> ExportConfig {
-    let layout = e.layout;
-    ExportConfig {
-        layout,
-        // The files layout keeps views whole; the paper's layouts take the published crop.
-        crop: match e.crop {
-            Some(CropSetting::Side(n)) => Some(n),
-            Some(CropSetting::Word(NoCrop::None)) => None,
-            None => layout.default_crop(),
-        },
-        // A run that segments its photos exports their labels.
-        semantics: e.semantics || segmented,
-        ..crate::export::official(dataset, out)
-    }
+) -> Result<ExportConfig> {
+    let mut c = e.config(dataset, out)?;
+    // A run that segments its photos exports their labels.
+    c.semantics |= segmented;
+    Ok(c)
 }
 
 fn style_config(s: &StyleTable, dataset: &Location, weights: Option<&Path>) -> Result<StyleConfig> {
@@ -413,7 +370,8 @@ pub fn run(
     let export = p
         .export
         .as_ref()
-        .map(|e| export_config(e, out, export_dir, segmented));
+        .map(|e| export_config(e, out, export_dir, segmented))
+        .transpose()?;
     let mut ingest = p
         .ingest
         .as_ref()

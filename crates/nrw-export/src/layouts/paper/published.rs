@@ -56,7 +56,7 @@ pub fn official_seg_rgb(labels: &GrayImage) -> RgbImage {
 }
 
 /// How camera-space depth becomes the 0…255 the published loaders expect.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DepthMapping {
     /// Levels evenly spaced in depth between the dataset's near and far.

@@ -36,42 +36,8 @@ pub struct DensifyArgs {
     /// az://) [default: SCENE/dense]
     #[arg(long)]
     pub out: Option<nrw_dataset::Location>,
-    /// Replace an existing workspace at the output folder (never replaced otherwise)
-    #[arg(long)]
-    pub overwrite: bool,
-    /// Longer side of the undistorted views, in pixels; 0 keeps the photos' size
-    #[arg(long, default_value_t = nrw_pipeline::densify::DEFAULT_MAX_IMAGE_SIZE)]
-    pub max_image_size: u64,
-    /// Source views each view is matched with (the most overlapping, at least 1° apart)
-    #[arg(long, default_value_t = nrw_pipeline::densify::DEFAULT_MAX_SOURCES)]
-    pub max_sources: usize,
-    /// Red-black PatchMatch sweeps per scale
-    #[arg(long, default_value_t = 5)]
-    pub iterations: usize,
-    /// Half the matching window's side, in pixels (sampled every second pixel)
-    #[arg(long, default_value_t = 5)]
-    pub window_radius: usize,
-    /// Coarse-to-fine levels (1: full size only; each level halves the image)
-    #[arg(long, default_value_t = 2)]
-    pub scales: usize,
-    /// The fewest pixels (of different views) fusion merges into a point: COLMAP's
-    /// min_num_pixels (COLMAP: 5). The default 2 is OpenMVS's: a surface two photos see makes
-    /// points; 5 gives a sparser, cleaner cloud of what many photos see
-    #[arg(long, default_value_t = nrw_pipeline::runner::DensifyTable::default().min_num_pixels)]
-    pub min_num_pixels: usize,
-    /// The fewest source views whose depth must agree with a pixel's for it to keep its depth
-    /// (COLMAP's filter_min_num_consistent, 2). 1 (OpenMVS's adjusted filter) keeps surfaces
-    /// only two photos see, and more wrong depths with them: see docs/densify.md
-    #[arg(long, default_value_t = nrw_pipeline::runner::DensifyTable::default().min_consistent)]
-    pub min_consistent: usize,
-    /// The most MiB of depth, normal and colour maps fusion holds at once (COLMAP's
-    /// cache_size): views beyond it are read again when a walk needs them. The cloud is the
-    /// same whatever the size; only the time is not
-    #[arg(long, default_value_t = nrw_pipeline::densify::DEFAULT_FUSION_CACHE_MB)]
-    pub fusion_cache_mb: usize,
-    /// Skip the geometric-consistency pass (faster, noisier: photometric maps are fused)
-    #[arg(long)]
-    pub no_geometric: bool,
+    #[command(flatten)]
+    pub settings: nrw_pipeline::settings::densify::DensifySettings,
     /// The photo folder, if not the scene's images/
     #[arg(long)]
     pub images: Option<PathBuf>,
@@ -96,19 +62,7 @@ pub struct DensifyArgs {
 
 /// Run `densify`.
 pub fn run(args: &DensifyArgs) -> Result<()> {
-    let table = nrw_pipeline::runner::DensifyTable {
-        max_image_size: args.max_image_size,
-        max_sources: args.max_sources,
-        iterations: args.iterations,
-        window_radius: args.window_radius,
-        scales: args.scales,
-        geometric: !args.no_geometric,
-        min_num_pixels: args.min_num_pixels,
-        min_consistent: args.min_consistent,
-        fusion_cache_mb: args.fusion_cache_mb,
-        overwrite: args.overwrite,
-    };
-    let mut cfg = nrw_pipeline::runner::densify_config(&table, &args.scene);
+    let mut cfg = args.settings.config(&args.scene);
     cfg.out = args.out.clone();
     cfg.images = args.images.clone();
     cfg.follow_outside_links = args.follow_outside_links;

@@ -30,46 +30,9 @@ pub struct Pipeline {
 }
 
 /// `[densify]`: multi-view stereo into SCENE/dense before ingest, when the scene has no dense
-/// cloud yet (an existing SCENE/dense is used as it is unless `overwrite`); a setting left
-/// out is densify's default (`DensifyConfig::new`).
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct DensifyTable {
-    /// Longer side of the undistorted views (0: the photos' own size).
-    pub max_image_size: u64,
-    pub max_sources: usize,
-    pub iterations: usize,
-    pub window_radius: usize,
-    pub scales: usize,
-    pub geometric: bool,
-    /// The fewest pixels fusion merges into a point (COLMAP's `min_num_pixels`).
-    pub min_num_pixels: usize,
-    /// The fewest agreeing source views that keep a depth (COLMAP's
-    /// `filter_min_num_consistent`).
-    pub min_consistent: usize,
-    /// The most MiB of maps fusion holds at once (the cloud does not depend on it).
-    pub fusion_cache_mb: usize,
-    /// Replace an existing SCENE/dense.
-    pub overwrite: bool,
-}
-
-impl Default for DensifyTable {
-    fn default() -> Self {
-        let c = crate::densify::DensifyConfig::new(Path::new(""));
-        DensifyTable {
-            max_image_size: c.max_image_size.unwrap_or(0),
-            max_sources: c.max_sources,
-            iterations: c.stereo.iterations,
-            window_radius: c.stereo.window_radius,
-            scales: c.stereo.scales,
-            geometric: c.geometric,
-            min_num_pixels: c.fusion.min_num_pixels,
-            min_consistent: c.stereo.filter_min_consistent,
-            fusion_cache_mb: c.fusion_cache_bytes >> 20,
-            overwrite: false,
-        }
-    }
-}
+/// cloud yet (an existing SCENE/dense is used as it is unless `overwrite`), as `densify`'s
+/// flags say it ([`crate::settings::densify::DensifySettings`]).
+pub type DensifyTable = crate::settings::densify::DensifySettings;
 
 /// `[densify]` before ingest: multi-view stereo into `dense` (SCENE/dense when `None`) unless
 /// that workspace has a cloud already (and `overwrite` is off). The cloud ingest should read
@@ -104,21 +67,9 @@ fn densify_before_ingest(
     Ok(own)
 }
 
-/// Densify's settings from `[densify]` (or the command line's, which take the same fields).
+/// Densify's settings from `[densify]` (or the command line's, which are the same struct).
 pub fn densify_config(d: &DensifyTable, scene: &Path) -> crate::densify::DensifyConfig {
-    let mut c = crate::densify::DensifyConfig::new(scene);
-    c.max_image_size = (d.max_image_size > 0).then_some(d.max_image_size);
-    c.max_sources = d.max_sources;
-    c.stereo.iterations = d.iterations;
-    c.stereo.window_radius = d.window_radius;
-    c.stereo.sigma_spatial = d.window_radius as f64;
-    c.stereo.scales = d.scales;
-    c.geometric = d.geometric;
-    c.fusion.min_num_pixels = d.min_num_pixels;
-    c.stereo.filter_min_consistent = d.min_consistent;
-    c.fusion_cache_bytes = d.fusion_cache_mb.saturating_mul(1 << 20);
-    c.overwrite = d.overwrite;
-    c
+    d.config(scene)
 }
 
 /// `[ingest]`: render and filter; a setting left out is the paper's (`IngestConfig::new`).

@@ -124,6 +124,8 @@ pub enum Setting {
     Overwrite,
     /// How many photos the split holds out for validation.
     Val,
+    /// The share of the kept photos the split holds out for validation.
+    ValFraction,
     /// The square an export crops views to.
     Crop,
     /// How many TFRecord files an export writes per split.
@@ -150,7 +152,7 @@ pub enum Setting {
 
 impl Setting {
     /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 31] = [
+    pub const ALL: [Setting; 32] = [
         Setting::RowsPerShard,
         Setting::Radius,
         Setting::MaxEmpty,
@@ -171,6 +173,7 @@ impl Setting {
         Setting::Points,
         Setting::Overwrite,
         Setting::Val,
+        Setting::ValFraction,
         Setting::Crop,
         Setting::TfrecordFiles,
         Setting::MetresPerUnit,
@@ -207,6 +210,7 @@ impl Setting {
             Setting::Points => "ingest.points",
             Setting::Overwrite => "overwrite",
             Setting::Val => "split.val",
+            Setting::ValFraction => "split.val_fraction",
             Setting::Crop => "export.crop",
             Setting::TfrecordFiles => "export.tfrecord_files",
             Setting::MetresPerUnit => "export.metres_per_unit",
@@ -293,6 +297,7 @@ impl Setting {
             S::Points => "--points",
             S::Overwrite => "--overwrite",
             S::Val => "--val",
+            S::ValFraction => "--val-fraction",
             S::Crop => "--crop",
             S::TfrecordFiles => "--tfrecord-files",
             S::MetresPerUnit => "--metres-per-unit",

@@ -10,7 +10,7 @@ use serde::Deserialize;
 
 use crate::error::{PipelineError, Result, Setting};
 use crate::ingest::{IngestConfig, IngestSummary};
-use crate::split::{SplitConfig, SplitSummary};
+use crate::split::SplitSummary;
 use crate::style::{StyleConfig, StyleSummary};
 use crate::triplets::{TripletsConfig, TripletsSummary};
 use crate::Progress;
@@ -110,25 +110,8 @@ impl Default for IngestTable {
     }
 }
 
-/// `[split]`: validation photos (a count, or a fraction of the kept photos) and seed; with
-/// neither count nor fraction, the paper's count (`SplitConfig::new`).
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SplitTable {
-    pub val: Option<usize>,
-    pub val_fraction: Option<f64>,
-    pub seed: u64,
-}
-
-impl Default for SplitTable {
-    fn default() -> Self {
-        SplitTable {
-            val: None,
-            val_fraction: None,
-            seed: SplitConfig::new("").seed,
-        }
-    }
-}
+/// `[split]`: as `split`'s flags say it ([`crate::settings::split::SplitSettings`]).
+pub type SplitTable = crate::settings::split::SplitSettings;
 
 /// `[style]`: the descriptor tier (weights come from the command line); the paper's
 /// reference tier when left out.
@@ -146,21 +129,9 @@ impl Default for StyleTable {
     }
 }
 
-/// `[triplets]`: neighbours per anchor (lowered, with a warning, to what the scope holds);
-/// the paper's k when left out.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TripletsTable {
-    pub k: usize,
-}
-
-impl Default for TripletsTable {
-    fn default() -> Self {
-        TripletsTable {
-            k: TripletsConfig::new("").k,
-        }
-    }
-}
+/// `[triplets]`: as `triplets`' flags say it ([`crate::settings::triplets::TripletsSettings`];
+/// k is lowered, with a warning, to what the training split holds).
+pub type TripletsTable = crate::settings::triplets::TripletsSettings;
 
 /// `[export]`: the export into DIR/export, as `export`'s flags say it
 /// ([`crate::settings::export::ExportSettings`]; the published code's own layout, `official`,
@@ -354,26 +325,7 @@ pub fn run(
         return Ok(outcome);
     }
     if let Some(s) = &p.split {
-        let kept = nrw_dataset::reader::Dataset::open(nrw_dataset::Store::open(out)?)?.len();
-        let val = match (s.val, s.val_fraction) {
-            (None, None) => SplitConfig::new(out).val,
-            (Some(v), None) => v,
-            (None, Some(f)) if (0.0..1.0).contains(&f) => ((kept as f64 * f) as usize).max(1),
-            _ => {
-                return Err(PipelineError::config(
-                    Setting::Split,
-                    format!(
-                "of pipeline {}: give exactly one of val (a count) and val_fraction (0 to 1)",
-                p.name
-            ),
-                ))
-            }
-        };
-        let r = crate::split::split(&SplitConfig {
-            val,
-            seed: s.seed,
-            ..SplitConfig::new(out)
-        })?;
+        let r = crate::split::split(&s.config(out)?)?;
         done(StageDone::Split(&r));
     }
     if let Some(c) = &style {
@@ -383,7 +335,7 @@ pub fn run(
     if let Some(t) = &p.triplets {
         let r = crate::triplets::triplets(&TripletsConfig {
             k: capped_k(t.k, out, progress)?,
-            ..TripletsConfig::new(out)
+            ..t.config(out)
         })?;
         done(StageDone::Triplets(&r));
     }

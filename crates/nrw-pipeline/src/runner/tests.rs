@@ -1,4 +1,5 @@
 use super::*;
+use crate::split::SplitConfig;
 use nrw_export::Layout;
 
 #[test]

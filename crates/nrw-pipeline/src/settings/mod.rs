@@ -3,11 +3,13 @@
 //! use all come. A field's name is its table key; its flag is that name in kebab case (or
 //! `--no-NAME` for a setting on by default); its doc comment is the flag's help.
 //!
-//! Moved here so far: densify, export. The other stages still declare their flags in
-//! nrw-etl's `cmd/` and their tables in the runner.
+//! Moved here so far: densify, split, triplets, export. The other stages (ingest, style,
+//! segment) still declare their flags in nrw-etl's `cmd/` and their tables in the runner.
 
 pub mod densify;
 pub mod export;
+pub mod split;
+pub mod triplets;
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 

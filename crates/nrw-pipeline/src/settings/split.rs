@@ -1,0 +1,115 @@
+//! `split`'s settings: the flags of `nrw-etl split` and the `[split]` table of a pipeline
+//! file, one declaration.
+
+use std::path::PathBuf;
+
+use nrw_dataset::Location;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{PipelineError, Result, Setting};
+use crate::split::SplitConfig;
+
+/// How the kept photos are split into train and val; with neither `val` nor `val_fraction`,
+/// the paper's 100 validation photos.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(deny_unknown_fields, default)]
+pub struct SplitSettings {
+    /// Number of validation photos [default: 100, the paper's]; 0 puts every photo in
+    /// training
+    #[arg(long, conflicts_with = "val_fraction")]
+    pub val: Option<usize>,
+    /// Validation photos as a fraction (0 to 1) of the kept photos, at least one
+    #[arg(long)]
+    pub val_fraction: Option<f64>,
+    /// Seed of the assignment: same seed, same split on any machine
+    #[arg(long, default_value_t = SplitSettings::default().seed)]
+    pub seed: u64,
+    /// Take the sets from a published Phototourism split file (NeRF-W's SCENE.tsv: filename,
+    /// id, split, dataset) instead of drawing them: `train` rows train, `test` rows are the
+    /// val split; rows without an id are ignored, as nerf_pl does; a name that is not in the
+    /// scene's model is refused. Replaces any earlier split
+    #[arg(long, conflicts_with_all = ["val", "val_fraction", "seed"])]
+    pub from_tsv: Option<PathBuf>,
+}
+
+impl Default for SplitSettings {
+    fn default() -> Self {
+        SplitSettings {
+            val: None,
+            val_fraction: None,
+            seed: SplitConfig::new("").seed,
+            from_tsv: None,
+        }
+    }
+}
+
+impl SplitSettings {
+    /// The split of `dataset` these settings ask for: a fraction becomes a count of the
+    /// dataset's kept photos here, for the CLI and pipeline files alike.
+    pub fn config(&self, dataset: &Location) -> Result<SplitConfig> {
+        let val = match (self.val, self.val_fraction) {
+            (None, None) => SplitConfig::new("").val,
+            (Some(v), None) => v,
+            (None, Some(f)) if (0.0..1.0).contains(&f) => {
+                let store = nrw_dataset::Store::open(dataset)?;
+                let kept = nrw_dataset::reader::Dataset::open(store)?.len();
+                ((kept as f64 * f) as usize).max(1)
+            }
+            (None, Some(f)) => {
+                return Err(PipelineError::config(
+                    Setting::ValFraction,
+                    format!("is {f}: a fraction of the kept photos, at least 0 and below 1"),
+                ))
+            }
+            (Some(_), Some(_)) => {
+                return Err(PipelineError::config(
+                    Setting::Val,
+                    format!(
+                        "and {} were both given: give exactly one, a count or a fraction",
+                        Setting::ValFraction
+                    ),
+                ))
+            }
+        };
+        Ok(SplitConfig {
+            val,
+            seed: self.seed,
+            from_tsv: self.from_tsv.clone(),
+            ..SplitConfig::new(dataset)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        settings: SplitSettings,
+    }
+
+    #[test]
+    fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
+        assert_eq!(
+            crate::settings::tests::flags::<SplitSettings>(),
+            crate::settings::tests::keys::<SplitSettings>()
+        );
+        assert_eq!(
+            Cli::try_parse_from(["split"]).unwrap().settings,
+            SplitSettings::default()
+        );
+        let table: SplitSettings = toml::from_str("val = 3\nseed = 7").unwrap();
+        let cli = Cli::try_parse_from(["split", "--val", "3", "--seed", "7"]).unwrap();
+        assert_eq!(cli.settings, table);
+        let both = SplitSettings {
+            val: Some(3),
+            val_fraction: Some(0.5),
+            ..SplitSettings::default()
+        };
+        let e = both.config(&Location::parse("/nowhere")).unwrap_err();
+        assert!(e.to_string().contains("split.val_fraction"), "{e}");
+    }
+}

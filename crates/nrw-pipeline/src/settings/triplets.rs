@@ -1,0 +1,81 @@
+//! `triplets`' settings: the flags of `nrw-etl triplets` and the `[triplets]` table of a
+//! pipeline file, one declaration.
+
+use nrw_dataset::Location;
+use serde::{Deserialize, Serialize};
+
+use crate::triplets::TripletsConfig;
+
+/// How the style triplets are mined; a setting left out is the paper's (k = 20, exact, the
+/// training split).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(deny_unknown_fields, default)]
+pub struct TripletsSettings {
+    /// Neighbours per anchor, nearest and furthest (the paper: 20)
+    #[arg(long, default_value_t = TripletsSettings::default().k)]
+    pub k: usize,
+    /// Draw anchors and neighbours from every split (default: the training split only, so
+    /// validation photos never appear)
+    #[arg(long)]
+    pub all_splits: bool,
+    /// Approximate: candidates from a PCA projection to this many dimensions, re-ranked
+    /// exactly (for large N; recall against the exact path is measured and stored when N ≤
+    /// --check-up-to)
+    #[arg(long)]
+    pub pca: Option<usize>,
+    /// Measure the approximate path's recall against the exact one up to this many photos
+    #[arg(long, default_value_t = TripletsSettings::default().check_up_to)]
+    pub check_up_to: usize,
+}
+
+impl Default for TripletsSettings {
+    fn default() -> Self {
+        let c = TripletsConfig::new("");
+        TripletsSettings {
+            k: c.k,
+            all_splits: c.all_splits,
+            pca: c.pca,
+            check_up_to: c.check_up_to,
+        }
+    }
+}
+
+impl TripletsSettings {
+    /// The triplets of `dataset` these settings ask for.
+    pub fn config(&self, dataset: &Location) -> TripletsConfig {
+        TripletsConfig {
+            k: self.k,
+            all_splits: self.all_splits,
+            pca: self.pca,
+            check_up_to: self.check_up_to,
+            ..TripletsConfig::new(dataset.clone())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        settings: TripletsSettings,
+    }
+
+    #[test]
+    fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
+        assert_eq!(
+            crate::settings::tests::flags::<TripletsSettings>(),
+            crate::settings::tests::keys::<TripletsSettings>()
+        );
+        assert_eq!(
+            Cli::try_parse_from(["triplets"]).unwrap().settings,
+            TripletsSettings::default()
+        );
+        let table: TripletsSettings = toml::from_str("k = 5\npca = 16").unwrap();
+        let cli = Cli::try_parse_from(["triplets", "--k", "5", "--pca", "16"]).unwrap();
+        assert_eq!(cli.settings, table);
+    }
+}

@@ -113,21 +113,9 @@ impl Default for IngestTable {
 /// `[split]`: as `split`'s flags say it ([`crate::settings::split::SplitSettings`]).
 pub type SplitTable = crate::settings::split::SplitSettings;
 
-/// `[style]`: the descriptor tier (weights come from the command line); the paper's
-/// reference tier when left out.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct StyleTable {
-    pub tier: String,
-}
-
-impl Default for StyleTable {
-    fn default() -> Self {
-        StyleTable {
-            tier: StyleConfig::new("").tier.name(),
-        }
-    }
-}
+/// `[style]`: as `style`'s flags say it ([`crate::settings::style::StyleSettings`]; the
+/// weights come from the command line).
+pub type StyleTable = crate::settings::style::StyleSettings;
 
 /// `[triplets]`: as `triplets`' flags say it ([`crate::settings::triplets::TripletsSettings`];
 /// k is lowered, with a warning, to what the training split holds).
@@ -173,6 +161,7 @@ impl Pipeline {
             } else {
                 StyleTable {
                     tier: nrw_style::Tier::ColorStats.name(),
+                    ..StyleTable::default()
                 }
             }),
             triplets: Some(TripletsTable::default()),
@@ -253,20 +242,17 @@ fn export_config(
 }
 
 fn style_config(s: &StyleTable, dataset: &Location, weights: Option<&Path>) -> Result<StyleConfig> {
-    let tier = nrw_style::Tier::parse(&s.tier).ok_or_else(|| {
-        PipelineError::config(Setting::Tier, format!("{:?} is not a tier", s.tier))
-    })?;
-    if tier.needs_weights() && weights.is_none() {
+    let c = s.config(dataset, weights.map(Into::into))?;
+    if c.tier.needs_weights() && weights.is_none() {
         return Err(PipelineError::config(Setting::Weights, format!(
             "FILE is required: the pipeline's style tier {} runs VGG (the tool never downloads weights)",
             s.tier
         )));
     }
+    // A pipeline run owns its dataset: descriptors of another tier are replaced.
     Ok(StyleConfig {
-        tier,
-        weights: weights.map(Into::into),
         overwrite: true,
-        ..StyleConfig::new(dataset)
+        ..c
     })
 }
 

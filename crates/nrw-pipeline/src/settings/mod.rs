@@ -3,12 +3,17 @@
 //! use all come. A field's name is its table key; its flag is that name in kebab case (or
 //! `--no-NAME` for a setting on by default); its doc comment is the flag's help.
 //!
-//! Moved here so far: densify, split, triplets, export. The other stages (ingest, style,
-//! segment) still declare their flags in nrw-etl's `cmd/` and their tables in the runner.
+//! A command's flags outside its settings struct name places and run control (where, which
+//! model file, which work unit, whether to replace, how much to print), never how a stage
+//! computes.
+//!
+//! Declared here so far: densify, split, style, triplets, export. Ingest and segment still
+//! declare their flags in nrw-etl's `cmd/` and their tables in the runner.
 
 pub mod densify;
 pub mod export;
 pub mod split;
+pub mod style;
 pub mod triplets;
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};

@@ -100,7 +100,7 @@ pub fn export(
         inputs,
         tick,
     };
-    let layout = writer_of(cfg.layout);
+    let layout = layouts::writer_of(cfg.layout);
     layout.check(&job)?;
     let staged = staging::Staged::new(&cfg.out)?;
     let mut summary = ExportSummary::begin(&ds.dir.to_string(), cfg);
@@ -119,19 +119,5 @@ pub fn export(
             staged.abandon();
             Err(e)
         }
-    }
-}
-
-/// The format that writes `layout`.
-fn writer_of(layout: Layout) -> &'static dyn writer::LayoutWriter {
-    match layout {
-        Layout::Official => &official::Official,
-        Layout::Tfrecord => &tfrecord::Tfrecord,
-        Layout::Files => &files::Files,
-        Layout::Nerfw => &nerfw::NERFW,
-        Layout::Nerfstudio => &nerfstudio::NERFSTUDIO,
-        Layout::Gsplat => &gsplat::Gsplat,
-        Layout::Megadepth => &megadepth::Megadepth,
-        Layout::Nerfbaselines => &nerfbaselines::NERFBASELINES,
     }
 }

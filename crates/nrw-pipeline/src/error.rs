@@ -103,6 +103,8 @@ pub enum Setting {
     Undistort,
     SegmentWeights,
     SegmentMode,
+    /// The SegFormer's input size in pixels.
+    SegmentSize,
     PhotosPerPart,
     Tier,
     Weights,
@@ -152,7 +154,7 @@ pub enum Setting {
 
 impl Setting {
     /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 32] = [
+    pub const ALL: [Setting; 33] = [
         Setting::RowsPerShard,
         Setting::Radius,
         Setting::MaxEmpty,
@@ -160,6 +162,7 @@ impl Setting {
         Setting::Undistort,
         Setting::SegmentWeights,
         Setting::SegmentMode,
+        Setting::SegmentSize,
         Setting::PhotosPerPart,
         Setting::Tier,
         Setting::Weights,
@@ -197,6 +200,7 @@ impl Setting {
             Setting::Undistort => "ingest.undistort",
             Setting::SegmentWeights => "ingest.segment_weights",
             Setting::SegmentMode => "ingest.segment_mode",
+            Setting::SegmentSize => "ingest.segment_size",
             Setting::PhotosPerPart => "style.photos_per_part",
             Setting::Tier => "style.tier",
             Setting::Weights => "style.weights",
@@ -283,6 +287,7 @@ impl Setting {
             S::Undistort => "--undistort",
             S::SegmentWeights => "--segment-weights",
             S::SegmentMode => "--segment-mode",
+            S::SegmentSize => "--segment-size",
             S::PhotosPerPart => "--photos-per-part",
             S::Tier => "--tier",
             S::Weights => "--weights",

@@ -53,7 +53,8 @@ impl std::fmt::Display for Mode {
 }
 
 /// The kinds of [`Mode`], without their size: what a caller chooses before the size.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum ModeKind {
     Resize,
     Whole,

@@ -72,43 +72,9 @@ pub fn densify_config(d: &DensifyTable, scene: &Path) -> crate::densify::Densify
     d.config(scene)
 }
 
-/// `[ingest]`: render and filter; a setting left out is the paper's (`IngestConfig::new`).
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct IngestTable {
-    pub min_dim: u32,
-    pub radius: f32,
-    pub max_empty: f64,
-    pub min_photo_side: u32,
-    pub rows_per_shard: usize,
-    /// Folder of ADE20K label maps, relative to the scene folder.
-    pub semantics: Option<PathBuf>,
-    /// An unreadable photo or label map stops the run instead of being dropped.
-    pub strict: bool,
-    /// With `run --segment-weights`: how photos are fed to the SegFormer (`resize`,
-    /// `whole`, `slide` or `crop`; default resize).
-    pub segment_mode: Option<String>,
-    /// With `run --segment-weights`: the network's input size in pixels (default 512).
-    pub segment_size: Option<u32>,
-}
-
-impl Default for IngestTable {
-    /// The paper's settings, as ingest's own configuration holds them.
-    fn default() -> Self {
-        let paper = IngestConfig::new("", "");
-        IngestTable {
-            min_dim: paper.min_dim,
-            radius: paper.radius,
-            max_empty: paper.filters.max_empty_ratio,
-            min_photo_side: paper.filters.min_photo_side,
-            rows_per_shard: paper.rows_per_shard,
-            semantics: None,
-            strict: paper.strict,
-            segment_mode: None,
-            segment_size: None,
-        }
-    }
-}
+/// `[ingest]`: as `ingest`'s flags say it ([`crate::settings::ingest::IngestSettings`];
+/// `semantics` relative to the scene folder).
+pub type IngestTable = crate::settings::ingest::IngestSettings;
 
 /// `[split]`: as `split`'s flags say it ([`crate::settings::split::SplitSettings`]).
 pub type SplitTable = crate::settings::split::SplitSettings;
@@ -209,23 +175,8 @@ fn ingest_config(
     out: &Location,
     models: Models,
 ) -> Result<IngestConfig> {
-    let mut c = IngestConfig::new(scene, out);
-    c.min_dim = i.min_dim;
-    c.radius = i.radius;
-    c.filters.max_empty_ratio = i.max_empty;
-    c.filters.min_photo_side = i.min_photo_side;
-    c.rows_per_shard = i.rows_per_shard;
+    let mut c = i.config(scene, out, models.segformer.map(Into::into))?;
     c.semantics = i.semantics.as_ref().map(|s| scene.join(s));
-    c.strict = i.strict;
-    if let Some(w) = models.segformer {
-        let mode = i.segment_mode.as_deref().unwrap_or("resize");
-        let mode = nrw_segment::Mode::parse(mode, i.segment_size.unwrap_or(512))
-            .map_err(|e| PipelineError::config(Setting::SegmentMode, e))?;
-        c.segment = Some(crate::ingest::InlineSegment {
-            weights: w.into(),
-            mode,
-        });
-    }
     Ok(c)
 }
 

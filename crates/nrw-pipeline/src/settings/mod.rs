@@ -7,11 +7,13 @@
 //! model file, which work unit, whether to replace, how much to print), never how a stage
 //! computes.
 //!
-//! Declared here so far: densify, split, style, triplets, export. Ingest and segment still
-//! declare their flags in nrw-etl's `cmd/` and their tables in the runner.
+//! Declared here: densify, ingest, split, style, triplets, export (every stage a pipeline
+//! file has a table for). `segment`, which no pipeline file runs (ingest's
+//! `segment_mode`/`segment_size` do), keeps its flags in nrw-etl's `cmd/segment.rs`.
 
 pub mod densify;
 pub mod export;
+pub mod ingest;
 pub mod split;
 pub mod style;
 pub mod triplets;

@@ -1,0 +1,235 @@
+//! `ingest`'s settings: the flags of `nrw-etl ingest` and the `[ingest]` table of a pipeline
+//! file, one declaration. Where the scene, photos, cloud and SegFormer are is given on the
+//! command line (places, not settings); in a pipeline file `semantics` is relative to the
+//! scene folder.
+
+use std::path::{Path, PathBuf};
+
+use nrw_dataset::Location;
+use nrw_render::Filters;
+use nrw_segment::{Mode, ModeKind};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{PipelineError, Result, Setting};
+use crate::ingest::{IngestConfig, InlineSegment};
+
+/// How views are rendered and filtered; a setting left out is the paper's.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(deny_unknown_fields, default)]
+pub struct IngestSettings {
+    /// Render so the shorter side has this many pixels (the paper: 600)
+    #[arg(long, default_value_t = IngestSettings::default().min_dim)]
+    pub min_dim: u32,
+    /// Splat radius in render pixels: a point covers the pixels whose centres lie within it
+    /// (0: its own pixel)
+    #[arg(long, default_value_t = IngestSettings::default().radius)]
+    pub radius: f32,
+    /// Drop views whose render has more than this fraction of empty pixels (the paper: 0.85)
+    #[arg(long, default_value_t = IngestSettings::default().max_empty)]
+    pub max_empty: f64,
+    /// Drop photos whose shorter side is under this many pixels (the paper: 450)
+    #[arg(long, default_value_t = IngestSettings::default().min_photo_side)]
+    pub min_photo_side: u32,
+    /// Images per shard (one shard per group of this many images, in id order; the unit of
+    /// resumption and of --unit work units)
+    #[arg(long, default_value_t = IngestSettings::default().rows_per_shard)]
+    pub rows_per_shard: usize,
+    /// Stop with an error (exit 1, naming the file) at the first photo or label map that
+    /// cannot be decoded whole, instead of dropping its view as `unreadable` and going on
+    #[arg(long)]
+    pub strict: bool,
+    /// Folder of per-photo ADE20K label maps (8-bit PNG of class ids, named like the photo
+    /// with .png); stored colour-coded with a transient mask
+    #[arg(long)]
+    pub semantics: Option<PathBuf>,
+    /// With --segment-weights: how a photo is fed to the network
+    #[arg(long, value_parser = super::names(&ModeKind::ALL, ModeKind::name, ModeKind::summary), default_value = "resize")]
+    pub segment_mode: ModeKind,
+    /// With --segment-weights: network input size in pixels
+    #[arg(long, default_value_t = IngestSettings::default().segment_size)]
+    pub segment_size: u32,
+    /// Store every view undistorted, as COLMAP's image_undistorter does: the PINHOLE camera
+    /// it computes (no blank pixels, scale clipped to 0.2–2) and the photo resampled to it
+    /// through the exact camera model, so photo and render align pixel for pixel with a
+    /// pinhole camera (what NeRF-W, nerfstudio and Gaussian-splatting loaders expect)
+    #[arg(long, conflicts_with = "semantics")]
+    pub undistort: bool,
+    /// With --undistort: 0 keeps only pixels that see the photo (COLMAP's default), 1 keeps
+    /// every photo pixel (black corners), values between interpolate
+    #[arg(long, default_value_t = 0.0, requires = "undistort")]
+    pub blank_pixels: f64,
+    /// With --undistort: longest side of the undistorted camera, as COLMAP's
+    /// --max_image_size [default: no limit]
+    #[arg(long, requires = "undistort")]
+    pub undistort_max_size: Option<u64>,
+    /// Remove floating points before rendering (off by default: the paper renders the raw
+    /// cloud): "K,SIGMA" drops a point when its mean distance to its K nearest neighbours
+    /// exceeds the cloud's mean by SIGMA standard deviations (Open3D's
+    /// remove_statistical_outlier; e.g. 16,2). The count removed goes into the manifest
+    #[arg(long, value_name = "K,SIGMA")]
+    pub denoise: Option<Denoise>,
+    /// Estimate normals for a cloud without them (the sparse points, most PLYs from other
+    /// tools) by PCA of each point's K nearest neighbours, oriented toward the cameras that
+    /// see it; gives the deep buffer its normal channel (e.g. 16)
+    #[arg(long, value_name = "K")]
+    pub estimate_normals: Option<usize>,
+}
+
+impl Default for IngestSettings {
+    /// The paper's settings, as ingest's own configuration holds them.
+    fn default() -> Self {
+        let paper = IngestConfig::new("", "");
+        IngestSettings {
+            min_dim: paper.min_dim,
+            radius: paper.radius,
+            max_empty: paper.filters.max_empty_ratio,
+            min_photo_side: paper.filters.min_photo_side,
+            rows_per_shard: paper.rows_per_shard,
+            strict: paper.strict,
+            semantics: None,
+            segment_mode: ModeKind::Resize,
+            segment_size: 512,
+            undistort: false,
+            blank_pixels: 0.0,
+            undistort_max_size: None,
+            denoise: None,
+            estimate_normals: None,
+        }
+    }
+}
+
+/// Statistical outlier removal, `K,SIGMA` on the command line and in a pipeline file:
+/// k ≥ 2 neighbours (the point itself counts), σ > 0.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub struct Denoise {
+    pub k: usize,
+    pub sigma: f64,
+}
+
+impl std::str::FromStr for Denoise {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Denoise, String> {
+        let (k, sigma) = s
+            .split_once(',')
+            .ok_or_else(|| format!("`{s}`: give K,SIGMA, e.g. 16,2"))?;
+        let k: usize = k
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{k}` is not a whole number of neighbours"))?;
+        let sigma: f64 = sigma
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{sigma}` is not a number of standard deviations"))?;
+        if k < 2 || !(sigma.is_finite() && sigma > 0.0) {
+            return Err(format!(
+                "K = {k}, SIGMA = {sigma}: K must be at least 2 (the point itself is one) and SIGMA positive"
+            ));
+        }
+        Ok(Denoise { k, sigma })
+    }
+}
+
+impl TryFrom<String> for Denoise {
+    type Error = String;
+
+    fn try_from(s: String) -> std::result::Result<Denoise, String> {
+        s.parse()
+    }
+}
+
+impl From<Denoise> for String {
+    fn from(d: Denoise) -> String {
+        format!("{},{}", d.k, d.sigma)
+    }
+}
+
+impl IngestSettings {
+    /// Ingest of `scene` into `out` with these settings; `segment_weights` (a SegFormer given
+    /// on the command line) labels the photos inline.
+    pub fn config(
+        &self,
+        scene: &Path,
+        out: &Location,
+        segment_weights: Option<PathBuf>,
+    ) -> Result<IngestConfig> {
+        let segment = match segment_weights {
+            Some(weights) => Some(InlineSegment {
+                weights,
+                mode: Mode::new(self.segment_mode, self.segment_size).map_err(|e| {
+                    PipelineError::config(
+                        Setting::SegmentSize,
+                        format!("{}: {e}", self.segment_size),
+                    )
+                })?,
+            }),
+            None => None,
+        };
+        let undistort = self.undistort.then_some(nrw_colmap::UndistortOptions {
+            blank_pixels: self.blank_pixels,
+            max_image_size: self.undistort_max_size,
+            ..Default::default()
+        });
+        Ok(IngestConfig {
+            segment,
+            undistort,
+            denoise: self.denoise.map(|d| (d.k, d.sigma)),
+            estimate_normals: self.estimate_normals,
+            semantics: self.semantics.clone(),
+            min_dim: self.min_dim,
+            radius: self.radius,
+            filters: Filters {
+                max_empty_ratio: self.max_empty,
+                min_photo_side: self.min_photo_side,
+            },
+            rows_per_shard: self.rows_per_shard,
+            strict: self.strict,
+            ..IngestConfig::new(scene, out)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        settings: IngestSettings,
+    }
+
+    #[test]
+    fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
+        assert_eq!(
+            crate::settings::tests::flags::<IngestSettings>(),
+            crate::settings::tests::keys::<IngestSettings>()
+        );
+        assert_eq!(
+            Cli::try_parse_from(["ingest"]).unwrap().settings,
+            IngestSettings::default()
+        );
+        let table: IngestSettings = toml::from_str(
+            "min_dim = 96\ndenoise = \"16,2\"\nsegment_mode = \"slide\"\nundistort = true\nundistort_max_size = 640",
+        )
+        .unwrap();
+        let cli = Cli::try_parse_from([
+            "ingest",
+            "--min-dim",
+            "96",
+            "--denoise",
+            "16,2",
+            "--segment-mode",
+            "slide",
+            "--undistort",
+            "--undistort-max-size",
+            "640",
+        ])
+        .unwrap();
+        assert_eq!(cli.settings, table);
+        let e = toml::from_str::<IngestSettings>("denoise = \"1,2\"").unwrap_err();
+        assert!(e.to_string().contains("K must be at least 2"), "{e}");
+    }
+}

@@ -92,28 +92,14 @@ impl DensifySettings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        settings: DensifySettings,
-    }
+    use crate::settings::tests::{declared_once, parse, table};
 
     #[test]
     fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
+        declared_once::<DensifySettings>();
         assert_eq!(
-            crate::settings::tests::flags::<DensifySettings>(),
-            crate::settings::tests::keys::<DensifySettings>()
+            parse::<DensifySettings>(&["--no-geometric", "--window-radius", "3"]),
+            table("geometric = false\nwindow_radius = 3")
         );
-        let cli = Cli::try_parse_from(["densify"]).unwrap();
-        assert_eq!(cli.settings, DensifySettings::default());
-        let table: DensifySettings = toml::from_str("").unwrap();
-        assert_eq!(table, DensifySettings::default());
-        let cli =
-            Cli::try_parse_from(["densify", "--no-geometric", "--window-radius", "3"]).unwrap();
-        let table: DensifySettings =
-            toml::from_str("geometric = false\nwindow_radius = 3").unwrap();
-        assert_eq!(cli.settings, table);
     }
 }

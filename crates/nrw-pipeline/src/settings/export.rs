@@ -138,30 +138,16 @@ impl ExportSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        settings: ExportSettings,
-    }
+    use crate::settings::tests::{declared_once, parse, table};
 
     #[test]
     fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
-        assert_eq!(
-            crate::settings::tests::flags::<ExportSettings>(),
-            crate::settings::tests::keys::<ExportSettings>()
-        );
-        let cli = Cli::try_parse_from(["export"]).unwrap();
-        assert_eq!(cli.settings, ExportSettings::default());
-        let table: ExportSettings = toml::from_str("").unwrap();
-        assert_eq!(table, ExportSettings::default());
+        declared_once::<ExportSettings>();
     }
 
     #[test]
     fn the_command_line_and_the_table_say_the_same_thing_the_same_way() {
-        let cli = Cli::try_parse_from([
-            "export",
+        let cli: ExportSettings = parse(&[
             "--layout",
             "megadepth",
             "--name",
@@ -175,13 +161,11 @@ mod tests {
             "4",
             "--metres-per-unit",
             "0.37",
-        ])
-        .unwrap();
-        let table: ExportSettings = toml::from_str(
+        ]);
+        let file: ExportSettings = table(
             "layout = \"megadepth\"\nname = \"trevi\"\ncrop = \"none\"\nsemantics = false\ndepth = \"inverse\"\ntfrecord_files = 4\nmetres_per_unit = 0.37\n",
-        )
-        .unwrap();
-        assert_eq!(cli.settings, table);
+        );
+        assert_eq!(cli, file);
         let e = toml::from_str::<ExportSettings>("tfrecord_file = 2").unwrap_err();
         assert!(
             e.to_string().contains("unknown field `tfrecord_file`"),

@@ -193,30 +193,12 @@ impl IngestSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        settings: IngestSettings,
-    }
+    use crate::settings::tests::{declared_once, parse, table};
 
     #[test]
     fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
-        assert_eq!(
-            crate::settings::tests::flags::<IngestSettings>(),
-            crate::settings::tests::keys::<IngestSettings>()
-        );
-        assert_eq!(
-            Cli::try_parse_from(["ingest"]).unwrap().settings,
-            IngestSettings::default()
-        );
-        let table: IngestSettings = toml::from_str(
-            "min_dim = 96\ndenoise = \"16,2\"\nsegment_mode = \"slide\"\nundistort = true\nundistort_max_size = 640",
-        )
-        .unwrap();
-        let cli = Cli::try_parse_from([
-            "ingest",
+        declared_once::<IngestSettings>();
+        let cli: IngestSettings = parse(&[
             "--min-dim",
             "96",
             "--denoise",
@@ -226,9 +208,11 @@ mod tests {
             "--undistort",
             "--undistort-max-size",
             "640",
-        ])
-        .unwrap();
-        assert_eq!(cli.settings, table);
+        ]);
+        assert_eq!(
+            cli,
+            table("min_dim = 96\ndenoise = \"16,2\"\nsegment_mode = \"slide\"\nundistort = true\nundistort_max_size = 640")
+        );
         let e = toml::from_str::<IngestSettings>("denoise = \"1,2\"").unwrap_err();
         assert!(e.to_string().contains("K must be at least 2"), "{e}");
     }

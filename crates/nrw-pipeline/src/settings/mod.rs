@@ -42,20 +42,52 @@ where
 pub(crate) mod tests {
     use std::collections::BTreeSet;
 
-    /// The table keys of a settings struct: the fields of its default as serialised.
-    pub(crate) fn keys<T: serde::Serialize + Default>() -> BTreeSet<String> {
-        match serde_json::to_value(T::default()).expect("settings serialise") {
-            serde_json::Value::Object(m) => m.keys().cloned().collect(),
-            v => panic!("settings serialise to an object, not {v}"),
-        }
+    /// A command of one settings struct, as a stage's command flattens it.
+    #[derive(clap::Parser)]
+    struct Cli<T: clap::Args> {
+        #[command(flatten)]
+        settings: T,
     }
 
-    /// The argument ids (field names) of a settings struct's flags.
-    pub(crate) fn flags<T: clap::Args>() -> BTreeSet<String> {
-        T::augment_args(clap::Command::new("stage"))
+    /// The settings the flags `args` (after the command's name) give.
+    pub(crate) fn parse<T: clap::Args>(args: &[&str]) -> T {
+        let argv = std::iter::once("stage").chain(args.iter().copied());
+        <Cli<T> as clap::Parser>::try_parse_from(argv)
+            .unwrap_or_else(|e| panic!("{args:?}: {e}"))
+            .settings
+    }
+
+    /// The settings a pipeline file's table gives.
+    pub(crate) fn table<T: serde::de::DeserializeOwned>(text: &str) -> T {
+        toml::from_str(text).unwrap_or_else(|e| panic!("{text:?}: {e}"))
+    }
+
+    /// A stage's settings are declared once: every flag is a table key and every key a flag,
+    /// and no flag and an empty table both give the defaults.
+    pub(crate) fn declared_once<T>()
+    where
+        T: clap::Args
+            + serde::Serialize
+            + serde::de::DeserializeOwned
+            + Default
+            + PartialEq
+            + std::fmt::Debug,
+    {
+        let keys = match serde_json::to_value(T::default()).expect("settings serialise") {
+            serde_json::Value::Object(m) => m.keys().cloned().collect::<BTreeSet<_>>(),
+            v => panic!("settings serialise to an object, not {v}"),
+        };
+        let flags: BTreeSet<String> = T::augment_args(clap::Command::new("stage"))
             .get_arguments()
             .map(|a| a.get_id().to_string())
             .filter(|id| id != "help")
-            .collect()
+            .collect();
+        assert_eq!(flags, keys, "flags (left) and table keys (right)");
+        assert_eq!(parse::<T>(&[]), T::default(), "no flag gives the defaults");
+        assert_eq!(
+            table::<T>(""),
+            T::default(),
+            "an empty table gives the defaults"
+        );
     }
 }

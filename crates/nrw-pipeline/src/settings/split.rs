@@ -83,27 +83,15 @@ impl SplitSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        settings: SplitSettings,
-    }
+    use crate::settings::tests::{declared_once, parse, table};
 
     #[test]
     fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
+        declared_once::<SplitSettings>();
         assert_eq!(
-            crate::settings::tests::flags::<SplitSettings>(),
-            crate::settings::tests::keys::<SplitSettings>()
+            parse::<SplitSettings>(&["--val", "3", "--seed", "7"]),
+            table("val = 3\nseed = 7")
         );
-        assert_eq!(
-            Cli::try_parse_from(["split"]).unwrap().settings,
-            SplitSettings::default()
-        );
-        let table: SplitSettings = toml::from_str("val = 3\nseed = 7").unwrap();
-        let cli = Cli::try_parse_from(["split", "--val", "3", "--seed", "7"]).unwrap();
-        assert_eq!(cli.settings, table);
         let both = SplitSettings {
             val: Some(3),
             val_fraction: Some(0.5),

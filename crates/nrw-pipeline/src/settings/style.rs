@@ -88,35 +88,15 @@ impl StyleSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        settings: StyleSettings,
-    }
+    use crate::settings::tests::{declared_once, parse, table};
 
     #[test]
     fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
+        declared_once::<StyleSettings>();
         assert_eq!(
-            crate::settings::tests::flags::<StyleSettings>(),
-            crate::settings::tests::keys::<StyleSettings>()
+            parse::<StyleSettings>(&["--tier", "color-stats", "--preprocess", "minus-one-to-one"]),
+            table("tier = \"color-stats\"\npreprocess = \"minus-one-to-one\"")
         );
-        assert_eq!(
-            Cli::try_parse_from(["style"]).unwrap().settings,
-            StyleSettings::default()
-        );
-        let table: StyleSettings =
-            toml::from_str("tier = \"color-stats\"\npreprocess = \"minus-one-to-one\"").unwrap();
-        let cli = Cli::try_parse_from([
-            "style",
-            "--tier",
-            "color-stats",
-            "--preprocess",
-            "minus-one-to-one",
-        ])
-        .unwrap();
-        assert_eq!(cli.settings, table);
         let bad = StyleSettings {
             tier: "vgg17".into(),
             ..StyleSettings::default()

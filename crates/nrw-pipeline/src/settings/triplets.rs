@@ -56,26 +56,14 @@ impl TripletsSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        settings: TripletsSettings,
-    }
+    use crate::settings::tests::{declared_once, parse, table};
 
     #[test]
     fn every_flag_is_a_key_of_the_table_and_the_defaults_agree() {
+        declared_once::<TripletsSettings>();
         assert_eq!(
-            crate::settings::tests::flags::<TripletsSettings>(),
-            crate::settings::tests::keys::<TripletsSettings>()
+            parse::<TripletsSettings>(&["--k", "5", "--pca", "16"]),
+            table("k = 5\npca = 16")
         );
-        assert_eq!(
-            Cli::try_parse_from(["triplets"]).unwrap().settings,
-            TripletsSettings::default()
-        );
-        let table: TripletsSettings = toml::from_str("k = 5\npca = 16").unwrap();
-        let cli = Cli::try_parse_from(["triplets", "--k", "5", "--pca", "16"]).unwrap();
-        assert_eq!(cli.settings, table);
     }
 }

@@ -62,14 +62,18 @@ def kill_mid_task(cluster, doomed, task_log, killed, seconds=300):
 
 def check_task_log(path, doomed, failing=()):
     """What the task log must show after a node was killed: an attempt that started on the
-    doomed node and never ended (it held a task when it died), its command run again to
+    doomed node and never ended, or ended by a signal as the node went down (its wrapper can
+    outlive the child it was killing by a moment and log the signal; either way it held a
+    task when the node died), its command run again to
     exit 0 on a surviving node, and no command that exited non-zero except those naming one
     of `failing` (a retry must follow a lost node, never hide a failure of the binary);
     a failing command never later succeeds. Returns a one-line summary."""
     with open(path, encoding="utf-8") as f:
         events = [json.loads(line) for line in f]
     key = lambda e: (e["node"], e["pid"], tuple(e["args"]))  # noqa: E731
-    ends = collections.Counter(key(e) for e in events if e["event"] == "end")
+    # An end by a signal on the doomed node is the node's death, not the binary's exit.
+    killed = lambda e: e["node"] == doomed and e.get("code", 0) < 0  # noqa: E731
+    ends = collections.Counter(key(e) for e in events if e["event"] == "end" and not killed(e))
     lost = []
     for e in (e for e in events if e["event"] == "start"):
         if ends[key(e)]:
@@ -79,7 +83,7 @@ def check_task_log(path, doomed, failing=()):
     cut = [e for e in lost if e["node"] == doomed]
     assert cut, f"no task was running on the killed node {doomed}: {events}"
     assert all(e["node"] == doomed for e in lost), f"attempts lost on a surviving node: {lost}"
-    finished = [e for e in events if e["event"] == "end"]
+    finished = [e for e in events if e["event"] == "end" and not killed(e)]
     expected_failure = lambda e: any(name in " ".join(e["args"]) for name in failing)  # noqa: E731
     for e in cut:
         again = [f for f in finished if f["args"] == e["args"] and f["node"] != doomed

@@ -20,10 +20,11 @@ pub mod summary;
 pub mod writer;
 
 // The layouts and encoders by their short names (one path per module, whatever its folder).
-pub use encoders::{hdf5, inverse_depth, npz, pickle, pyramid, record};
+pub use encoders::{hdf5, inverse_depth, pyramid, record};
 pub use layouts::megadepth::{self, imc};
 pub use layouts::paper::{self, official, published, tfrecord};
 pub use layouts::{files, gsplat, nerfbaselines, nerfstudio, nerfw};
+pub use nrw_npy::{npz, pickle};
 
 pub use error::{ExportError, Result};
 pub use layout::Layout;

@@ -9,7 +9,6 @@ pub mod conv;
 pub mod descriptor;
 pub mod error;
 pub mod matmul;
-pub mod npy;
 mod pool;
 pub mod preprocess;
 pub mod tensor;

@@ -272,7 +272,7 @@ fn npy_convs(path: &Path, bytes: &[u8], algo: ConvAlgo) -> Result<Vec<Conv>> {
         path: path.into(),
         problem,
     };
-    let layers = crate::npy::read_layers(bytes).map_err(&bad)?;
+    let layers = nrw_npy::read::read_layers(bytes).map_err(&bad)?;
     if let Some(k) = layers
         .keys()
         .find(|k| !VGG16_NPY_LAYERS.contains(&k.as_str()))

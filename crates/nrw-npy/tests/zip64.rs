@@ -9,7 +9,7 @@ mod python;
 
 use std::io::Cursor;
 
-use nrw_export::npz::{Array, NpzWriter};
+use nrw_npy::npz::{Array, NpzWriter};
 
 /// The ZIP64 end-of-central-directory record's signature.
 const ZIP64_END: [u8; 4] = 0x0606_4b50u32.to_le_bytes();

@@ -1,8 +1,9 @@
-//! The settings record of a folder built by several runs (work units, a resumed run): the
-//! first run writes what it builds with; every later run reads it and goes on only if its
-//! own settings are the same, or is refused naming each setting that differs. Densify's
-//! `densify.json` and segment's `segment.json` are such records; a stage's folder is then
-//! published whole by [`crate::publish`].
+//! How runs that build one thing agree: the settings record of a folder built by several runs
+//! (work units, a resumed run) — the first run writes what it builds with, every later run
+//! reads it and goes on only if its own settings are the same, or is refused naming each
+//! setting that differs (densify's `densify.json`, segment's record) — and the fingerprint a
+//! dataset's work units record (`crate::units`), which finalize merges only when the units
+//! agree on it. A folder built in hiding is then published whole by [`crate::publish`].
 
 use std::collections::BTreeMap;
 
@@ -47,6 +48,17 @@ where
     }
     let differ = differences(settings(&found), want);
     Ok(Agreement::Differs { found, differ })
+}
+
+/// SHA-256 (hex) of the inputs and parameters: what makes two runs' outputs interchangeable.
+/// Work units record it, and finalize merges only units that agree on it.
+pub fn fingerprint(
+    inputs: &[crate::FileEntry],
+    parameters: &serde_json::Map<String, serde_json::Value>,
+) -> String {
+    let mut text = serde_json::to_string(inputs).expect("json");
+    text.push_str(&serde_json::to_string(parameters).expect("json"));
+    crate::manifest::sha256_hex(text.as_bytes())
 }
 
 /// Write a record (pretty JSON: a person reads it when a run is refused).

@@ -124,15 +124,8 @@ impl Unit {
     }
 }
 
-/// SHA-256 (hex) of the inputs and parameters: what makes two runs' outputs interchangeable.
-pub fn fingerprint(
-    inputs: &[nrw_dataset::FileEntry],
-    parameters: &serde_json::Map<String, serde_json::Value>,
-) -> String {
-    let mut text = serde_json::to_string(inputs).expect("json");
-    text.push_str(&serde_json::to_string(parameters).expect("json"));
-    crate::sha256_hex(text.as_bytes())
-}
+/// SHA-256 (hex) of the inputs and parameters ([`nrw_dataset::resume::fingerprint`]).
+pub use nrw_dataset::resume::fingerprint;
 
 pub(crate) fn units_error(dataset: &Store, problem: String) -> PipelineError {
     PipelineError::Units {

@@ -75,7 +75,7 @@ fn script_json(python: &std::ffi::OsStr, script: &str, args: &[&Path]) -> serde_
     let run = std::process::Command::new(python)
         .arg(
             Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../tests")
+                .join("../../tests/oracles")
                 .join(script),
         )
         .args(args)
@@ -743,7 +743,7 @@ fn shards_read_back_with_pyarrow_duckdb_and_openexr() {
         "color-stats",
         "--quiet",
     ]);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/read_shards.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/read_shards.py");
     let o = Command::new("python3")
         .arg(script)
         .arg(out.path())
@@ -1118,7 +1118,7 @@ fn reader_streams_a_split_and_crops_every_channel_at_one_place() {
     );
 }
 
-/// Run tests/paper_oracle.py (the published code itself) in its records mode: the official
+/// Run tests/oracles/paper_oracle.py (the published code itself) in its records mode: the official
 /// folders through `AlignedRenderedDataset` → `_generate_tfrecord_dataset` →
 /// `_parser_rendered_dataset`, our TFRecords through the same parser, compared. None when
 /// TensorFlow is not installed here (a skip that says so; CI requires it).
@@ -1925,7 +1925,8 @@ fn triplets_come_from_the_training_split_in_exact_order() {
     assert_eq!(anchors, 7);
     // And numpy's own all-pairs distances over the Parquet files, none of our code.
     if python::python_has("import numpy, pyarrow") {
-        let oracle = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/triplets_oracle.py");
+        let oracle =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/triplets_oracle.py");
         let o = Command::new("python3")
             .args([oracle.to_str().unwrap(), d, "6"])
             .output()

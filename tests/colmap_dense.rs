@@ -1,6 +1,6 @@
 //! COLMAP's dense-workspace files as COLMAP's own script reads and writes them: depth and
 //! normal maps written by `nrw_colmap::dense` equal what `read_write_dense.py` reads, and
-//! maps it writes read back to the same values (tests/colmap_dense.py follows the script).
+//! maps it writes read back to the same values (tests/oracles/colmap_dense.py follows the script).
 
 use std::path::Path;
 
@@ -34,7 +34,7 @@ fn npy(m: &DenseMap, path: &Path) {
 }
 
 /// COLMAP's scripts/python folder (NRW_COLMAP_SCRIPTS, set by .ci/run from Debian's colmap
-/// source), or `None`: the transcription in tests/colmap_dense.py then stands in, said here,
+/// source), or `None`: the transcription in tests/oracles/colmap_dense.py then stands in, said here,
 /// and refused under NRW_REQUIRE_COLMAP=1.
 fn colmap_scripts() -> Option<String> {
     let dir = std::env::var("NRW_COLMAP_SCRIPTS")
@@ -46,17 +46,17 @@ fn colmap_scripts() -> Option<String> {
             "NRW_REQUIRE_COLMAP=1 but NRW_COLMAP_SCRIPTS (COLMAP's scripts/python) is not set"
         );
         eprintln!(
-            "note: NRW_COLMAP_SCRIPTS is not set: tests/colmap_dense.py's transcription of \
+            "note: NRW_COLMAP_SCRIPTS is not set: tests/oracles/colmap_dense.py's transcription of \
              read_write_dense.py stands in for COLMAP's own"
         );
     }
     dir
 }
 
-/// Runs tests/colmap_dense.py; checks it ran COLMAP's own file when there is one.
+/// Runs tests/oracles/colmap_dense.py; checks it ran COLMAP's own file when there is one.
 fn script(scripts: &Option<String>, args: &[&Path]) -> std::process::Output {
     let out = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/colmap_dense.py"))
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/colmap_dense.py"))
         .args(args)
         .output()
         .unwrap();

@@ -132,7 +132,7 @@ fn every_layouts_colmap_model_keeps_the_sfm_observations_where_the_views_show_th
             "--quiet",
         ]);
         let mut cmd = std::process::Command::new("python3");
-        cmd.arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/export_models.py"))
+        cmd.arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/export_models.py"))
             .arg(out.join(model));
         if let Some((images, colmap)) = nb {
             cmd.arg("nerfbaselines").arg(&out).arg(images).arg(colmap);

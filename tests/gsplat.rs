@@ -228,7 +228,7 @@ fn masks_depth_priors_and_pyramids_hold_what_they_claim() {
 }
 
 /// graphdeco's own loader (its `scene/` and `utils/` at the checkout `NRW_GRAPHDECO_SRC` names;
-/// torch, so never in CI; tests/gsplat_graphdeco_torch.py) reads the export as `train.py -d
+/// torch, so never in CI; tests/oracles/gsplat_graphdeco_torch.py) reads the export as `train.py -d
 /// depths` does: every camera at the view's size and field of view, every depth prior
 /// reliable and, after its scale and offset, 1 / z of the render within half the PNG's step
 /// (0 where the render has no depth), and the initialisation cloud with its normals.
@@ -322,7 +322,10 @@ fn nerfbaselines_reads_the_split_images_masks_and_points() {
     let (_, ds_dir, out) = exported(tmp.path());
     let ds = Dataset::open(ds_dir.as_path()).unwrap();
     let o = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/gsplat_nerfbaselines.py"))
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../tests/oracles/gsplat_nerfbaselines.py"),
+        )
         .arg(&out)
         .output()
         .unwrap();
@@ -422,7 +425,10 @@ fn nerfbaselines_reads_its_phototourism_layout_through_nb_info() {
     ]);
     let ds = Dataset::open(ds_dir.as_path()).unwrap();
     let o = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/gsplat_nerfbaselines.py"))
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../tests/oracles/gsplat_nerfbaselines.py"),
+        )
         .arg(&out)
         .output()
         .unwrap();

@@ -153,9 +153,9 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
 /// the export through their own datasets: RoMa's and LoFTR's own ground-truth warps carry every
 /// SfM observation of view A whose depth the file holds onto view B's observation of the same
 /// point, and DUSt3R's point maps hold the SfM points, as closely as the export's numbers allow
-/// (tests/megadepth_torch.py). Runs where `NRW_TORCH_PYTHON` names a Python with torch and
+/// (tests/oracles/megadepth_torch.py). Runs where `NRW_TORCH_PYTHON` names a Python with torch and
 /// romatch; skips and says so elsewhere (CI keeps the transcriptions in
-/// tests/megadepth_matchers.py and tests/megadepth_dust3r.py).
+/// tests/oracles/megadepth_matchers.py and tests/oracles/megadepth_dust3r.py).
 #[test]
 fn roma_loftr_and_dust3r_themselves_read_the_export() {
     let Some(py) = std::env::var_os("NRW_TORCH_PYTHON") else {
@@ -213,7 +213,7 @@ fn roma_loftr_and_dust3r_themselves_read_the_export() {
     }
 }
 
-/// What a consumer of tests/megadepth_torch.py read (`got`): no problem reading, valid at half
+/// What a consumer of tests/oracles/megadepth_torch.py read (`got`): no problem reading, valid at half
 /// the observations or more, and its median error within 1.25 times the same quantity computed
 /// independently from scene_info.npz; (valid, observations, median, independent median).
 fn close_to_independent(who: &str, got: &serde_json::Value) -> (u64, u64, f64, f64) {
@@ -237,7 +237,7 @@ fn close_to_independent(who: &str, got: &serde_json::Value) -> (u64, u64, f64, f
     (valid, n, median, theirs)
 }
 
-/// A consumer's warp (`got` from tests/megadepth_torch.py), printed after
+/// A consumer's warp (`got` from tests/oracles/megadepth_torch.py), printed after
 /// [`close_to_independent`]'s checks (RoMa resamples depth bilinearly, LoFTR rounds the
 /// keypoint).
 fn warps_onto_the_tracks(who: &str, got: &serde_json::Value) {
@@ -300,7 +300,7 @@ fn script_json(script: &str, args: &[&Path]) -> serde_json::Value {
     super::script_json("python3".as_ref(), script, args)
 }
 
-/// LoFTR's and RoMa's loaders, transcribed (tests/megadepth_matchers.py), read the export's
+/// LoFTR's and RoMa's loaders, transcribed (tests/oracles/megadepth_matchers.py), read the export's
 /// `index/` and `prep_scene_info/`: every pair's views open, and the pairs, scores and central
 /// matches are those D2-Net's own overlap matrix and dicts (`theirs`) give.
 fn matchers_read_their_indices(out: &Path, theirs: &Path) {
@@ -343,7 +343,7 @@ fn matchers_read_their_indices(out: &Path, theirs: &Path) {
     );
 }
 
-/// IMC 2022's evaluation code, transcribed (tests/megadepth_imc2022.py), reads the export's
+/// IMC 2022's evaluation code, transcribed (tests/oracles/megadepth_imc2022.py), reads the export's
 /// `imc2022/train/`: calibration equals D2-Net's K and poses, the pairs are those sharing points
 /// in D2-Net's overlap matrix, each covisibility is the bounding-box rule recomputed from
 /// D2-Net's dicts, each F is the organisers' `ComputeFundamentalMatrix`, and submitted as a
@@ -382,7 +382,7 @@ fn imc2022_reads_its_folder(out: &Path, theirs: &Path) {
     );
 }
 
-/// DUSt3R's loader, transcribed (tests/megadepth_dust3r.py) with OpenCV's own readers, on the
+/// DUSt3R's loader, transcribed (tests/oracles/megadepth_dust3r.py) with OpenCV's own readers, on the
 /// export's `dust3r/` folder: every pair's views open; depth is the dataset's bit for bit; K is
 /// the view's in OpenCV's convention; cam2world inverts the view's world-to-camera pose; the JPEG is the photo within
 /// JPEG's error.

@@ -1,5 +1,5 @@
 //! `export --layout nerfstudio` on a real scene: an independent Python projector following
-//! nerfstudio's documented conventions (tests/nerfstudio_projector.py) sends every sparse
+//! nerfstudio's documented conventions (tests/oracles/nerfstudio_projector.py) sends every sparse
 //! point of sacre_coeur through transforms.json, and lands exactly where the dataset's own
 //! camera puts it, and on its COLMAP observation within the model's reprojection error.
 //! Models nerfstudio cannot represent exactly are refused by name.
@@ -105,7 +105,10 @@ fn transforms_json_projects_every_sparse_point_onto_its_observation() {
         }
     }
     let o = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/nerfstudio_projector.py"))
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../tests/oracles/nerfstudio_projector.py"),
+        )
         .arg(&exp)
         .arg(scene.join("sparse/0"))
         .output()
@@ -241,7 +244,7 @@ fn masks_keep_what_the_transient_mask_does_not_cover() {
 
 /// nerfstudio itself (1.1.5, which needs torch: never in CI) reads the nerfstudio export through
 /// its `NerfstudioDataParser` and `DepthDataset`, and the gsplat export through its
-/// `ColmapDataParser` at downscale factors 1, 2 and 4 (tests/nerfstudio_torch.py). Runs where
+/// `ColmapDataParser` at downscale factors 1, 2 and 4 (tests/oracles/nerfstudio_torch.py). Runs where
 /// `NRW_TORCH_PYTHON` names a Python with torch and nerfstudio; skips and says so elsewhere.
 #[test]
 fn nerfstudio_itself_reads_the_nerfstudio_and_gsplat_exports() {

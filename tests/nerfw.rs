@@ -1,5 +1,5 @@
 //! `export --layout nerfw` read back by a transcription of nerf_pl's final Phototourism loader
-//! (branch `nerfw`; tests/nerfw_reader.py, with pycolmap): every tsv row resolves to its image
+//! (branch `nerfw`; tests/oracles/nerfw_reader.py, with pycolmap): every tsv row resolves to its image
 //! and camera, intrinsics (with the loader's img_w = 2·cx), poses (its `poses[..., 1:3] *= -1`,
 //! checked against our own rigid transform, not the same swap) and photos are the dataset's,
 //! every image gets a near and far bound; `split --from-tsv` takes the tsv's sets back; a
@@ -57,7 +57,7 @@ fn nerfw_export_reads_back_as_nerf_pl_reads_phototourism() {
     ]);
     assert!(exp.join("sacre.tsv").is_file());
     let o = std::process::Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/nerfw_reader.py"))
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/nerfw_reader.py"))
         .arg(&exp)
         .output()
         .unwrap();

@@ -1,5 +1,5 @@
 //! The paper's published code (../shared/paper-code, run unmodified under
-//! tensorflow.compat.v1 by tests/paper_oracle.py) reads our default `official` export: its
+//! tensorflow.compat.v1 by tests/oracles/paper_oracle.py) reads our default `official` export: its
 //! TFRecord converter and parser, its appearance-pretraining reader at the export's crop, its
 //! triplet sampler with our `dist_NAME.pckl`, and its own style distance
 //! (`compute_pairwise_style_loss_v2`) against our `--tier official`, on a synthetic scene with
@@ -22,7 +22,7 @@ fn test_npy(dir: &Path) -> PathBuf {
     let npy = dir.join("vgg16.npy");
     let st = shared::shared_path("weights/vgg16_imagenet.safetensors");
     let o = Command::new("python3")
-        .arg(repo().join("tests/make_vgg16_npy.py"))
+        .arg(repo().join("tests/oracles/make_vgg16_npy.py"))
         .arg(&st)
         .arg(&npy)
         .output()
@@ -31,10 +31,10 @@ fn test_npy(dir: &Path) -> PathBuf {
     npy
 }
 
-/// Run tests/paper_oracle.py with `args` (after `--paper`); its JSON summary.
+/// Run tests/oracles/paper_oracle.py with `args` (after `--paper`); its JSON summary.
 pub fn paper_oracle(args: &[&str]) -> serde_json::Value {
     let o = Command::new("python3")
-        .arg(repo().join("tests/paper_oracle.py"))
+        .arg(repo().join("tests/oracles/paper_oracle.py"))
         .arg("--paper")
         .arg(shared::shared_path("paper-code"))
         .args(args)

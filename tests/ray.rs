@@ -114,7 +114,7 @@ fn densify_as_ray_units_on_two_nodes_gives_the_workspace_of_one_process() {
     .concat());
     let fixed = [s, env!("CARGO_BIN_EXE_nrw-etl"), "3"];
     let stdout = python_script(
-        "tests/ray_densify.py",
+        "tests/oracles/ray_densify.py",
         &[&fixed[..], &settings].concat(),
         &[],
     );
@@ -182,7 +182,7 @@ fn the_corpus_driver_called_from_another_driver_with_a_node_killed_indexes_every
     std::fs::write(broken.join("sparse/0/images.txt"), "").unwrap();
     std::fs::write(broken.join("sparse/0/points3D.txt"), "").unwrap();
     let out = tmp.path().join("corpus");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/ray_corpus.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/ray_corpus.py");
     let driver_py = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines/ray/driver.py");
     let args = [&ingest[..], &["--pause-after-group-ms", "2000"]].concat();
     let o = Command::new("python3")

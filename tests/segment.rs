@@ -320,7 +320,7 @@ fn a_folder_of_photos_segments_without_a_model_and_the_accuracy_script_scores_it
     }
     let score = |labels: &Path| -> String {
         let o = std::process::Command::new("python3")
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/segment_check.py"))
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/segment_check.py"))
             .args([
                 "--labels",
                 labels.to_str().unwrap(),

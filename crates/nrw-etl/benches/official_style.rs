@@ -2,11 +2,11 @@
 //!
 //! `style --tier official` against the published code (docs/bench/official_style.md): the same
 //! photos (a synthetic scene's default official export, PHOTOS photos, all in train), the
-//! same `vgg16.npy` (tests/make_vgg16_npy.py from ../shared/weights), 2 threads on both sides.
+//! same `vgg16.npy` (tests/oracles/make_vgg16_npy.py from ../shared/weights), 2 threads on both sides.
 //! Ours: `nrw-etl style --tier official` (descriptors of every kept photo) plus `export`, which
 //! computes `dist_NAME.pckl` (and writes the PNG folders, so ours is overstated). Theirs:
 //! `style_loss.compute_pairwise_style_loss_v2` on the exported references under TensorFlow's
-//! CPU build (tests/paper_oracle.py --only-dist), its graph built once as the published code
+//! CPU build (tests/oracles/paper_oracle.py --only-dist), its graph built once as the published code
 //! builds it. Every process timed whole (wall seconds, peak resident memory); the distances of
 //! both compared entry by entry and row by row (neighbour order).
 //!
@@ -45,7 +45,7 @@ fn main() {
     let t = tmp.path();
     let npy = t.join("vgg16.npy");
     let o = Command::new("python3")
-        .arg(root.join("tests/make_vgg16_npy.py"))
+        .arg(root.join("tests/oracles/make_vgg16_npy.py"))
         .arg(shared.join("weights/vgg16_imagenet.safetensors"))
         .arg(&npy)
         .output()
@@ -98,7 +98,7 @@ fn main() {
     );
     let wall = Instant::now();
     let o = Command::new("python3")
-        .arg(root.join("tests/paper_oracle.py"))
+        .arg(root.join("tests/oracles/paper_oracle.py"))
         .args(["--paper", shared.join("paper-code").to_str().unwrap()])
         .args([
             "--official",
@@ -123,7 +123,7 @@ fn main() {
     let mut md = String::from("# `style --tier official` against the published code\n\n");
     let _ = writeln!(
         md,
-        "Regenerate: `cargo bench -p nrw-etl --bench official_style [-- PHOTOS]` (the peer needs `pip install tensorflow-cpu opencv-python-headless matplotlib six`).\n\nMachine: {}.\n\nA synthetic scene of {photos} photos (demo façade, 600–900 px, stored at shorter side 600), all {} in the train split, so both sides describe the same photos; the same `vgg16.npy` on both sides (tests/make_vgg16_npy.py: ../shared/weights in tensorflow-vgg's layout); 2 threads on both sides (RAYON_NUM_THREADS, TF_NUM_INTRAOP_THREADS). Ours is `style --tier official` (every kept photo) plus the `export` that computes `dist_bench.pckl` and writes the PNG folders; theirs is `style_loss.compute_pairwise_style_loss_v2` on the exported train references ({}; its Python process took {process_s:.1} s in all with imports).\n",
+        "Regenerate: `cargo bench -p nrw-etl --bench official_style [-- PHOTOS]` (the peer needs `pip install tensorflow-cpu opencv-python-headless matplotlib six`).\n\nMachine: {}.\n\nA synthetic scene of {photos} photos (demo façade, 600–900 px, stored at shorter side 600), all {} in the train split, so both sides describe the same photos; the same `vgg16.npy` on both sides (tests/oracles/make_vgg16_npy.py: ../shared/weights in tensorflow-vgg's layout); 2 threads on both sides (RAYON_NUM_THREADS, TF_NUM_INTRAOP_THREADS). Ours is `style --tier official` (every kept photo) plus the `export` that computes `dist_bench.pckl` and writes the PNG folders; theirs is `style_loss.compute_pairwise_style_loss_v2` on the exported train references ({}; its Python process took {process_s:.1} s in all with imports).\n",
         cpu::describe(),
         n,
         v["tensorflow"].as_str().map_or("TensorFlow".into(), |t| format!("TensorFlow {t} CPU")),

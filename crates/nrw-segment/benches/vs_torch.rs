@@ -95,7 +95,7 @@ fn modes_table(md: &mut String, model: &Segformer, threads: usize, reps: usize) 
          squashed); `whole` keeps the aspect ratio (one pass at a shorter side of 512, the protocol behind \
          the SegFormer paper's ADE20K numbers); `slide` covers the same scaled photo with 512² windows; `crop` is the \
          published code's (one 512² pass, labels only inside the crop). The accuracy each buys cannot be \
-         measured here (no ADE20K weights offline; `tests/segment_check.py` measures it where they are).\n\n\
+         measured here (no ADE20K weights offline; `tests/oracles/segment_check.py` measures it where they are).\n\n\
          | photo | resize 512 | whole 512 | slide 512 | crop 512 | post-processing: streaming arg-max | full upsampling + arg-max (memory) | same labels |\n\
          |---|---|---|---|---|---|---|---|"
     );

@@ -2,7 +2,7 @@
 //! float64 on the published code's input (centre crop, v·2/255 − 1, then its VGG's Caffe step)
 //! after checking itself against the PyTorch float64 fixtures in ../shared/fixtures/vgg16. Our
 //! side reads the same weights from a `vgg16.npy` that numpy wrote in tensorflow-vgg's layout
-//! (tests/make_vgg16_npy.py), so the reader, the BGR reordering and the input step are tested.
+//! (tests/oracles/make_vgg16_npy.py), so the reader, the BGR reordering and the input step are tested.
 
 #[path = "../../../tests/support/python.rs"]
 mod python;
@@ -30,7 +30,7 @@ fn official_grams_match_a_float64_vgg16_that_matches_pytorch() {
     let tmp = tempfile::tempdir().unwrap();
     let npy = tmp.path().join("vgg16.npy");
     let o = Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/make_vgg16_npy.py"))
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/oracles/make_vgg16_npy.py"))
         .arg(&weights)
         .arg(&npy)
         .output()

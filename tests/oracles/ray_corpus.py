@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """A driver of its own that calls the Ray driver's `run_corpus` (called by tests/ray.rs).
 
-    python3 tests/ray_corpus.py DRIVER_PY OUT BINARY SCENE... [-- INGEST_ARG ...]
+    python3 tests/oracles/ray_corpus.py DRIVER_PY OUT BINARY SCENE... [-- INGEST_ARG ...]
 
 Loads pipelines/ray/driver.py from its path under another module name (so Ray's workers
 could not import it: the tasks must carry its code), starts a cluster of a 0-CPU head and

@@ -7,7 +7,7 @@ real model is measured by the user, with this script:
   huggingface-cli download nvidia/segformer-b0-finetuned-ade-512-512 --local-dir segformer-b0
   # 2. ADE20K SceneParsing validation (ADEChallengeData2016: images/ and annotations/):
   nrw-etl segment --images ADEChallengeData2016/images/validation --weights segformer-b0 --out /tmp/ade-b0
-  python3 tests/segment_check.py --labels /tmp/ade-b0 \\
+  python3 tests/oracles/segment_check.py --labels /tmp/ade-b0 \\
       --annotations ADEChallengeData2016/annotations/validation \\
       [--model segformer-b0 --images ADEChallengeData2016/images/validation --transformers 50]
 

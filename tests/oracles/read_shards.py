@@ -2,7 +2,7 @@
 """Read an nrw-etl dataset with no Rust: pyarrow and DuckDB for the tables, OpenEXR for
 depth, Pillow for PNG payloads.
 
-    python3 tests/read_shards.py DATASET
+    python3 tests/oracles/read_shards.py DATASET
 
 Checks, independently of the Rust code, that every kept view's payloads match the CRC-32
 written beside them (zlib's), decode, and agree with each other and with the tables, and

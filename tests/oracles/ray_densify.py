@@ -1,7 +1,7 @@
 """Densify as work units on Ray's multi-node harness (two 1-CPU worker nodes): the driver's
 `densify` step, run by tests/ray.rs, which compares the workspace with one process's.
 
-    python3 tests/ray_densify.py SCENE BINARY UNITS [DENSIFY_ARG ...]
+    python3 tests/oracles/ray_densify.py SCENE BINARY UNITS [DENSIFY_ARG ...]
 """
 
 import os
@@ -10,7 +10,7 @@ import sys
 import ray
 from ray.cluster_utils import Cluster
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "pipelines", "ray"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "pipelines", "ray"))
 import driver  # noqa: E402
 
 

@@ -1,5 +1,5 @@
 //! The `nrw-train` binary fails clearly on bad input (training itself is tested end to end in
-//! tests/cli.rs, where datasets are made).
+//! the `cli` test (tests/trainer.rs), where datasets are made).
 
 use std::process::Command;
 

@@ -6,20 +6,9 @@ use nrw_dataset::reader::Dataset;
 use nrw_dataset::split::TRAIN;
 
 use crate::error::{ExportError, Result};
+use crate::inputs::{Inputs, Prior, ScenePoint, RENDER_DEPTH};
 use crate::staging::Staged;
-use crate::{ExportConfig, ExportSummary, Inputs, SplitExport};
-
-/// One 3D point of the scene's initialisation cloud, for `points3D.bin` (and a PLY with
-/// normals where the layout has one).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ScenePoint {
-    pub id: u64,
-    pub xyz: [f64; 3],
-    pub rgb: [u8; 3],
-    pub error: f64,
-    /// The unit normal, when the cloud has normals (a dense cloud does; SfM points do not).
-    pub normal: Option<[f32; 3]>,
-}
+use crate::{ExportConfig, ExportSummary, SplitExport};
 
 /// One export's inputs, as every layout sees them.
 pub struct Job<'a> {
@@ -87,7 +76,7 @@ impl<'a> Job<'a> {
     }
 
     /// A view's depth prior with its confidence, when the source has one.
-    pub fn prior(&self, v: &nrw_dataset::ViewRow) -> Result<crate::Prior> {
+    pub fn prior(&self, v: &nrw_dataset::ViewRow) -> Result<Prior> {
         if let Some(p) = self.inputs.depth_prior {
             let got = (p.depth)(v).map_err(|problem| ExportError::Value {
                 path: v.name.clone().into(),
@@ -99,7 +88,7 @@ impl<'a> Job<'a> {
                 return Ok(prior);
             }
         }
-        Ok(crate::Prior {
+        Ok(Prior {
             depth: v.depth()?,
             confidence: None,
         })
@@ -109,7 +98,7 @@ impl<'a> Job<'a> {
     pub fn depth_source(&self) -> String {
         self.inputs
             .depth_prior
-            .map_or_else(|| crate::RENDER_DEPTH.to_string(), |p| p.source.clone())
+            .map_or_else(|| RENDER_DEPTH.to_string(), |p| p.source.clone())
     }
 
     /// The splits with no view, as `export.json` lists them.

@@ -25,7 +25,7 @@ impl FinalizeSummary {
     }
 }
 
-/// A sharded stage as finalize drives it.
+/// A group stage as finalize drives it.
 struct Step {
     /// The stage's name in the unit records.
     stage: &'static str,
@@ -35,7 +35,7 @@ struct Step {
     merge: fn(&Store, &mut FinalizeSummary) -> Result<()>,
 }
 
-/// The sharded stages in pipeline order: the one list finalize checks, then merges.
+/// The group stages in pipeline order: the one list finalize checks, then merges.
 const STEPS: [Step; 2] = [
     Step {
         stage: units::INGEST,
@@ -55,7 +55,7 @@ const STEPS: [Step; 2] = [
     },
 ];
 
-/// Merge whatever units wait in the dataset: each sharded stage of [`STEPS`] in pipeline
+/// Merge whatever units wait in the dataset: each group stage of [`STEPS`] in pipeline
 /// order, through its own merge, once none has started without finishing.
 pub fn finalize(dataset: &Store) -> Result<FinalizeSummary> {
     for step in &STEPS {

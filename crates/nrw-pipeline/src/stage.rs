@@ -1,7 +1,7 @@
-//! The seam every sharded stage plugs into. A stage whose work is cut into groups of image
+//! The seam every group stage plugs into. A stage whose work is cut into groups of image
 //! ids (ingest: one shard per group; style: one descriptor part per group) implements
-//! [`Sharded`]; [`drive`] runs the groups a work unit owns, skipping those already done, and
-//! [`merge_stage`] runs the stage's merge once its units have run (`finalize`). A new sharded
+//! [`GroupStage`]; [`drive`] runs the groups a work unit owns, skipping those already done, and
+//! [`merge_stage`] runs the stage's merge once its units have run (`finalize`). A new group
 //! stage writes its group, its "already done" test and its merge; the unit arithmetic,
 //! resumption, progress and the unit record are shared.
 
@@ -12,7 +12,7 @@ use crate::error::Result;
 use crate::{Progress, Unit};
 
 /// A stage whose work is cut into groups that work units share.
-pub trait Sharded {
+pub trait GroupStage {
     /// The stage's name in the dataset's unit records (`units::INGEST`, `units::STYLE`).
     const STAGE: &'static str;
     /// What the progress bar counts (views, photos).
@@ -48,7 +48,7 @@ pub struct Driven {
 /// Run the groups of `per_group` consecutive ids that `unit` owns and that are not done yet,
 /// in order, under one progress bar labelled `label`. `after_group(ran, todo)` is called after
 /// each group (ran of todo): a caller's pause or stop.
-pub fn drive<S: Sharded>(
+pub fn drive<S: GroupStage>(
     stage: &S,
     unit: Unit,
     ids: &[u32],
@@ -91,7 +91,7 @@ pub fn drive<S: Sharded>(
 }
 
 /// Record that `unit` of stage `S` is done (what `finalize` checks and merges by).
-pub fn record_unit<S: Sharded>(store: &Store, unit: Unit, record: &UnitRecord) -> Result<()> {
+pub fn record_unit<S: GroupStage>(store: &Store, unit: Unit, record: &UnitRecord) -> Result<()> {
     let rel = units::unit_record_path(S::STAGE, unit.index, unit.count);
     Ok(units::write_record(store, &rel, record)?)
 }
@@ -99,7 +99,7 @@ pub fn record_unit<S: Sharded>(store: &Store, unit: Unit, record: &UnitRecord) -
 /// The whole stage in this process: earlier unfinished unit runs' records are cleared (this
 /// run owns the dataset; their group outputs are reused when they match), `run_whole` runs
 /// unit 0 of 1, and the stage's merge makes the dataset whole.
-pub fn whole<S: Sharded, T>(
+pub fn whole<S: GroupStage, T>(
     dataset: &Store,
     run_whole: impl FnOnce() -> Result<T>,
 ) -> Result<(T, S::Merge)> {
@@ -110,13 +110,13 @@ pub fn whole<S: Sharded, T>(
 
 /// Whether units of stage `S` started in `dataset` (its unit folder holds files) although
 /// none has finished (no unit record): merging would be premature.
-pub fn started_unfinished<S: Sharded>(dataset: &Store) -> Result<bool> {
+pub fn started_unfinished<S: GroupStage>(dataset: &Store) -> Result<bool> {
     Ok(!dataset.list(&units::stage_dir(S::STAGE))?.is_empty()
         && units::unit_records(dataset, S::STAGE)?.is_empty())
 }
 
 /// Merge stage `S` when any of its units has run here; None when none has.
-pub fn merge_stage<S: Sharded>(dataset: &Store) -> Result<Option<S::Merge>> {
+pub fn merge_stage<S: GroupStage>(dataset: &Store) -> Result<Option<S::Merge>> {
     if units::unit_records(dataset, S::STAGE)?.is_empty() {
         return Ok(None);
     }
@@ -133,7 +133,7 @@ mod tests {
         ran: Mutex<Vec<usize>>,
     }
 
-    impl Sharded for Fake {
+    impl GroupStage for Fake {
         const STAGE: &'static str = "fake";
         const ITEMS: &'static str = "items";
         type Merge = ();

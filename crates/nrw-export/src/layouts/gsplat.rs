@@ -44,11 +44,12 @@ use nrw_dataset::split::{TRAIN, VAL};
 use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
+use crate::inputs::{Prior, ScenePoint};
 use crate::inverse_depth::{self, DepthParams};
 use crate::pyramid::{self, FACTORS};
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
-use crate::writer::{Job, LayoutWriter, ScenePoint};
+use crate::writer::{Job, LayoutWriter};
 use crate::ExportSummary;
 
 /// ADE20K's `sky` (1-based id, as the dataset's label maps store it).
@@ -225,7 +226,7 @@ fn depth_files(v: &ViewRow, depth: &DepthMap, file: &str, scale: f64) -> Result<
 
 /// The depth prior's validity mask (255 = the prior has depth there) and, when the source
 /// has one, its confidence (0–255 for 0–1).
-fn depth_trust_files(v: &ViewRow, prior: &crate::Prior, file: &str) -> Result<Encoded> {
+fn depth_trust_files(v: &ViewRow, prior: &Prior, file: &str) -> Result<Encoded> {
     let (w, h) = (v.width, v.height);
     let valid: Vec<u8> = prior
         .depth

@@ -27,8 +27,9 @@ use serde_json::{json, Map, Value};
 use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
+use crate::inputs::ScenePoint;
 use crate::staging::Staged;
-use crate::writer::{Job, ScenePoint, WithPoints};
+use crate::writer::{Job, WithPoints};
 use crate::SplitExport;
 
 /// nerfstudio's `applied_transform` (rows of a 3 × 4 matrix): world (x, y, z) → (x, z, −y).

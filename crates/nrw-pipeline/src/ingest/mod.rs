@@ -21,7 +21,7 @@ use crate::error::{PipelineError, Result, Setting};
 use crate::model::{
     encoding_and_layout, images_dir, load_model, undistort_model, undistort_record,
 };
-use crate::stage::Sharded;
+use crate::stage::GroupStage;
 use crate::units::fingerprint;
 use crate::{Progress, Unit};
 use nrw_dataset::provenance::IngestParameters;
@@ -201,14 +201,14 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     })
 }
 
-/// Ingest as a sharded stage: one group of `rows_per_shard` images per shard.
+/// Ingest as a group stage: one group of `rows_per_shard` images per shard.
 struct IngestStage<'a> {
     cfg: &'a IngestConfig,
     store: &'a Store,
     p: &'a Prepared,
 }
 
-impl Sharded for IngestStage<'_> {
+impl GroupStage for IngestStage<'_> {
     const STAGE: &'static str = units::INGEST;
     const ITEMS: &'static str = "views";
     type Merge = IngestMerge;

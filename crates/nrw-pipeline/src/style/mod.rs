@@ -15,7 +15,7 @@ use nrw_style::{Backend, Preprocess, Tier};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result, Setting};
-use crate::stage::Sharded;
+use crate::stage::GroupStage;
 use crate::units::{check_units, close_stage, units_error};
 use crate::{Progress, Unit};
 
@@ -273,7 +273,7 @@ pub fn style_unit(cfg: &StyleConfig, unit: Unit, progress: &dyn Progress) -> Res
     style_unit_on(cfg, unit, net.as_ref().map(|n| n as &dyn Backend), progress)
 }
 
-/// Style as a sharded stage: one descriptor part per group of `photos_per_part` photos.
+/// Style as a group stage: one descriptor part per group of `photos_per_part` photos.
 struct StyleStage<'a> {
     cfg: &'a StyleConfig,
     ds: &'a Dataset,
@@ -281,7 +281,7 @@ struct StyleStage<'a> {
     kind: &'a DescriptorKind,
 }
 
-impl Sharded for StyleStage<'_> {
+impl GroupStage for StyleStage<'_> {
     const STAGE: &'static str = units::STYLE;
     const ITEMS: &'static str = "photos";
     type Merge = StyleMerge;

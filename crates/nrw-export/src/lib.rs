@@ -13,7 +13,6 @@ mod colmap_model;
 pub mod encoders;
 pub mod error;
 pub mod inputs;
-pub mod layout;
 pub mod layouts;
 pub mod staging;
 pub mod stream;
@@ -29,34 +28,37 @@ pub use nrw_npy::{npz, pickle};
 
 pub use error::{ExportError, Result};
 pub use inputs::{DepthPrior, DistMatrix, DistRows, Inputs, Prior, ScenePoint, RENDER_DEPTH};
-pub use layout::Layout;
+pub use layouts::Layout;
 pub use staging::{join_under, EXPORT_JSON};
 pub use stream::index_width;
 pub use summary::{DepthRecord, ExportConfig, ExportSummary, Skipped, SplitExport};
 pub use tfrecord::tfrecord_name;
+pub use writer::About;
 
 use nrw_dataset::reader::Dataset;
 
-/// Export `ds` as `cfg` says into `cfg.out` (a folder or an object-store URL), replacing an
-/// earlier export there whole; `tick` is called once per view done.
+/// Export `ds` in `layout` as `cfg` says into `cfg.out` (a folder or an object-store URL),
+/// replacing an earlier export there whole; `tick` is called once per view done.
 pub fn export(
     ds: &Dataset,
+    layout: Layout,
     cfg: &ExportConfig,
     inputs: &Inputs,
     tick: &(dyn Fn() + Sync),
 ) -> Result<ExportSummary> {
+    let (about, writer) = layout.parts();
     let job = writer::Job {
         ds,
+        about,
         cfg,
         splits: ds.splits(),
         inputs,
         tick,
     };
-    let layout = layouts::writer_of(cfg.layout);
-    layout.check(&job)?;
+    writer.check(&job)?;
     let staged = staging::Staged::new(&cfg.out)?;
-    let mut summary = ExportSummary::begin(&ds.dir.to_string(), cfg);
-    let written = layout.write(&job, &staged, &mut summary).and_then(|()| {
+    let mut summary = ExportSummary::begin(&ds.dir.to_string(), about.name, cfg);
+    let written = writer.write(&job, &staged, &mut summary).and_then(|()| {
         staged.write(
             EXPORT_JSON,
             &serde_json::to_vec_pretty(&summary).expect("json"),

@@ -4,12 +4,10 @@
 use serde::Serialize;
 
 use crate::published::{DepthMapping, DepthScale};
-use crate::Layout;
 
 /// What to export and how.
 #[derive(Debug, Clone)]
 pub struct ExportConfig {
-    pub layout: Layout,
     /// Destination: a folder (created, or replaced whole when it holds an earlier export) or
     /// an `s3://`, `gs://` or `az://` URL (the same files, uploaded).
     pub out: nrw_dataset::Location,
@@ -30,10 +28,9 @@ pub struct ExportConfig {
 }
 
 impl ExportConfig {
-    /// The paper's layout with the defaults the published code runs with.
+    /// The settings the published code runs with (for the paper's layouts).
     pub fn official(out: nrw_dataset::Location, name: String) -> Self {
         ExportConfig {
-            layout: Layout::Official,
             out,
             name,
             crop: Some(crate::published::PUBLISHED_CROP),
@@ -84,7 +81,8 @@ impl SplitExport {
 pub struct ExportSummary {
     pub tool: String,
     pub dataset: String,
-    pub layout: Layout,
+    /// The layout's name ([`crate::Layout::name`]).
+    pub layout: &'static str,
     pub name: String,
     pub crop: Option<u32>,
     /// Depth levels in the official and tfrecord layouts, with the formula to recover depth.
@@ -107,11 +105,11 @@ pub struct ExportSummary {
 
 impl ExportSummary {
     /// The summary before a layout fills in what it wrote: tool, dataset, layout and name.
-    pub(crate) fn begin(dataset: &str, cfg: &ExportConfig) -> ExportSummary {
+    pub(crate) fn begin(dataset: &str, layout: &'static str, cfg: &ExportConfig) -> ExportSummary {
         ExportSummary {
             tool: format!("nrw-etl {}", env!("CARGO_PKG_VERSION")),
             dataset: dataset.into(),
-            layout: cfg.layout,
+            layout,
             name: cfg.name.clone(),
             crop: None,
             depth: None,

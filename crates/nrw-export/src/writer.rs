@@ -13,6 +13,8 @@ use crate::{ExportConfig, ExportSummary, SplitExport};
 /// One export's inputs, as every layout sees them.
 pub struct Job<'a> {
     pub ds: &'a Dataset,
+    /// The layout being written.
+    pub about: &'static About,
     pub cfg: &'a ExportConfig,
     /// The dataset's splits and their view counts, in order.
     pub splits: Vec<(String, usize)>,
@@ -30,8 +32,8 @@ impl<'a> Job<'a> {
         Err(ExportError::refused(
             &self.ds.dir,
             format!(
-                "the {:?} layout needs a train split with views; split it first (`split.val` N holds out N photos){advice}",
-                self.cfg.layout
+                "the {} layout needs a train split with views; split it first (`split.val` N holds out N photos){advice}",
+                self.about.name
             ),
         ))
     }
@@ -49,7 +51,7 @@ impl<'a> Job<'a> {
                 &self.cfg.out,
                 format!(
                     "the {} layout needs the scene's 3D points (Inputs::points)",
-                    self.cfg.layout
+                    self.about.name
                 ),
             )),
         }
@@ -63,7 +65,7 @@ impl<'a> Job<'a> {
                 &self.cfg.out,
                 format!(
                     "the {} layout needs the scene's model (Inputs::model) for its tracks",
-                    self.cfg.layout
+                    self.about.name
                 ),
             )
         })
@@ -111,6 +113,22 @@ impl<'a> Job<'a> {
     }
 }
 
+/// What a layout is, declared in its own file: the name the CLI, pipeline files and
+/// `export.json` use, its help line, and what it needs from the other stages.
+#[derive(Debug)]
+pub struct About {
+    pub name: &'static str,
+    /// What the layout holds, in one line (the CLI's help for the value).
+    pub summary: &'static str,
+    /// Whether it carries the scene's 3D points ([`crate::Inputs::points`]).
+    pub needs_points: bool,
+    /// Whether it writes depth priors, which prefer densify's MVS depth to the render's
+    /// z-buffer.
+    pub writes_depth_priors: bool,
+    /// The crop when none is asked (the published 512 for the paper's layouts).
+    pub default_crop: Option<u32>,
+}
+
 /// One export layout: what it refuses before anything is written, and the files it writes.
 pub trait LayoutWriter: Sync {
     /// Refuse what this layout cannot export (settings, dataset), before the staging folder
@@ -139,7 +157,7 @@ impl LayoutWriter for WithPoints {
     fn write(&self, job: &Job, staged: &Staged, summary: &mut ExportSummary) -> Result<()> {
         summary.empty_splits = job.empty_splits();
         (summary.splits, summary.warnings) = (self.0)(job, job.points()?, staged)?;
-        if job.cfg.layout.writes_depth_priors() {
+        if job.about.writes_depth_priors {
             summary.depth_source = Some(job.depth_source());
         }
         Ok(())

@@ -2,7 +2,7 @@
 //! `nrw_export`); this supplies what the layouts need from other stages (the style distance
 //! matrix, the scene's points) and the default name.
 
-use nrw_export::{ExportConfig, ExportSummary};
+use nrw_export::{ExportConfig, ExportSummary, Layout};
 
 use crate::error::Result;
 use crate::Progress;
@@ -25,9 +25,10 @@ pub fn official(dataset: &nrw_dataset::Location, out: &nrw_dataset::Location) ->
     ExportConfig::official(out.clone(), default_name(dataset))
 }
 
-/// Export `dataset` as `cfg` says.
+/// Export `dataset` in `layout` as `cfg` says.
 pub fn export(
     dataset: &nrw_dataset::Location,
+    layout: Layout,
     cfg: &ExportConfig,
     progress: &dyn Progress,
 ) -> Result<ExportSummary> {
@@ -35,7 +36,7 @@ pub fn export(
     crate::timing::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-        let model = if cfg.layout.needs_points() {
+        let model = if layout.needs_points() {
             Some(scene_model(store)?)
         } else {
             None
@@ -44,7 +45,7 @@ pub fn export(
             Some(rec) => Some(init_points(store, rec)?),
             None => None,
         };
-        let mvs = if cfg.layout.writes_depth_priors() {
+        let mvs = if layout.writes_depth_priors() {
             crate::mvs_prior::MvsPriors::of_dataset(store)?
         } else {
             None
@@ -65,7 +66,7 @@ pub fn export(
             depth_prior: prior.as_ref(),
         };
         progress.start("export", total as u64, "views");
-        let summary = nrw_export::export(&ds, cfg, &inputs, &|| progress.inc(1))?;
+        let summary = nrw_export::export(&ds, layout, cfg, &inputs, &|| progress.inc(1))?;
         progress.finish();
         Ok(summary)
     })

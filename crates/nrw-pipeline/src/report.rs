@@ -151,7 +151,7 @@ pub fn export(dataset: &Location, out: &Location, s: &ExportSummary) -> Report {
             "style distances: {} (pretrain_appearance loads it)",
             out.join(p)
         )),
-        None if s.layout == Layout::Official => r.err(
+        None if s.layout == Layout::Official.name() => r.err(
             format!(
                 "no dist_NAME.pckl: the dataset has no official style descriptors (the style stage with {} official and {} VGG16)",
                 Setting::Tier,
@@ -468,7 +468,7 @@ mod tests {
         let mut s = ExportSummary {
             tool: "t".into(),
             dataset: "d".into(),
-            layout: Layout::Official,
+            layout: Layout::Official.name(),
             name: "n".into(),
             crop: None,
             depth: None,

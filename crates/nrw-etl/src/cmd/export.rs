@@ -45,7 +45,12 @@ pub struct ExportArgs {
 /// Run `export`.
 pub fn run(args: &ExportArgs) -> Result<()> {
     let cfg = args.settings.config(&args.dataset, &args.out)?;
-    let summary = nrw_pipeline::export::export(&args.dataset, &cfg, &super::Bars::new(args.quiet))?;
+    let summary = nrw_pipeline::export::export(
+        &args.dataset,
+        args.settings.layout,
+        &cfg,
+        &super::Bars::new(args.quiet),
+    )?;
     if !args.quiet {
         super::print_report(&nrw_pipeline::report::export(
             &args.dataset,

@@ -8,8 +8,17 @@ use nrw_dataset::ViewRow;
 use crate::error::{ExportError, Result};
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
-use crate::writer::{Job, LayoutWriter};
+use crate::writer::{About, Job, LayoutWriter};
 use crate::ExportSummary;
+
+/// The `files` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "files",
+    summary: "SPLIT/NAME/{photo.png, color.png, depth.exr, normal.png, semantics.png, labels.png, transient.png, meta.json}",
+    needs_points: false,
+    writes_depth_priors: false,
+    default_crop: None,
+};
 
 /// The `files` layout.
 pub struct Files;

@@ -49,11 +49,20 @@ use crate::inverse_depth::{self, DepthParams};
 use crate::pyramid::{self, FACTORS};
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
-use crate::writer::{Job, LayoutWriter};
+use crate::writer::{About, Job, LayoutWriter};
 use crate::ExportSummary;
 
 /// ADE20K's `sky` (1-based id, as the dataset's label maps store it).
 pub const ADE_SKY: u8 = 3;
+
+/// The `gsplat` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "gsplat",
+    summary: "the COLMAP folder 3DGS trainers read (graphdeco, gsplat, OpenSplat, nerfbaselines): images/ and images_2|4|8/ (box-filtered whole blocks, intrinsics / N exactly), masks/ (255 = use; NAME.png and COLMAP's NAME.png.png) and masks_N/, sky/, depths/ and depths_N/ (graphdeco's 16-bit inverse depth) with sparse/0/depth_params.json, sparse/0 (one PINHOLE camera per image, the scene's points), train_list.txt / test_list.txt; needs PINHOLE cameras (`ingest.undistort`)",
+    needs_points: true,
+    writes_depth_priors: true,
+    default_crop: None,
+};
 
 /// The gsplat layout.
 pub struct Gsplat;

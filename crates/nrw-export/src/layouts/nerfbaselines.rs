@@ -25,8 +25,17 @@ use serde_json::json;
 use crate::error::Result;
 use crate::nerfw::{write_phototourism, Places};
 use crate::staging::Staged;
-use crate::writer::{Job, WithModel};
+use crate::writer::{About, Job, WithModel};
 use crate::SplitExport;
+
+/// The `nerfbaselines` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "nerfbaselines",
+    summary: "the Phototourism folder nerfbaselines reads (WildGaussians and other in-the-wild methods): images/, sparse/ (one PINHOLE camera per image, the scene's points), masks/ (255 = use), nerfw_split.csv, train_list.txt / test_list.txt and nb-info.json (loader colmap, id phototourism, NeRF-W evaluation); needs PINHOLE cameras (`ingest.undistort`)",
+    needs_points: true,
+    writes_depth_priors: false,
+    default_crop: None,
+};
 
 /// nerfbaselines' Phototourism layout.
 pub static NERFBASELINES: WithModel = WithModel(write);

@@ -29,7 +29,7 @@ use nrw_dataset::ViewRow;
 use crate::error::{ExportError, Result};
 use crate::inputs::ScenePoint;
 use crate::staging::Staged;
-use crate::writer::{Job, WithPoints};
+use crate::writer::{About, Job, WithPoints};
 use crate::SplitExport;
 
 /// nerfstudio's `applied_transform` (rows of a 3 × 4 matrix): world (x, y, z) → (x, z, −y).
@@ -169,6 +169,15 @@ fn frame(job: &Job, v: &ViewRow, staged: &Staged) -> Result<(String, Value)> {
     }
     Ok((image, Value::Object(f)))
 }
+
+/// The `nerfstudio` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "nerfstudio",
+    summary: "nerfstudio's transforms.json (each frame's exact camera model, OpenGL camera-to-world poses with nerfstudio's applied_transform, depth/*.npy, masks/*.png from the transient mask, train/val/test_filenames) with images/ and sparse_pc.ply; refuses camera models nerfstudio cannot represent exactly (FOV, FULL_OPENCV, thin-prism fisheyes)",
+    needs_points: true,
+    writes_depth_priors: true,
+    default_crop: None,
+};
 
 /// nerfstudio's layout.
 pub static NERFSTUDIO: WithPoints = WithPoints(write);

@@ -31,7 +31,7 @@ use nrw_dataset::ViewRow;
 
 use crate::error::{ExportError, Result};
 use crate::staging::Staged;
-use crate::writer::{Job, WithModel};
+use crate::writer::{About, Job, WithModel};
 use crate::SplitExport;
 
 /// The tsv `split` value of one of our splits: NeRF-W's loaders call the held-out set `test`.
@@ -96,6 +96,15 @@ pub(crate) fn model_image(v: &ViewRow, file: &str) -> Result<Image> {
         points2d: Vec::new(),
     })
 }
+
+/// The `nerfw` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "nerfw",
+    summary: "NeRF-W's Phototourism layout for nerf_pl / Ha-NeRF loaders: NAME.tsv (filename, id, split, dataset), dense/images/, dense/sparse/ (one PINHOLE camera per image, the scene's points); needs a dataset ingested with `ingest.undistort` (or pinhole cameras)",
+    needs_points: true,
+    writes_depth_priors: false,
+    default_crop: None,
+};
 
 /// NeRF-W's Phototourism layout.
 pub static NERFW: WithModel = WithModel(write);

@@ -5,7 +5,7 @@ use nrw_dataset::split::TRAIN;
 use nrw_dataset::Location;
 use std::path::{Path, PathBuf};
 
-use nrw_export::{ExportConfig, ExportSummary};
+use nrw_export::{ExportConfig, ExportSummary, Layout};
 use serde::Deserialize;
 
 use crate::error::{PipelineError, Result, Setting};
@@ -185,11 +185,11 @@ fn export_config(
     dataset: &Location,
     out: &Location,
     segmented: bool,
-) -> Result<ExportConfig> {
+) -> Result<(Layout, ExportConfig)> {
     let mut c = e.config(dataset, out)?;
     // A run that segments its photos exports their labels.
     c.semantics |= segmented;
-    Ok(c)
+    Ok((e.layout, c))
 }
 
 fn style_config(s: &StyleTable, dataset: &Location, weights: Option<&Path>) -> Result<StyleConfig> {
@@ -276,8 +276,8 @@ pub fn run(
         })?;
         done(StageDone::Triplets(&r));
     }
-    if let Some(c) = &export {
-        let r = crate::export::export(out, c, progress)?;
+    if let Some((layout, c)) = &export {
+        let r = crate::export::export(out, *layout, c, progress)?;
         done(StageDone::Export(export_dir, &r));
         outcome.export = Some(export_dir.clone());
     }

@@ -49,7 +49,7 @@ impl Default for ExportSettings {
     fn default() -> Self {
         let c = ExportConfig::official(Location::parse(""), String::new());
         ExportSettings {
-            layout: c.layout,
+            layout: Layout::Official,
             name: None,
             crop: None,
             semantics: c.semantics,
@@ -115,7 +115,6 @@ impl ExportSettings {
             ));
         }
         Ok(ExportConfig {
-            layout: self.layout,
             name: self
                 .name
                 .clone()

@@ -48,7 +48,7 @@ use crate::error::{ExportError, Result};
 use crate::imc::ImcView;
 use crate::npz::{self, Array};
 use crate::staging::Staged;
-use crate::writer::{Job, LayoutWriter};
+use crate::writer::{About, Job, LayoutWriter};
 use crate::{ExportSummary, SplitExport};
 use scene_info::{rotation, write_pair_indices};
 pub use scene_info::{SceneInfo, SceneView, LOFTR_BANDS};
@@ -57,6 +57,15 @@ use view::View;
 /// The script's rule for a depth file: under this size it is taken for a mask and the image
 /// is dropped (`file_size < 100 * 1024`).
 pub const D2NET_MIN_DEPTH_BYTES: usize = 100 * 1024;
+
+/// The `megadepth` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "megadepth",
+    summary: "MegaDepth's layout for matcher trainers: Undistorted_SfM/NAME/{images/, sparse-txt/ (PINHOLE, the views' SfM observations)}, phoenix/S6/zl548/MegaDepth_v1/NAME/dense0/depths/*.h5 (key `depth`, float32, 0 = none) and scene_info/NAME.npz as D2-Net's preprocess_scene.py writes it (paths, K, poses, overlap, scale ratios, angles), LoFTR's index/, RoMa's prep_scene_info/, DUSt3R's dust3r/ and IMC 2022's imc2022/train/NAME/{calibration,pair_covisibility}.csv; needs PINHOLE cameras (`ingest.undistort`)",
+    needs_points: true,
+    writes_depth_priors: true,
+    default_crop: None,
+};
 
 /// The MegaDepth layout.
 pub struct Megadepth;

@@ -9,12 +9,21 @@ use crate::error::Result;
 use crate::paper::Paper;
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
-use crate::writer::{Job, LayoutWriter};
+use crate::writer::{About, Job, LayoutWriter};
 use crate::ExportSummary;
 
 pub use crate::published::{
     crop_start, official_colors, official_seg_rgb, DepthMapping, DepthScale, OFFICIAL_COLORS_CSV,
     PUBLISHED_CROP,
+};
+
+/// The `official` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "official",
+    summary: "train/ and val/ with NNNN_reference.png, NNNN_color.png (RGBA), NNNN_depth.png (levels 0-255), NNNN_seg_rgb.png (the published colour coding), dist_NAME.pckl with official descriptors",
+    needs_points: false,
+    writes_depth_priors: false,
+    default_crop: Some(crate::published::PUBLISHED_CROP),
 };
 
 /// The official layout: `train/` and `val/` of `NNNN_{reference,color,depth,seg_rgb}.png`,

@@ -9,8 +9,17 @@ use crate::paper::Paper;
 use crate::record::{encode_record, Feature};
 use crate::staging::Staged;
 use crate::stream::{write_views, Encoded, ViewEncoder};
-use crate::writer::{Job, LayoutWriter};
+use crate::writer::{About, Job, LayoutWriter};
 use crate::ExportSummary;
+
+/// The `tfrecord` layout, as the CLI, pipeline files and `export.json` name it.
+pub const ABOUT: About = About {
+    name: "tfrecord",
+    summary: "NAME_train.tfrecord / NAME_val.tfrecord (or NAME-0000i-of-0000N_SPLIT.tfrecord with `export.tfrecord_files` N): the Examples the published data.py parses",
+    needs_points: false,
+    writes_depth_priors: false,
+    default_crop: Some(crate::published::PUBLISHED_CROP),
+};
 
 /// The tfrecord layout.
 pub struct Tfrecord;

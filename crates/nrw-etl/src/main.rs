@@ -2,6 +2,7 @@
 //! "Neural Rerendering in the Wild" (Meshry et al., CVPR 2019) trains on.
 
 mod cmd;
+mod commands;
 mod error;
 
 use clap::Parser;
@@ -22,7 +23,7 @@ On your own data, start with `nrw-etl inspect SCENE` to check a model, then `nrw
 )]
 struct Cli {
     #[command(subcommand)]
-    command: cmd::Command,
+    command: commands::Command,
     /// Wait this long before each commit (rename) of an output, saying so on stderr: lets the
     /// kill tests interrupt any stage at a known point
     #[arg(long, global = true, hide = true, value_name = "MS")]
@@ -47,7 +48,7 @@ fn main() -> std::process::ExitCode {
             return std::process::ExitCode::FAILURE;
         }
     }
-    let result = cmd::run(&cli.command);
+    let result = commands::run(&cli.command);
     match result {
         Ok(code) => code,
         Err(e) if e.interrupted() => {

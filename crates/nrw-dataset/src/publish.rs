@@ -24,6 +24,23 @@ pub fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The hidden name a folder called `name` is built under beside its destination (a sibling
+/// folder locally, a sibling prefix on object storage), so the units of one run find it.
+pub fn staging_name(name: &str) -> String {
+    format!(".{name}.partial")
+}
+
+/// A fresh hidden folder in the temporary directory, named by `tag`, the process and the
+/// clock, where a folder bound for object storage is built before it is uploaded.
+pub fn scratch_folder(tag: &str) -> Result<PathBuf> {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let dir = std::env::temp_dir().join(format!(".nrw-{tag}-{}-{nanos}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
+    Ok(dir)
+}
+
 /// The name an earlier folder takes while `staged` replaces it (beside `staged`, so on its
 /// file system).
 fn aside(staged: &Path) -> PathBuf {

@@ -46,7 +46,10 @@ impl Staged {
                 let store = Store::open(out)?;
                 let earlier = store.list("")?;
                 refuse_foreign(out, &earlier, |k| k == EXPORT_JSON)?;
-                (remote_staging()?, Destination::Remote { store, earlier })
+                (
+                    nrw_dataset::publish::scratch_folder("export-new")?,
+                    Destination::Remote { store, earlier },
+                )
             }
             Location::Local(folder) => {
                 (local_staging(folder)?, Destination::Folder(folder.clone()))
@@ -194,16 +197,6 @@ fn local_staging(out: &Path) -> Result<PathBuf> {
     let staged = parent.join(format!(".{base}.export-new-{}", std::process::id()));
     std::fs::create_dir_all(&staged).map_err(|e| ExportError::io(&staged, e))?;
     Ok(staged)
-}
-
-/// A fresh hidden folder in the temporary directory for an export bound for object storage.
-fn remote_staging() -> Result<PathBuf> {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let dir = std::env::temp_dir().join(format!(".nrw-export-new-{}-{nanos}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| ExportError::io(&dir, e))?;
-    Ok(dir)
 }
 
 /// An output file name refused, naming the export folder.

@@ -36,7 +36,7 @@ pub fn export(
     crate::timing::timed(store, "export", || {
         let ds = crate::triplets::require_views(store)?;
         let total: usize = ds.splits().iter().map(|(_, n)| n).sum();
-        let model = if layout.needs_points() {
+        let model = if layout.about().needs_points {
             Some(scene_model(store)?)
         } else {
             None
@@ -45,7 +45,7 @@ pub fn export(
             Some(rec) => Some(init_points(store, rec)?),
             None => None,
         };
-        let mvs = if layout.writes_depth_priors() {
+        let mvs = if layout.about().writes_depth_priors {
             crate::mvs_prior::MvsPriors::of_dataset(store)?
         } else {
             None

@@ -57,7 +57,8 @@ impl Layout {
         }
     }
 
-    /// What the layout is: its name, help and needs, as its file declares them.
+    /// What the layout is: its name, help and needs (points, depth priors, default crop), as
+    /// its file declares them.
     pub const fn about(self) -> &'static About {
         self.parts().0
     }
@@ -70,23 +71,6 @@ impl Layout {
     /// What the layout holds, in one line (the CLI's help for each value).
     pub fn summary(self) -> &'static str {
         self.about().summary
-    }
-
-    /// Whether the layout carries the scene's 3D points ([`crate::Inputs::points`]).
-    pub fn needs_points(self) -> bool {
-        self.about().needs_points
-    }
-
-    /// Whether the layout writes depth priors, which prefer densify's MVS depth to the
-    /// render's z-buffer.
-    pub fn writes_depth_priors(self) -> bool {
-        self.about().writes_depth_priors
-    }
-
-    /// The crop when none is asked: the published 512 for the paper's layouts, none (views
-    /// kept whole) for the others.
-    pub fn default_crop(self) -> Option<u32> {
-        self.about().default_crop
     }
 }
 

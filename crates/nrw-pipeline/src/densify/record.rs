@@ -64,7 +64,7 @@ pub(super) fn staging_dir(out: &Path) -> PathBuf {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "dense".into());
-    out.with_file_name(format!(".{name}.partial"))
+    out.with_file_name(nrw_dataset::publish::staging_name(&name))
 }
 
 /// Move the finished workspace into place (replacing an older one the caller may replace).

@@ -36,12 +36,7 @@ impl Remote {
     pub(super) fn open(out: &Location) -> Result<Remote> {
         let staging = Store::open(&staging_location(out)?)?;
         let out = Store::open(out)?;
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.subsec_nanos());
-        let scratch =
-            std::env::temp_dir().join(format!(".nrw-densify-{}-{nanos}", std::process::id()));
-        std::fs::create_dir_all(&scratch).map_err(|e| PipelineError::io(&scratch, e))?;
+        let scratch = nrw_dataset::publish::scratch_folder("densify")?;
         Ok(Remote {
             staging,
             out,
@@ -101,7 +96,10 @@ fn staging_location(out: &Location) -> Result<Location> {
     let text = out.to_string();
     match text.rsplit_once('/') {
         Some((parent, name)) if !name.is_empty() && !parent.ends_with(':') && !parent.ends_with('/') => {
-            Ok(Location::parse(&format!("{parent}/.{name}.partial")))
+            Ok(Location::parse(&format!(
+                "{parent}/{}",
+                nrw_dataset::publish::staging_name(name)
+            )))
         }
         _ => Err(PipelineError::config(
             Setting::DenseOut,

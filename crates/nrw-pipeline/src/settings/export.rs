@@ -123,7 +123,7 @@ impl ExportSettings {
             crop: match self.crop {
                 Some(Crop::Side(n)) => Some(n),
                 Some(Crop::Word(NoCrop::None)) => None,
-                None => self.layout.default_crop(),
+                None => self.layout.about().default_crop,
             },
             semantics: self.semantics,
             depth: self.depth,

@@ -321,15 +321,15 @@ fn colmap_fuses_the_same_cloud(ws: &Workspace, ours: &[DVec3], cams: &[Cam], min
     );
 }
 
-/// COLMAP 3.8's `image_undistorter`, run here on the scene's model and photos at `size`, and
-/// our workspace's `sparse/` agree: the same cameras (1e-9 px), poses, tracks, and every
-/// keypoint within 1e-4 px — every keypoint that has a viewing ray through its distorted
-/// camera; where one has none (a fisheye's corner past 90°, a noisy keypoint of a point seen
-/// at 89.9°), COLMAP's iterative undistortion does not converge (it writes 1e13 px and
-/// beyond), so those are counted, not compared. The largest keypoint difference.
-fn undistorter_agrees(model: &Path, images: &Path, size: Option<u32>, ours: &Path) -> f64 {
+/// The model COLMAP 3.8's `image_undistorter` writes for `model` and its photos at `size`
+/// (its `--max_image_size`; None: the photos' own), or None where `colmap` does not run.
+pub(crate) fn colmap_undistorts(
+    model: &Path,
+    images: &Path,
+    size: Option<u32>,
+) -> Option<nrw_colmap::Reconstruction> {
     if !colmap_present() {
-        return 0.0;
+        return None;
     }
     let out = tempfile::tempdir().unwrap();
     let mut cmd = std::process::Command::new("colmap");
@@ -346,7 +346,19 @@ fn undistorter_agrees(model: &Path, images: &Path, size: Option<u32>, ours: &Pat
     }
     let o = cmd.output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let theirs = nrw_colmap::read_model(&out.path().join("sparse"), None).unwrap();
+    Some(nrw_colmap::read_model(&out.path().join("sparse"), None).unwrap())
+}
+
+/// COLMAP 3.8's `image_undistorter`, run here on the scene's model and photos at `size`, and
+/// our workspace's `sparse/` agree: the same cameras (1e-9 px), poses, tracks, and every
+/// keypoint within 1e-4 px — every keypoint that has a viewing ray through its distorted
+/// camera; where one has none (a fisheye's corner past 90°, a noisy keypoint of a point seen
+/// at 89.9°), COLMAP's iterative undistortion does not converge (it writes 1e13 px and
+/// beyond), so those are counted, not compared. The largest keypoint difference.
+fn undistorter_agrees(model: &Path, images: &Path, size: Option<u32>, ours: &Path) -> f64 {
+    let Some(theirs) = colmap_undistorts(model, images, size) else {
+        return 0.0;
+    };
     let ours = nrw_colmap::read_model(ours, None).unwrap();
     let distorted = nrw_colmap::read_model(model, None).unwrap();
     assert_eq!(

@@ -3,7 +3,9 @@
 //! smaller than the photos, pycolmap 4.2.1 (every layout's model) and nerfbaselines 1.2.12's
 //! own `colmap` loader (gsplat's and nerfbaselines' layouts) find every SfM observation of
 //! every exported image, each keypoint where its image's own camera projects its point (the
-//! median within the source model's reprojection error).
+//! median within the source model's reprojection error). And each of those models is COLMAP
+//! 3.8's `image_undistorter` model of the scene (run in the test), each camera rescaled to its
+//! stored view as COLMAP rescales one: cameras, poses, points, every observation within 1e-4 px.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -114,6 +116,8 @@ fn every_layouts_colmap_model_keeps_the_sfm_observations_where_the_views_show_th
         .iter()
         .map(|(_, n)| n)
         .sum();
+    let undistorted =
+        super::densify::colmap_undistorts(&scene.join("sparse/0"), &scene.join("images"), None);
     let layouts: [Layout; 4] = [
         ("gsplat", "sparse/0", Some(("images", "sparse/0"))),
         ("nerfbaselines", "sparse", Some(("images", "sparse"))),
@@ -143,6 +147,15 @@ fn every_layouts_colmap_model_keeps_the_sfm_observations_where_the_views_show_th
             "{layout}: {}",
             String::from_utf8_lossy(&o.stderr)
         );
+        if let Some(theirs) = &undistorted {
+            let ours = nrw_colmap::read_model(&out.join(model), None).unwrap();
+            let (n, obs, cam, kp) = against_the_undistorter(layout, &ours, theirs);
+            eprintln!(
+                "{layout}: COLMAP's image_undistorter, rescaled to the stored views, and our \
+                 model agree: {n} images, {obs} observations, the largest camera parameter \
+                 difference {cam:.1e} px, the largest keypoint difference {kp:.1e} px"
+            );
+        }
         let got: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         let py = &got["pycolmap"];
         let (n, obs, median) = check_reader(
@@ -183,4 +196,98 @@ fn every_layouts_colmap_model_keeps_the_sfm_observations_where_the_views_show_th
             assert!(median2 <= source_error, "{layout}: median {median2} px");
         }
     }
+}
+
+/// `theirs`'s PINHOLE camera rescaled to `width`×`height` as COLMAP's `Camera::Rescale` does:
+/// the focal length and principal point along each axis by the ratio of the sizes on it.
+fn rescaled(theirs: &nrw_colmap::Camera, width: u64, height: u64) -> ([f64; 4], f64, f64) {
+    let (sx, sy) = (
+        width as f64 / theirs.width as f64,
+        height as f64 / theirs.height as f64,
+    );
+    let p = &theirs.params;
+    ([p[0] * sx, p[1] * sy, p[2] * sx, p[3] * sy], sx, sy)
+}
+
+/// Our exported model against COLMAP's undistorted model of the whole scene: every image of
+/// ours is one of theirs (by file name) with the same pose, its camera theirs rescaled to the
+/// stored view (1e-9 px), its observations theirs in the same order, each keypoint theirs
+/// scaled by the same ratios (what their rescaled camera's projection gives) within 1e-4 px,
+/// and every point where theirs is. Returns (images, observations, largest camera parameter
+/// difference, largest keypoint difference).
+fn against_the_undistorter(
+    layout: &str,
+    ours: &nrw_colmap::Reconstruction,
+    theirs: &nrw_colmap::Reconstruction,
+) -> (usize, usize, f64, f64) {
+    let by_name: BTreeMap<String, &nrw_colmap::Image> = theirs
+        .images
+        .values()
+        .map(|im| (nrw_export::nerfw::file_name(&im.name), im))
+        .collect();
+    let (mut observations, mut worst_camera, mut worst_keypoint) = (0, 0.0f64, 0.0f64);
+    for im in ours.images.values() {
+        let t = by_name
+            .get(&im.name)
+            .unwrap_or_else(|| panic!("{layout}: image {} is not in the scene", im.name));
+        let (tq, oq) = (t.cam_from_world.qvec(), im.cam_from_world.qvec());
+        let (tt, ot) = (t.cam_from_world.translation, im.cam_from_world.translation);
+        assert!(
+            tq.iter().zip(oq).all(|(a, b)| (a - b).abs() <= 1e-12) && (tt - ot).length() <= 1e-9,
+            "{layout}, {}: pose {tq:?} {tt} vs ours {oq:?} {ot}",
+            im.name
+        );
+        let (cam, tcam) = (&ours.cameras[&im.camera_id], &theirs.cameras[&t.camera_id]);
+        assert_eq!(
+            (cam.model, tcam.model),
+            (
+                nrw_colmap::CameraModel::Pinhole,
+                nrw_colmap::CameraModel::Pinhole
+            ),
+            "{layout}, {}",
+            im.name
+        );
+        let (want, sx, sy) = rescaled(tcam, cam.width, cam.height);
+        for (a, b) in want.iter().zip(&cam.params) {
+            worst_camera = worst_camera.max((a - b).abs());
+        }
+        assert!(
+            worst_camera <= 1e-9,
+            "{layout}, {}: camera {:?} vs COLMAP's rescaled {want:?}",
+            im.name,
+            cam.params
+        );
+        let seen: Vec<_> = t.points2d.iter().filter(|p| p.has_point3d()).collect();
+        assert_eq!(seen.len(), im.points2d.len(), "{layout}, {}", im.name);
+        for (k, (a, b)) in seen.iter().zip(&im.points2d).enumerate() {
+            assert_eq!(
+                a.point3d_id, b.point3d_id,
+                "{layout}, {} observation {k}",
+                im.name
+            );
+            let d = (glam::DVec2::new(a.xy.x * sx, a.xy.y * sy) - b.xy).length();
+            assert!(
+                d <= 1e-4,
+                "{layout}, {} observation {k}: COLMAP's {} rescaled vs ours {} ({d} px)",
+                im.name,
+                a.xy,
+                b.xy
+            );
+            worst_keypoint = worst_keypoint.max(d);
+        }
+        observations += im.points2d.len();
+    }
+    for (id, p) in &ours.points {
+        assert!(
+            (theirs.points[id].xyz - p.xyz).length() <= 1e-9,
+            "{layout}: point {id}"
+        );
+    }
+    assert!(observations > 0, "{layout}: no observation compared");
+    (
+        ours.images.len(),
+        observations,
+        worst_camera,
+        worst_keypoint,
+    )
 }

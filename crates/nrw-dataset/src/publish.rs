@@ -24,6 +24,13 @@ pub fn rename_into_place(staged: &Path, out: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Whether the destination of a folder published whole already holds files (locally) or
+/// objects (on object storage): what a stage's claim on its output tests before it would
+/// replace them, the same test wherever the destination is.
+pub fn occupied(out: &Store) -> Result<bool> {
+    Ok(!out.list("")?.is_empty())
+}
+
 /// The hidden name a folder called `name` is built under beside its destination (a sibling
 /// folder locally, a sibling prefix on object storage), so the units of one run find it.
 pub fn staging_name(name: &str) -> String {
@@ -91,6 +98,8 @@ mod tests {
         std::fs::create_dir_all(&copy).unwrap();
         std::fs::write(copy.join("stale"), b"old").unwrap();
         let earlier = Store::local(&copy).list("").unwrap();
+        assert!(occupied(&Store::local(&copy)).unwrap());
+        assert!(!occupied(&Store::local(tmp.path().join("nothing"))).unwrap());
         upload_folder(&staged, &Store::local(&copy), &earlier, "done").unwrap();
         assert_eq!(
             Store::local(&copy).list("").unwrap(),

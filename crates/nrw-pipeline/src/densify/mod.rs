@@ -117,12 +117,12 @@ fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<P
     let distorted = crate::model::undistort_model(&mut rec, &options, &scene.model_dir)?;
     let (ws, remote) = match &out {
         Location::Local(dir) => {
-            claim(dir, cfg.overwrite)?;
+            claim(&out, &Store::local(dir), cfg.overwrite)?;
             (Workspace::new(&staging_dir(dir)), None)
         }
         Location::Url(_) => {
             let remote = Remote::open(&out)?;
-            remote::claim(&out, &remote.out, cfg.overwrite)?;
+            claim(&out, &remote.out, cfg.overwrite)?;
             (Workspace::new(&remote.scratch), Some(remote))
         }
     };

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nrw_dataset::Location;
+use nrw_dataset::{Location, Store};
 
 use super::config::Settings;
 use crate::error::{PipelineError, Result, Setting};
@@ -35,27 +35,28 @@ pub(super) fn settings_differ(record: Location, differ: &[String]) -> PipelineEr
     )
 }
 
-/// Refuse to replace a non-empty folder at `out` unless asked to.
-pub(super) fn claim(out: &Path, overwrite: bool) -> Result<()> {
-    let occupied = std::fs::read_dir(out).is_ok_and(|mut d| d.next().is_some());
-    if occupied && !overwrite {
-        return Err(PipelineError::config(
+/// Refuse to replace an output that holds files (locally) or objects (on a bucket) unless
+/// asked to: one claim wherever the workspace goes. `store` is the store at `out`.
+pub(super) fn claim(out: &Location, store: &Store, overwrite: bool) -> Result<()> {
+    if let Location::Local(dir) = out {
+        if dir.exists() && !dir.is_dir() {
+            return Err(PipelineError::input(
+                dir,
+                "is a file, not a folder: the dense workspace is a folder",
+            ));
+        }
+    }
+    if overwrite || !nrw_dataset::publish::occupied(store)? {
+        return Ok(());
+    }
+    Err(PipelineError::config(
+        Setting::Overwrite,
+        format!(
+            "{out} already holds a dense workspace (perhaps your own COLMAP run); it is kept unless {} is set — or write elsewhere with {}",
             Setting::Overwrite,
-            format!(
-                "{} already holds a dense workspace (perhaps your own COLMAP run); it is kept unless {} is set — or write elsewhere with {}",
-                out.display(),
-                Setting::Overwrite,
-                Setting::DenseOut
-            ),
-        ));
-    }
-    if out.exists() && !out.is_dir() {
-        return Err(PipelineError::input(
-            out,
-            "is a file, not a folder: the dense workspace is a folder",
-        ));
-    }
-    Ok(())
+            Setting::DenseOut
+        ),
+    ))
 }
 
 /// The folder a workspace is built in before it replaces `out` whole.

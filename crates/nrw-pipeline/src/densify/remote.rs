@@ -117,21 +117,6 @@ pub(super) fn rel(ws: &Workspace, path: &Path) -> String {
         .join("/")
 }
 
-/// Refuse an output prefix that holds objects unless asked to replace them.
-pub(super) fn claim(out: &Location, store: &Store, overwrite: bool) -> Result<()> {
-    if !overwrite && !store.list("")?.is_empty() {
-        return Err(PipelineError::config(
-            Setting::Overwrite,
-            format!(
-                "{out} already holds objects; they are kept unless {} is set — or write elsewhere with {}",
-                Setting::Overwrite,
-                Setting::DenseOut
-            ),
-        ));
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

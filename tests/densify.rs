@@ -698,6 +698,27 @@ fn densify_lets_ingest_keep_sacre_coeur_views_it_drops_from_the_sparse_model() {
     assert!(kept >= 5, "{dense_line}");
 }
 
+/// Unit 0/2 of a 4-view scene's photometric pass stopped after one view (exit 130, as a kill
+/// would), `after_stop` run, then the unit rerun: it finishes, finding that view done. `run`
+/// runs densify with the extra arguments given.
+pub(crate) fn a_stopped_unit_resumes(
+    run: &dyn Fn(&[&str]) -> std::process::Output,
+    after_stop: &dyn Fn(),
+) {
+    let unit = ["--unit", "0/2", "--pass", "photometric"];
+    let o = run(&[&unit[..], &["--stop-after-views", "1"]].concat());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    after_stop();
+    let o = run(&unit);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("2 of 4 views; 1 matched, 1 found done"),
+        "{err}"
+    );
+}
+
 #[test]
 fn densify_units_and_finalize_give_the_bytes_of_one_process_and_a_stopped_unit_resumes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -731,25 +752,7 @@ fn densify_units_and_finalize_give_the_bytes_of_one_process_and_a_stopped_unit_r
     );
 
     // Unit 0/2 of the photometric pass stops after one view (as a kill would), then resumes.
-    let o = run(
-        &split,
-        &[
-            "--unit",
-            "0/2",
-            "--pass",
-            "photometric",
-            "--stop-after-views",
-            "1",
-        ],
-    );
-    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
-    let o = run(&split, &["--unit", "0/2", "--pass", "photometric"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stderr(&o).contains("2 of 4 views; 1 matched, 1 found done"),
-        "{}",
-        stderr(&o)
-    );
+    a_stopped_unit_resumes(&|extra| run(&split, extra), &|| {});
     // A unit with other settings is refused, naming the setting.
     let e = fails(&super::strs(&args(
         &split,

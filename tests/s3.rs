@@ -540,41 +540,19 @@ fn densify_on_s3_as_units_and_finalize_gives_the_bytes_of_a_local_run_and_a_stop
     );
     // Unit 0/2 of the photometric pass stops after one view (as a kill would), then resumes
     // from the maps it shared: the machine's scratch folder is gone with the process.
-    let o = run(
-        url,
-        &[
-            "--unit",
-            "0/2",
-            "--pass",
-            "photometric",
-            "--stop-after-views",
-            "1",
-        ],
-    );
-    assert_eq!(
-        o.status.code(),
-        Some(130),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let shared = m.files("s3://nrw/scene/.dense.partial");
-    assert!(
-        shared.contains_key(Path::new("densify.json"))
-            && shared.keys().filter(|k| k.starts_with("stereo")).count() == 2,
-        "the stopped unit shared its record and one view's two maps: {:?}",
-        shared.keys().collect::<Vec<_>>()
-    );
-    assert!(
-        m.files(url).is_empty(),
-        "nothing is published before finalize"
-    );
-    let o = run(url, &["--unit", "0/2", "--pass", "photometric"]);
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert!(o.status.success(), "{err}");
-    assert!(
-        err.contains("2 of 4 views; 1 matched, 1 found done"),
-        "{err}"
-    );
+    super::densify::a_stopped_unit_resumes(&|extra| run(url, extra), &|| {
+        let shared = m.files("s3://nrw/scene/.dense.partial");
+        assert!(
+            shared.contains_key(Path::new("densify.json"))
+                && shared.keys().filter(|k| k.starts_with("stereo")).count() == 2,
+            "the stopped unit shared its record and one view's two maps: {:?}",
+            shared.keys().collect::<Vec<_>>()
+        );
+        assert!(
+            m.files(url).is_empty(),
+            "nothing is published before finalize"
+        );
+    });
     assert_ok(&run(url, &["--unit", "1/2", "--pass", "photometric"]));
     for unit in ["1/2", "0/2"] {
         assert_ok(&run(url, &["--unit", unit, "--pass", "geometric"]));

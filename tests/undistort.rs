@@ -6,7 +6,7 @@ use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array};
 use nrw_dataset::reader::Dataset;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
-use super::{assert_same_files, column, data, files, nrw, ok, shared};
+use super::{assert_same_files, column, data, fails, files, nrw, ok, shared};
 
 #[test]
 fn ingest_undistort_stores_colmaps_pinhole_cameras_and_photos() {
@@ -180,4 +180,89 @@ fn undistorted_units_and_finalize_write_the_bytes_of_one_process() {
     let m: serde_json::Value =
         serde_json::from_slice(&std::fs::read(whole.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(m["parameters"]["undistort"]["blank_pixels"], 0.0, "{m}");
+}
+
+/// A scene of COLMAP 4's SIMPLE_DIVISION cameras: `ingest` renders it with its own lens and
+/// `--undistort` stores PINHOLE views that gsplat's layout exports; without `--undistort` that
+/// export is refused naming its reader and the command that fixes it. A 360° model
+/// (EQUIRECTANGULAR) is inspected, and refused by ingest naming the file, camera and model.
+#[test]
+fn colmap_4_cameras_go_through_ingest_and_export_and_a_panorama_is_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(5, (220, 260), 60_000);
+    spec.cameras.model = "SIMPLE_DIVISION".into();
+    spec.cameras.distortion = 3.0;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let s = scene.to_str().unwrap();
+    let small = [
+        "--min-photo-side",
+        "100",
+        "--min-dim",
+        "150",
+        "--max-empty",
+        "1.0",
+    ];
+    for (name, undistort) in [("pinhole", true), ("division", false)] {
+        let ds = tmp.path().join(name);
+        let d = ds.to_str().unwrap();
+        let mut args = vec!["ingest", s, "--out", d];
+        args.extend(small);
+        if undistort {
+            args.push("--undistort");
+        }
+        let o = nrw(&args);
+        let line = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            o.status.success() && line.contains("5 registered, 5 kept"),
+            "{line}"
+        );
+        ok(&["split", d, "--val", "1"]);
+        let out = tmp.path().join(format!("{name}_gsplat"));
+        let export = [
+            "export",
+            d,
+            "--layout",
+            "gsplat",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if undistort {
+            ok(&export);
+            let model = nrw_colmap::read_model(&out.join("sparse/0"), None).unwrap();
+            assert!(model.cameras.values().all(|c| c.model.name() == "PINHOLE"));
+        } else {
+            let err = fails(&export);
+            assert!(
+                err.contains("SIMPLE_DIVISION")
+                    && err.contains("graphdeco")
+                    && err.contains("nrw-etl ingest SCENE --out DATASET --undistort"),
+                "{err}"
+            );
+        }
+    }
+
+    let mut rec = nrw_colmap::read_model(&scene.join("sparse/0"), None).unwrap();
+    for c in rec.cameras.values_mut() {
+        c.model = nrw_colmap::CameraModel::Equirectangular;
+        c.params = vec![c.width as f64, c.height as f64];
+    }
+    let pano = tmp.path().join("pano");
+    nrw_colmap::write_model(&rec, &pano.join("sparse/0"), nrw_colmap::Format::Binary).unwrap();
+    let p = pano.to_str().unwrap();
+    let text = ok(&["inspect", p]);
+    assert!(text.contains("EQUIRECTANGULAR"), "{text}");
+    let err = fails(&[
+        "ingest",
+        p,
+        "--images",
+        scene.join("images").to_str().unwrap(),
+        "--out",
+        tmp.path().join("no").to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("cameras.bin")
+            && err.contains("camera 1: model EQUIRECTANGULAR is a 360° panorama"),
+        "{err}"
+    );
 }

@@ -168,7 +168,7 @@ pub(crate) fn read_cameras(path: &Path, data: &[u8]) -> Result<BTreeMap<u32, Cam
                 path,
                 rec,
                 "model_id",
-                format!("unknown camera model id {model_id} (known: 0-11, 14, 15)"),
+                format!("unknown camera model id {model_id} (known: 0-17, COLMAP 4.2's)"),
             )
         })?;
         let width = b.u64(rec, "width")?;

@@ -59,6 +59,9 @@ pub enum UndistortError {
     /// Options outside their meaning.
     #[error("undistortion options: {0}")]
     Options(String),
+    /// A 360° panorama: no pinhole camera covers it (COLMAP's undistorter refuses it too).
+    #[error("camera {camera} ({model}) is a 360° panorama: no pinhole camera covers it, and COLMAP's image_undistorter refuses it too (camera.IsPerspective())")]
+    Spherical { camera: u32, model: &'static str },
     /// An image names a camera the model does not have.
     #[error("image {image} names camera {camera}, which the model does not have")]
     MissingCamera { image: u32, camera: u32 },
@@ -144,6 +147,12 @@ pub fn undistort_camera(
     options: &UndistortOptions,
 ) -> Result<Camera, UndistortError> {
     check_options(options)?;
+    if camera.model.is_spherical() {
+        return Err(UndistortError::Spherical {
+            camera: camera.id,
+            model: camera.model.name(),
+        });
+    }
     let f = camera.focal();
     let pp = camera.principal_point();
     let mut out = Camera {

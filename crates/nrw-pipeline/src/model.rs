@@ -17,6 +17,28 @@ pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(Scene, Recons
     Ok((scene, rec))
 }
 
+/// Refuse a model with a 360° camera (EQUIRECTANGULAR) before a stage that renders or
+/// undistorts its views: nrw-etl reads and inspects panoramas but draws perspective and
+/// fisheye views only, and COLMAP's undistorter refuses them too. Names the cameras file,
+/// the camera and its model.
+pub fn refuse_panoramas(scene: &Scene, rec: &Reconstruction) -> Result<()> {
+    let Some(cam) = rec.cameras.values().find(|c| c.model.is_spherical()) else {
+        return Ok(());
+    };
+    let file = ["cameras.bin", "cameras.txt"]
+        .map(|n| scene.model_dir.join(n))
+        .into_iter()
+        .find(|p| p.exists())
+        .unwrap_or_else(|| scene.model_dir.clone());
+    Err(PipelineError::input(
+        file,
+        format!(
+            "camera {}: model {} is a 360° panorama; nrw-etl reads and inspects it, but renders perspective and fisheye views only, and COLMAP's image_undistorter refuses it too — reconstruct from perspective crops of the panoramas",
+            cam.id, cam.model
+        ),
+    ))
+}
+
 /// The model as COLMAP's `image_undistorter` writes it (PINHOLE cameras, keypoints carried
 /// into the undistorted images), and the original cameras; ingest, densify and finalize all
 /// derive it this way.

@@ -31,7 +31,11 @@ pub fn default_extra(model: CameraModel, d: f64) -> Vec<f64> {
         | CameraModel::Pinhole
         | CameraModel::SimpleFisheye
         | CameraModel::Fisheye => &[],
-        CameraModel::SimpleRadial => &[-0.04],
+        CameraModel::SimpleRadial | CameraModel::SimpleDivision | CameraModel::Division => &[-0.04],
+        // α = 0 is a pinhole whatever β; β stays 1 (a sphere).
+        CameraModel::Eucm => return vec![0.1 * d, 1.0],
+        // A panorama's parameters are its size (spec checks refuse it before this).
+        CameraModel::Equirectangular => &[],
         CameraModel::Radial => &[-0.04, 0.008],
         CameraModel::OpenCv => &[-0.04, 0.008, 0.0005, -0.0003],
         CameraModel::FullOpenCv => &[-0.04, 0.008, 0.0005, -0.0003, 0.001, 0.002, 0.0005, 0.0001],

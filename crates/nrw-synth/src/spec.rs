@@ -221,11 +221,22 @@ impl SceneSpec {
             return bad("geometry.origin", "must be finite".into());
         }
         let c = &self.cameras;
-        if nrw_colmap::CameraModel::from_name(&c.model).is_none() {
-            return bad(
-                "cameras.model",
-                format!("unknown camera model {:?}", c.model),
-            );
+        match nrw_colmap::CameraModel::from_name(&c.model) {
+            None => {
+                return bad(
+                    "cameras.model",
+                    format!("unknown camera model {:?}", c.model),
+                )
+            }
+            Some(m) if m.is_spherical() => {
+                return bad(
+                    "cameras.model",
+                    format!(
+                    "{m} is a 360° panorama: the renderer draws perspective and fisheye views only"
+                ),
+                )
+            }
+            Some(_) => {}
         }
         if c.count == 0 || c.count > 100_000 {
             return bad("cameras.count", "must be 1 to 100000".into());

@@ -29,13 +29,17 @@ pub enum CameraModel {
     RadialFisheye,
     ThinPrismFisheye,
     RadTanThinPrismFisheye,
+    SimpleDivision,
+    Division,
     SimpleFisheye,
     Fisheye,
+    Eucm,
+    Equirectangular,
 }
 
 impl CameraModel {
     /// Every supported model, in COLMAP id order.
-    pub const ALL: [CameraModel; 14] = [
+    pub const ALL: [CameraModel; 18] = [
         CameraModel::SimplePinhole,
         CameraModel::Pinhole,
         CameraModel::SimpleRadial,
@@ -48,8 +52,12 @@ impl CameraModel {
         CameraModel::RadialFisheye,
         CameraModel::ThinPrismFisheye,
         CameraModel::RadTanThinPrismFisheye,
+        CameraModel::SimpleDivision,
+        CameraModel::Division,
         CameraModel::SimpleFisheye,
         CameraModel::Fisheye,
+        CameraModel::Eucm,
+        CameraModel::Equirectangular,
     ];
 
     /// COLMAP's numeric model id, as stored in cameras.bin.
@@ -67,8 +75,12 @@ impl CameraModel {
             CameraModel::RadialFisheye => 9,
             CameraModel::ThinPrismFisheye => 10,
             CameraModel::RadTanThinPrismFisheye => 11,
+            CameraModel::SimpleDivision => 12,
+            CameraModel::Division => 13,
             CameraModel::SimpleFisheye => 14,
             CameraModel::Fisheye => 15,
+            CameraModel::Eucm => 16,
+            CameraModel::Equirectangular => 17,
         }
     }
 
@@ -92,8 +104,12 @@ impl CameraModel {
             CameraModel::RadialFisheye => "RADIAL_FISHEYE",
             CameraModel::ThinPrismFisheye => "THIN_PRISM_FISHEYE",
             CameraModel::RadTanThinPrismFisheye => "RAD_TAN_THIN_PRISM_FISHEYE",
+            CameraModel::SimpleDivision => "SIMPLE_DIVISION",
+            CameraModel::Division => "DIVISION",
             CameraModel::SimpleFisheye => "SIMPLE_FISHEYE",
             CameraModel::Fisheye => "FISHEYE",
+            CameraModel::Eucm => "EUCM",
+            CameraModel::Equirectangular => "EQUIRECTANGULAR",
         }
     }
 
@@ -107,7 +123,13 @@ impl CameraModel {
         match self {
             CameraModel::SimplePinhole | CameraModel::SimpleFisheye => &["f", "cx", "cy"],
             CameraModel::Pinhole | CameraModel::Fisheye => &["fx", "fy", "cx", "cy"],
-            CameraModel::SimpleRadial | CameraModel::SimpleRadialFisheye => &["f", "cx", "cy", "k"],
+            CameraModel::SimpleRadial
+            | CameraModel::SimpleRadialFisheye
+            | CameraModel::SimpleDivision => &["f", "cx", "cy", "k"],
+            CameraModel::Division => &["fx", "fy", "cx", "cy", "k"],
+            CameraModel::Eucm => &["fx", "fy", "cx", "cy", "alpha", "beta"],
+            // COLMAP 4.2 spells them "w,h": the panorama's size, its only parameters.
+            CameraModel::Equirectangular => &["w", "h"],
             CameraModel::Radial | CameraModel::RadialFisheye => &["f", "cx", "cy", "k1", "k2"],
             CameraModel::OpenCv => &["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"],
             CameraModel::OpenCvFisheye => &["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"],
@@ -147,6 +169,13 @@ impl CameraModel {
                 | CameraModel::SimpleFisheye
                 | CameraModel::Fisheye
         )
+    }
+
+    /// Whether the model sees the whole sphere (COLMAP's `IsSpherical`): it has no focal
+    /// length or principal point, projects points behind the camera too, and COLMAP's
+    /// undistorter refuses it (`camera.IsPerspective()`), so no pinhole view is made of it.
+    pub fn is_spherical(self) -> bool {
+        self == CameraModel::Equirectangular
     }
 
     /// Whether projecting through this model does more than `f·x/z + c`.
@@ -213,12 +242,28 @@ macro_rules! dispatch {
                 type $m = RadTanThinPrismFisheyeP;
                 $body
             }
+            CameraModel::SimpleDivision => {
+                type $m = SimpleDivisionP;
+                $body
+            }
+            CameraModel::Division => {
+                type $m = DivisionP;
+                $body
+            }
             CameraModel::SimpleFisheye => {
                 type $m = SimpleFisheyeP;
                 $body
             }
             CameraModel::Fisheye => {
                 type $m = FisheyeP;
+                $body
+            }
+            CameraModel::Eucm => {
+                type $m = EucmP;
+                $body
+            }
+            CameraModel::Equirectangular => {
+                type $m = EquirectangularP;
                 $body
             }
         }
@@ -265,6 +310,9 @@ impl Camera {
     /// 1e-6 px or `None` is returned (e.g. beyond the fold of a strong radial distortion, or
     /// past a fisheye's 90°).
     pub fn cam_ray_from_img(&self, px: DVec2) -> Option<DVec3> {
+        if self.model.is_spherical() {
+            return equirectangular_ray(&self.params, px);
+        }
         let guess = (px - self.principal_point()) / self.focal();
         if !self.model.has_distortion() {
             return Some(DVec3::new(guess.x, guess.y, 1.0).normalize());
@@ -385,6 +433,13 @@ impl Camera {
 
     /// Focal lengths (fx, fy); models with one focal length return it twice.
     pub fn focal(&self) -> DVec2 {
+        if self.model.is_spherical() {
+            // No focal length: the angular resolution, pixels per radian along each axis.
+            return DVec2::new(
+                self.params[0] / std::f64::consts::TAU,
+                self.params[1] / std::f64::consts::PI,
+            );
+        }
         if self.model.single_focal() {
             DVec2::splat(self.params[0])
         } else {
@@ -394,6 +449,10 @@ impl Camera {
 
     /// Principal point (cx, cy) in pixels.
     pub fn principal_point(&self) -> DVec2 {
+        if self.model.is_spherical() {
+            // No principal point: the pixel the forward axis projects to.
+            return DVec2::new(self.params[0], self.params[1]) * 0.5;
+        }
         let i = if self.model.single_focal() { 1 } else { 2 };
         DVec2::new(self.params[i], self.params[i + 1])
     }
@@ -404,7 +463,10 @@ impl Camera {
     /// factors keeps that exact.
     pub fn scaled(&self, sx: f64, sy: f64, width: u64, height: u64) -> Camera {
         let mut params = self.params.clone();
-        if self.model.single_focal() {
+        if self.model.is_spherical() {
+            // Its parameters are its size.
+            params = vec![width as f64, height as f64];
+        } else if self.model.single_focal() {
             params[0] *= 0.5 * (sx + sy);
             params[1] *= sx;
             params[2] *= sy;
@@ -425,174 +487,4 @@ impl Camera {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn cam(model: CameraModel, params: &[f64]) -> Camera {
-        Camera {
-            id: 1,
-            model,
-            width: 100,
-            height: 80,
-            params: params.to_vec(),
-        }
-    }
-
-    #[test]
-    fn ids_and_names_round_trip() {
-        for m in CameraModel::ALL {
-            assert_eq!(CameraModel::from_id(m.id()), Some(m));
-            assert_eq!(CameraModel::from_name(m.name()), Some(m));
-        }
-        assert_eq!(CameraModel::from_id(12), None);
-        assert_eq!(CameraModel::from_id(-1), None);
-    }
-
-    #[test]
-    fn behind_on_and_nan_points_are_not_visible() {
-        for m in CameraModel::ALL {
-            let mut params = vec![0.0; m.num_params()];
-            params[0] = 100.0;
-            if !m.single_focal() {
-                params[1] = 100.0;
-            }
-            let c = cam(m, &params);
-            assert_eq!(
-                c.img_from_cam(DVec3::new(0.1, 0.2, 0.0)),
-                None,
-                "{m} on plane"
-            );
-            assert_eq!(
-                c.img_from_cam(DVec3::new(0.1, 0.2, -1.0)),
-                None,
-                "{m} behind"
-            );
-            assert_eq!(
-                c.img_from_cam(DVec3::new(0.1, 0.2, 1e-17)),
-                None,
-                "{m} below eps"
-            );
-            assert_eq!(
-                c.img_from_cam(DVec3::new(f64::NAN, 0.2, 1.0)),
-                None,
-                "{m} nan"
-            );
-            assert!(
-                c.img_from_cam(DVec3::new(0.1, 0.2, 1.0)).is_some(),
-                "{m} in front"
-            );
-        }
-    }
-
-    #[test]
-    fn principal_axis_hits_principal_point() {
-        let c = cam(
-            CameraModel::OpenCvFisheye,
-            &[500.0, 510.0, 320.5, 240.5, 0.1, 0.01, 0.0, 0.0],
-        );
-        assert_eq!(
-            c.img_from_cam(DVec3::new(0.0, 0.0, 3.0)),
-            Some(DVec2::new(320.5, 240.5))
-        );
-    }
-
-    #[test]
-    fn fisheye_beyond_90_degrees_is_not_visible() {
-        let c = cam(
-            CameraModel::OpenCvFisheye,
-            &[500.0, 500.0, 320.0, 240.0, 0.0, 0.0, 0.0, 0.0],
-        );
-        // 89.9° is visible and lands at f·θ from the centre; 90.1° is behind the camera.
-        let a = 89.9f64.to_radians();
-        let px = c.img_from_cam(DVec3::new(a.sin(), 0.0, a.cos())).unwrap();
-        assert!((px.x - (320.0 + 500.0 * a)).abs() < 1e-9);
-        let b = 90.1f64.to_radians();
-        assert_eq!(c.img_from_cam(DVec3::new(b.sin(), 0.0, b.cos())), None);
-    }
-
-    #[test]
-    fn rays_from_pixels_reproject_for_every_model() {
-        for m in CameraModel::ALL {
-            let mut params = vec![0.0; m.num_params()];
-            let k = if m.single_focal() { 1 } else { 2 };
-            params[..k].fill(if m.is_fisheye() { 420.0 } else { 700.0 });
-            params[k] = 400.0;
-            params[k + 1] = 300.0;
-            for (i, p) in params.iter_mut().enumerate().skip(k + 2) {
-                *p = if m == CameraModel::Fov {
-                    0.8
-                } else {
-                    0.02 / (i as f64)
-                };
-            }
-            let c = cam(m, &params);
-            for y in (0..600).step_by(37) {
-                for x in (0..800).step_by(41) {
-                    let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-                    let ray = c.cam_ray_from_img(px).unwrap_or_else(|| panic!("{m} {px}"));
-                    assert!((ray.length() - 1.0).abs() < 1e-12);
-                    let back = c.img_from_cam(ray * 7.0).unwrap();
-                    assert!((back - px).length() < 1e-6, "{m} {px} -> {back}");
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn injective_radius_finds_the_fold_of_a_negative_radial_term() {
-        // x(1 + k x²) peaks at x = 1/√(−3k): 2.887 for k = −0.04.
-        let c = cam(CameraModel::SimpleRadial, &[500.0, 320.0, 240.0, -0.04]);
-        let r = c.injective_radius();
-        assert!((r - 1.0 / (0.12f64).sqrt()).abs() < 0.03, "{r}");
-        // Positive k never folds; pinhole never does.
-        assert_eq!(
-            cam(CameraModel::SimpleRadial, &[500.0, 320.0, 240.0, 0.04]).injective_radius(),
-            100.0
-        );
-        assert_eq!(
-            cam(CameraModel::Pinhole, &[500.0, 500.0, 320.0, 240.0]).injective_radius(),
-            100.0
-        );
-    }
-
-    #[test]
-    fn overflowing_distortion_is_not_a_pixel() {
-        let c = cam(CameraModel::Radial, &[100.0, 50.0, 40.0, 1e300, 1e300]);
-        assert_eq!(c.img_from_cam(DVec3::new(1e10, 1e10, 1.0)), None);
-    }
-
-    #[test]
-    fn scaling_moves_focal_and_principal_point_only() {
-        let c = cam(CameraModel::SimpleRadial, &[1000.0, 50.0, 40.0, 0.1]);
-        let s = c.scaled(0.5, 0.5, 50, 40);
-        assert_eq!(s.params, vec![500.0, 25.0, 20.0, 0.1]);
-        let p = DVec3::new(0.01, -0.02, 1.0);
-        let a = c.img_from_cam(p).unwrap();
-        let b = s.img_from_cam(p).unwrap();
-        assert!((a * 0.5 - b).length() < 1e-12);
-    }
-
-    #[test]
-    fn project_many_equals_one_by_one() {
-        let c = cam(
-            CameraModel::FullOpenCv,
-            &[
-                500.0, 510.0, 320.0, 240.0, 0.1, -0.01, 0.001, 0.002, 0.001, 0.01, 0.001, 0.0001,
-            ],
-        );
-        let pts: Vec<DVec3> = (0..50)
-            .map(|i| {
-                DVec3::new(
-                    i as f64 * 0.01 - 0.25,
-                    0.1,
-                    if i % 7 == 0 { -1.0 } else { 1.0 },
-                )
-            })
-            .collect();
-        let mut out = Vec::new();
-        c.project_many(&pts, &mut out);
-        for (p, o) in pts.iter().zip(&out) {
-            assert_eq!(c.img_from_cam(*p), *o);
-        }
-    }
-}
+mod tests;

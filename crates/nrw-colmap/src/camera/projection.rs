@@ -84,8 +84,12 @@ zst!(
     RadialFisheyeP,
     ThinPrismFisheyeP,
     RadTanThinPrismFisheyeP,
+    SimpleDivisionP,
+    DivisionP,
     SimpleFisheyeP,
-    FisheyeP
+    FisheyeP,
+    EucmP,
+    EquirectangularP
 );
 
 impl Projection for SimplePinholeP {
@@ -304,4 +308,83 @@ impl Projection for FisheyeP {
         let (uu, vv) = fisheye_from_normal(u, v);
         finite(p_[0] * uu + p_[2], p_[1] * vv + p_[3])
     }
+}
+
+/// Fitzgibbon's one-parameter division model as COLMAP 4.2 projects it, on the camera point
+/// as given (not its normalised coordinates): the smaller root of `ρ k r² − w r + ρ = 0`, or
+/// `None` where the discriminant is negative (k > 0 past the fold). COLMAP's division models
+/// ignore cheirality and project points behind the camera too; here, as for every other
+/// perspective model, a point with z < ε is not visible (no photo shows it).
+#[inline(always)]
+fn division(f: DVec2, c: DVec2, k: f64, p: DVec3) -> Option<DVec2> {
+    normalise(p)?;
+    let (u, v, w) = (p.x, p.y, p.z);
+    let rho = (u * u + v * v).sqrt();
+    let disc_sq = w * w - 4.0 * rho * rho * k;
+    if disc_sq < 0.0 {
+        return None;
+    }
+    let r = 2.0 / (w + disc_sq.sqrt());
+    finite(f.x * r * u + c.x, f.y * r * v + c.y)
+}
+
+impl Projection for SimpleDivisionP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        division(DVec2::splat(p_[0]), DVec2::new(p_[1], p_[2]), p_[3], p)
+    }
+}
+
+impl Projection for DivisionP {
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        division(DVec2::new(p_[0], p_[1]), DVec2::new(p_[2], p_[3]), p_[4], p)
+    }
+}
+
+impl Projection for EucmP {
+    /// The Enhanced Unified Camera Model (Khomutenko, Garcia and Martinet) as COLMAP 4.2
+    /// projects it: `den = α·sqrt(β(u² + v²) + w²) + (1 − α)·w`, both w and den at least ε.
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        normalise(p)?;
+        let (u, v, w) = (p.x, p.y, p.z);
+        let (alpha, beta) = (p_[4], p_[5]);
+        let rho2 = beta * (u * u + v * v) + w * w;
+        if rho2 < 0.0 {
+            return None;
+        }
+        let den = alpha * rho2.sqrt() + (1.0 - alpha) * w;
+        if den.partial_cmp(&f64::EPSILON)?.is_lt() {
+            return None;
+        }
+        finite(p_[0] * (u / den) + p_[2], p_[1] * (v / den) + p_[3])
+    }
+}
+
+impl Projection for EquirectangularP {
+    /// COLMAP 4.2's 360° panorama: azimuth from +z across the width, elevation (up is −y)
+    /// down the height; every direction but the zero vector projects, behind the camera too.
+    #[inline(always)]
+    fn project(p_: &[f64], p: DVec3) -> Option<DVec2> {
+        use std::f64::consts::PI;
+        let (u, v, w) = (p.x, p.y, p.z);
+        let horizontal = (u * u + w * w).sqrt();
+        if (horizontal + v.abs()).partial_cmp(&f64::EPSILON)?.is_lt() {
+            return None;
+        }
+        let theta = u.atan2(w);
+        let phi = (-v).atan2(horizontal);
+        finite((theta / (2.0 * PI) + 0.5) * p_[0], (0.5 - phi / PI) * p_[1])
+    }
+}
+
+/// The unit ray of a panorama's pixel (COLMAP 4.2's `CamRayFromImg` for EQUIRECTANGULAR):
+/// every pixel has one, behind the camera included.
+pub(super) fn equirectangular_ray(p_: &[f64], px: DVec2) -> Option<DVec3> {
+    use std::f64::consts::PI;
+    let theta = 2.0 * PI * (px.x / p_[0] - 0.5);
+    let phi = PI * (0.5 - px.y / p_[1]);
+    let ray = DVec3::new(phi.cos() * theta.sin(), -phi.sin(), phi.cos() * theta.cos());
+    ray.is_finite().then_some(ray)
 }

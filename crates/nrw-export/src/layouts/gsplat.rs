@@ -129,14 +129,18 @@ struct Encoder<'a> {
     model: Mutex<BTreeMap<u32, ModelView>>,
 }
 
+/// What this layout's readers do with a camera that is not a pinhole.
+const READERS: &str = "graphdeco's 3D Gaussian Splatting loader, which reads this layout \
+     beside gsplat's Parser, accepts only PINHOLE and SIMPLE_PINHOLE cameras";
+
 impl ViewEncoder for Encoder<'_> {
     fn check_view(&self, v: &ViewRow) -> Result<()> {
-        crate::nerfw::pinhole(v).map(|_| ())
+        crate::nerfw::pinhole(v, READERS).map(|_| ())
     }
 
     fn encode(&self, v: &ViewRow, _split: &str, _index: &str) -> Result<Encoded> {
         let file = crate::nerfw::file_name(&v.name);
-        let camera = crate::nerfw::pinhole(v)?;
+        let camera = crate::nerfw::pinhole(v, READERS)?;
         let mut image = crate::nerfw::model_image(v, &file)?;
         image.points2d = crate::colmap_model::observations(v, self.scene, &camera)?;
         let mut out: Encoded = vec![(format!("images/{file}"), v.photo_png.clone())];

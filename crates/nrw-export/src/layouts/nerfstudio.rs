@@ -77,8 +77,21 @@ pub fn camera_keys(v: &ViewRow) -> Result<Map<String, Value>> {
         CameraModel::Fisheye => ([p[0], p[1], p[2], p[3]], [0.0; 4], true),
         CameraModel::Fov => {
             return Err(refused(
-                "(a division model: atan-based distortion) has no exact nerfstudio equivalent",
+                "(atan-based distortion) has no exact nerfstudio equivalent",
             ))
+        }
+        CameraModel::SimpleDivision | CameraModel::Division => {
+            return Err(refused(
+                "(Fitzgibbon's division model) has no exact nerfstudio equivalent",
+            ))
+        }
+        CameraModel::Eucm => {
+            return Err(refused(
+                "(the enhanced unified camera model) has no exact nerfstudio equivalent",
+            ))
+        }
+        CameraModel::Equirectangular => {
+            return Err(refused("(a 360° panorama) is not a view a dataset holds"))
         }
         CameraModel::FullOpenCv => {
             return Err(refused(

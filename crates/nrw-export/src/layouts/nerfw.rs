@@ -49,8 +49,14 @@ pub fn file_name(view_name: &str) -> String {
     p.with_extension("png").to_string_lossy().replace('\\', "/")
 }
 
-/// The PINHOLE camera (id = image id) of a view at its stored size, or a refusal naming it.
-pub(crate) fn pinhole(v: &ViewRow) -> Result<Camera> {
+/// What NeRF-W's loaders do with a camera that is not a pinhole: [`pinhole`]'s `reader`.
+pub(crate) const NERFW_READERS: &str = "NeRF-W loaders (nerf_pl, Ha-NeRF) read params[0..4] as \
+     fx, fy, cx, cy, so a distorted camera would be silently misread";
+
+/// The PINHOLE camera (id = image id) of a view at its stored size, or a refusal naming the
+/// camera, what the layout's `reader` (its consumers) does with it, and the command that
+/// stores PINHOLE cameras.
+pub(crate) fn pinhole(v: &ViewRow, reader: &str) -> Result<Camera> {
     let p = &v.params;
     let params = match CameraModel::from_name(&v.model) {
         Some(CameraModel::Pinhole) if p.len() == 4 => p.clone(),
@@ -61,9 +67,9 @@ pub(crate) fn pinhole(v: &ViewRow) -> Result<Camera> {
                 record: format!("image {}", v.image_id),
                 field: "model".into(),
                 problem: format!(
-                    "camera model {} with parameters {:?}: NeRF-W loaders (nerf_pl, Ha-NeRF) read \
-                     params[0..4] as fx, fy, cx, cy, so a distorted camera would be silently \
-                     misread; ingest with --undistort to store PINHOLE cameras",
+                    "camera model {} with parameters {:?}: {reader}; re-ingest the scene with \
+                     `nrw-etl ingest SCENE --out DATASET --undistort` to store PINHOLE cameras \
+                     (photos resampled as COLMAP's image_undistorter does)",
                     v.model, v.params
                 ),
             })
@@ -174,7 +180,7 @@ pub(crate) fn write_phototourism(
                     ),
                 ));
             }
-            let camera = pinhole(&v)?;
+            let camera = pinhole(&v, NERFW_READERS)?;
             let mut image = model_image(&v, &file)?;
             image.points2d = crate::colmap_model::observations(&v, model, &camera)?;
             views.push((camera, image));

@@ -106,6 +106,7 @@ pub fn finalize_densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<
 fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<Prepared> {
     check(cfg)?;
     let (scene, mut rec) = crate::model::load_model(&cfg.scene, None)?;
+    crate::model::refuse_panoramas(&scene, &rec)?;
     let out = cfg
         .out
         .clone()

@@ -171,7 +171,11 @@ fn write_view(
                 .into(),
         });
     }
-    let camera = crate::nerfw::pinhole(v)?;
+    let camera = crate::nerfw::pinhole(
+        v,
+        "MegaDepth's readers (D2-Net's preprocess_scene.py, the matchers' loaders) take a \
+         PINHOLE camera's K and no distortion",
+    )?;
     let image_path = format!("{}/images/{file}", sfm_dir(name));
     staged.write(&image_path, &v.photo_png)?;
     let depth = job.prior_depth(v)?;

@@ -71,6 +71,21 @@ pub fn undistorted_photo(
     image::RgbImage::from_raw(out.width, out.height, out.data).expect("width × height × 3 bytes")
 }
 
+/// A label map of the photo resampled from its own camera `from` to the undistorted PINHOLE
+/// camera `to`, nearest class (a map stored at another size than its camera's, same aspect
+/// ratio, is brought to the camera's size first, nearest too).
+pub fn undistorted_labels(
+    labels: &image::GrayImage,
+    from: &nrw_colmap::Camera,
+    to: &nrw_colmap::Camera,
+) -> image::GrayImage {
+    let labels =
+        nrw_dataset::semantics::resize_labels(labels, from.width as u32, from.height as u32);
+    let out = nrw_render::undistort_labels(labels.as_raw(), from, to);
+    image::GrayImage::from_raw(to.width as u32, to.height as u32, out)
+        .expect("width × height bytes")
+}
+
 /// The undistorter's options as the unit record and manifest keep them.
 pub fn undistort_record(o: &UndistortOptions) -> nrw_dataset::provenance::UndistortRecord {
     nrw_dataset::provenance::UndistortRecord {

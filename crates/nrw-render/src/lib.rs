@@ -16,6 +16,6 @@ mod zbuffer;
 
 pub use cloud::{Chunk, RenderCloud, CHUNK_POINTS};
 pub use splat::{render, render_with, DeepBuffer, Kernel};
-pub use undistort::{undistort_photo, Rgb8};
+pub use undistort::{undistort_labels, undistort_photo, Rgb8};
 pub use verdict::{Filters, Verdict};
 pub use view::{render_size, View};

@@ -49,6 +49,32 @@ pub fn undistort_photo(src: &Rgb8, from: &Camera, to: &Camera) -> Rgb8 {
     resize_triangle(&warped, to.width as u32, to.height as u32)
 }
 
+/// A label map of the photo (`width` × `height` class ids, the size of camera `from`) seen
+/// through the pinhole camera `to`: each pixel centre of `to` takes the class of the photo
+/// pixel its ray lands in (nearest, never a blend of classes), 0 where it lands outside
+/// the photo. Drawn at `to`'s own size (a nearest sample needs no anti-aliasing pass).
+pub fn undistort_labels(ids: &[u8], from: &Camera, to: &Camera) -> Vec<u8> {
+    let (sw, sh) = (from.width as usize, from.height as usize);
+    assert_eq!(ids.len(), sw * sh, "the label map has its camera's size");
+    let (w, h) = (to.width as usize, to.height as usize);
+    let (f, pp) = (to.focal(), to.principal_point());
+    let mut out = vec![0u8; w * h];
+    for (y, row) in out.chunks_exact_mut(w).enumerate() {
+        for (x, class) in row.iter_mut().enumerate() {
+            let world = (DVec2::new(x as f64 + 0.5, y as f64 + 0.5) - pp) / f;
+            let Some(s) = from.img_from_cam(DVec3::new(world.x, world.y, 1.0)) else {
+                continue;
+            };
+            // The pixel whose square [i, i + 1) holds the sample.
+            let (sx, sy) = (s.x.floor(), s.y.floor());
+            if sx >= 0.0 && sy >= 0.0 && sx < sw as f64 && sy < sh as f64 {
+                *class = ids[sy as usize * sw + sx as usize];
+            }
+        }
+    }
+    out
+}
+
 /// Each pixel of the pinhole camera `to` sampled from the photo `src` (camera `from`).
 fn warp(src: &Rgb8, from: &Camera, to: &Camera) -> Rgb8 {
     let (w, h) = (to.width as u32, to.height as u32);

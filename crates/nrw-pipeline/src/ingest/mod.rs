@@ -95,17 +95,6 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
             format!("{} is not a folder", Setting::Semantics),
         ));
     }
-    if cfg.semantics.is_some() && cfg.undistort.is_some() {
-        return Err(PipelineError::config(
-            Setting::Undistort,
-            format!(
-                "cannot be combined with {} yet (label maps of the distorted photos would \
-                 need resampling too); segment the undistorted photos with {} instead",
-                Setting::Semantics,
-                Setting::SegmentWeights
-            ),
-        ));
-    }
     if cfg.semantics.is_some() && cfg.segment.is_some() {
         return Err(PipelineError::config(
             Setting::SegmentWeights,

@@ -70,22 +70,30 @@ pub(super) fn depth_range(depth: &[f32]) -> Option<(f64, f64)> {
 pub(super) type LabelPngs = (Option<Vec<u8>>, Option<Vec<u8>>, Option<Vec<u8>>);
 
 /// The view's label maps (colour-coded, transient mask, class ids), when ingest has them:
-/// read from the label folder, or made from the photo by the model (`--segment-weights`).
+/// made from the (stored) photo by the model (`--segment-weights`), or read from the label
+/// folder, where each map has its photo's size `original` and, with `--undistort`, is
+/// resampled from the photo's camera to the pinhole one (`undistort`: from, to).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn label_pngs(
     cfg: &IngestConfig,
     p: &Prepared,
     name: &str,
     photo_name: &str,
     photo: &RgbImage,
-    w: u32,
-    h: u32,
+    original: (u32, u32),
+    undistort: Option<(&nrw_colmap::Camera, &nrw_colmap::Camera)>,
+    (w, h): (u32, u32),
 ) -> Result<LabelPngs> {
     let labels = if let Some((model, mode)) = &p.segmenter {
         let what = p.photos_dir.join(photo_name).display().to_string();
         nrw_segment::segment(model, photo, *mode, &what, nrw_segment::Parallelism::None)?
     } else if let Some(dir) = &cfg.semantics {
         let path = nrw_dataset::semantics::label_path(dir, photo_name)?;
-        nrw_dataset::semantics::load_labels(&path, photo.width(), photo.height())?
+        let labels = nrw_dataset::semantics::load_labels(&path, original.0, original.1)?;
+        match undistort {
+            Some((from, to)) => crate::model::undistorted_labels(&labels, from, to),
+            None => labels,
+        }
     } else {
         return Ok((None, None, None));
     };
@@ -133,16 +141,28 @@ pub(super) fn process(
         ..o
     };
     let name = format!("image {}", img.id);
+    let undistort = p
+        .distorted
+        .as_ref()
+        .map(|originals| (&originals[&img.camera_id], cam));
     let decoded = load_photo(&photo_path)
         .map_err(PipelineError::from)
-        .map(|photo| match &p.distorted {
-            Some(originals) => {
-                crate::model::undistorted_photo(&photo, &originals[&img.camera_id], cam)
-            }
-            None => photo,
-        })
         .and_then(|photo| {
-            let labels = label_pngs(cfg, p, &name, &img.name, &photo, w, h)?;
+            let original = (photo.width(), photo.height());
+            let photo = match undistort {
+                Some((from, to)) => crate::model::undistorted_photo(&photo, from, to),
+                None => photo,
+            };
+            let labels = label_pngs(
+                cfg,
+                p,
+                &name,
+                &img.name,
+                &photo,
+                original,
+                undistort,
+                (w, h),
+            )?;
             Ok((photo, labels))
         });
     let (photo, (semantics_png, transient_png, labels_png)) = match decoded {

@@ -38,8 +38,9 @@ pub struct IngestSettings {
     /// cannot be decoded whole, instead of dropping its view as `unreadable` and going on
     #[arg(long)]
     pub strict: bool,
-    /// Folder of per-photo ADE20K label maps (8-bit PNG of class ids, named like the photo
-    /// with .png); stored colour-coded with a transient mask
+    /// Folder of per-photo ADE20K label maps (8-bit PNG of class ids, the photo's size, named
+    /// like the photo with .png); stored colour-coded with a transient mask, and with
+    /// --undistort resampled with the photo (nearest class, never a blend)
     #[arg(long)]
     pub semantics: Option<PathBuf>,
     /// With --segment-weights: how a photo is fed to the network
@@ -52,7 +53,7 @@ pub struct IngestSettings {
     /// it computes (no blank pixels, scale clipped to 0.2–2) and the photo resampled to it
     /// through the exact camera model, so photo and render align pixel for pixel with a
     /// pinhole camera (what NeRF-W, nerfstudio and Gaussian-splatting loaders expect)
-    #[arg(long, conflicts_with = "semantics")]
+    #[arg(long)]
     pub undistort: bool,
     /// With --undistort: 0 keeps only pixels that see the photo (COLMAP's default), 1 keeps
     /// every photo pixel (black corners), values between interpolate

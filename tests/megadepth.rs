@@ -149,20 +149,17 @@ fn d2net_preprocessing_of_the_export_gives_its_scene_info() {
 }
 
 /// RoMa itself (romatch 0.1.2), LoFTR and DUSt3R themselves (their sources, where
-/// `NRW_LOFTR_SRC` and `NRW_DUST3R_SRC` name checkouts), which need torch (never in CI), read
+/// `NRW_LOFTR_SRC` and `NRW_DUST3R_SRC` name checkouts), which need torch, read
 /// the export through their own datasets: RoMa's and LoFTR's own ground-truth warps carry every
 /// SfM observation of view A whose depth the file holds onto view B's observation of the same
 /// point, and DUSt3R's point maps hold the SfM points, as closely as the export's numbers allow
 /// (tests/oracles/megadepth_torch.py). Runs where `NRW_TORCH_PYTHON` names a Python with torch and
-/// romatch; skips and says so elsewhere (CI keeps the transcriptions in
-/// tests/oracles/megadepth_matchers.py and tests/oracles/megadepth_dust3r.py).
+/// romatch (CI installs both from PyPI: RoMa runs there; LoFTR's and DUSt3R's sources are not
+/// on PyPI, so there their transcriptions in tests/oracles/megadepth_matchers.py and
+/// tests/oracles/megadepth_dust3r.py stand in); skips and says so elsewhere.
 #[test]
 fn roma_loftr_and_dust3r_themselves_read_the_export() {
-    let Some(py) = std::env::var_os("NRW_TORCH_PYTHON") else {
-        eprintln!(
-            "skipped: NRW_TORCH_PYTHON is not set (a Python with torch and romatch 0.1.2); CI \
-             keeps the transcribed loaders"
-        );
+    let Some(py) = python::torch_python("romatch", "RoMa, romatch 0.1.2", true) else {
         return;
     };
     let loftr = std::env::var_os("NRW_LOFTR_SRC");

@@ -27,3 +27,30 @@ pub fn python_runs(code: &str, require: &str, what: &str) -> bool {
     }
     have
 }
+
+/// The Python with torch that `NRW_TORCH_PYTHON` names, if it imports `modules` (the
+/// consumers' own code that needs torch); when not, say the test skips, or fail when
+/// NRW_REQUIRE_TORCH=1 and `in_ci` (the consumers CI installs from PyPI).
+pub fn torch_python(modules: &str, what: &str, in_ci: bool) -> Option<std::ffi::OsString> {
+    let required = in_ci && std::env::var("NRW_REQUIRE_TORCH").is_ok_and(|v| v == "1");
+    let py = std::env::var_os("NRW_TORCH_PYTHON");
+    let imports = py.as_ref().is_some_and(|py| {
+        std::process::Command::new(py)
+            .args(["-c", &format!("import torch, {modules}")])
+            .current_dir(std::env::temp_dir())
+            .status()
+            .is_ok_and(|s| s.success())
+    });
+    if !imports {
+        assert!(
+            !required,
+            "NRW_REQUIRE_TORCH=1 but NRW_TORCH_PYTHON ({py:?}) does not import torch, {modules} ({what})"
+        );
+        eprintln!(
+            "skipped: NRW_TORCH_PYTHON ({py:?}) is not a Python with torch and {modules} ({what}); \
+             the transcribed checks stand in"
+        );
+        return None;
+    }
+    py
+}

@@ -313,7 +313,12 @@ impl Camera {
         if self.model.is_spherical() {
             return equirectangular_ray(&self.params, px);
         }
-        let guess = (px - self.principal_point()) / self.focal();
+        let mut guess = (px - self.principal_point()) / self.focal();
+        if let Some(k) = self.division_k() {
+            // COLMAP's closed-form lift: the distorted guess may lie past the fold (k > 0),
+            // where the projection Newton needs is undefined; this one is the answer.
+            guess /= 1.0 + k * guess.length_squared();
+        }
         if !self.model.has_distortion() {
             return Some(DVec3::new(guess.x, guess.y, 1.0).normalize());
         }
@@ -369,6 +374,15 @@ impl Camera {
         let d = dir(q)?;
         let back = self.img_from_cam(d)?;
         ((back - px).length() < 1e-6).then(|| d.normalize())
+    }
+
+    /// A division lens's k (SIMPLE_DIVISION, DIVISION), None for every other model.
+    fn division_k(&self) -> Option<f64> {
+        match self.model {
+            CameraModel::SimpleDivision => Some(self.params[3]),
+            CameraModel::Division => Some(self.params[4]),
+            _ => None,
+        }
     }
 
     /// The radius, in normalised coordinates (tan of the incidence angle; for fisheye models

@@ -1147,6 +1147,7 @@ fn check_mvs_priors(scene: &Path, ws: &Workspace, ds: &Path, out: &Path) {
     let dataset = nrw_dataset::reader::Dataset::open(ds).unwrap();
     let (mut prior, mut good, mut render, mut same_as_map) = (0usize, 0usize, 0usize, 0usize);
     let (mut trusted, mut confidence) = (0usize, 0f64);
+    let mut by_confidence = [(0usize, 0usize); 2];
     let mut same_size = false;
     for (split, _) in dataset.splits() {
         for &id in dataset.ids(&split).unwrap() {
@@ -1190,7 +1191,12 @@ fn check_mvs_priors(scene: &Path, ws: &Workspace, ds: &Path, out: &Path) {
                 let z = 1.0 / (*q as f64 / 65536.0 * scale);
                 let t = truth.data[ty * truth.width + tx] as f64;
                 prior += 1;
-                good += (t > 0.0 && ((z - t) / t).abs() <= 0.01) as usize;
+                let within = t > 0.0 && ((z - t) / t).abs() <= 0.01;
+                good += within as usize;
+                // By confidence: [0, 0.5) and [0.5, 1], (pixels, within 1%).
+                let band = &mut by_confidence[(conf.as_raw()[k] >= 128) as usize];
+                band.0 += 1;
+                band.1 += within as usize;
                 if map.width == v.width as usize {
                     let m = map.data[k] as f64;
                     same_as_map += ((z - m).abs() <= m * m * scale / 65536.0) as usize;
@@ -1210,8 +1216,18 @@ fn check_mvs_priors(scene: &Path, ws: &Workspace, ds: &Path, out: &Path) {
         "the validity mask covers every prior pixel"
     );
     let mean = confidence / trusted as f64;
-    eprintln!("MVS confidence: mean {mean:.3} over {trusted} valid pixels");
+    let [low, high] = by_confidence.map(|(n, g)| g as f64 / n.max(1) as f64);
+    eprintln!(
+        "MVS confidence: mean {mean:.3} over {trusted} valid pixels; within 1% of the true \
+         depth: {high:.4} of the {} pixels at confidence ≥ 0.5, {low:.4} of the {} below",
+        by_confidence[1].0, by_confidence[0].0
+    );
     assert!(mean > 0.2 && mean <= 1.0, "{mean}");
+    // The confidence means what it says: the confident pixels are the accurate ones.
+    assert!(
+        by_confidence.iter().all(|(n, _)| *n > 0) && high > low,
+        "{by_confidence:?}"
+    );
     if same_size {
         assert_eq!(
             same_as_map, prior,

@@ -334,7 +334,7 @@ fn nerfbaselines_reads_the_split_images_masks_and_points() {
     let rec = nrw_colmap::read_model(&out.join("sparse/0"), None).unwrap();
     assert_eq!(got["points"].as_u64().unwrap() as usize, rec.points.len());
     let by_file: BTreeMap<String, u32> = files(&ds).into_iter().map(|(id, f)| (f, id)).collect();
-    let mut ignored = 0;
+    let (mut ignored, mut poses) = (0, 0);
     for (split, ours) in [("train", "train"), ("test", "val")] {
         let views = got["splits"][split].as_array().unwrap();
         assert_eq!(views.len(), ds.ids(ours).unwrap().len(), "{split}");
@@ -353,8 +353,24 @@ fn nerfbaselines_reads_the_split_images_masks_and_points() {
                     "{file}: intrinsics (float32 in nerfbaselines)"
                 );
             }
+            // Its pose: camera-to-world [Rᵀ | −Rᵀt] of the image's (OpenCV axes), in float32.
+            let w2c = &rec.images[&id].cam_from_world;
+            let rt = w2c.matrix().transpose();
+            let centre = -(rt * w2c.translation);
+            let pose: Vec<Vec<f64>> = serde_json::from_value(v["pose"].clone()).unwrap();
+            for (row, got) in pose.iter().take(3).enumerate() {
+                let want = [rt.col(0)[row], rt.col(1)[row], rt.col(2)[row], centre[row]];
+                for (a, b) in got.iter().zip(want) {
+                    assert!(
+                        (a - b).abs() <= 1e-6 * (1.0 + b.abs()),
+                        "{file}: pose row {row}: nerfbaselines {got:?}, ours {want:?}"
+                    );
+                }
+                poses += 1;
+            }
         }
     }
+    assert_eq!(poses, 3 * ds.len(), "every view's pose compared");
     assert!(
         ignored > 0,
         "nerfbaselines sees the people as ignored pixels"

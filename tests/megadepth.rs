@@ -8,7 +8,7 @@ use std::path::Path;
 
 use nrw_dataset::reader::Dataset;
 
-use super::{npy, ok, python, shared};
+use super::{npy, nrw, ok, python, shared};
 
 /// The scene name the export is made under (`--name`, D2-Net's `--scene_id`).
 const SCENE: &str = "synthetic0001";
@@ -276,7 +276,7 @@ fn exported(
     ]);
     ok(&["split", ds.to_str().unwrap(), "--val", "1"]);
     let out = tmp.join("md");
-    let o = ok(&[
+    let o = nrw(&[
         "export",
         ds.to_str().unwrap(),
         "--layout",
@@ -288,7 +288,16 @@ fn exported(
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(!o.contains("warning"), "{o}");
+    // Warnings go to standard error (none for this dataset), the summary to standard output.
+    let (summary, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(o.status.success(), "{err}");
+    assert!(
+        summary.contains("exported") && !err.contains("warning"),
+        "{summary}\n{err}"
+    );
     (scene, ds, out)
 }
 

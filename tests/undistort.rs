@@ -103,7 +103,7 @@ fn ingest_undistort_stores_colmaps_pinhole_cameras_and_photos() {
 }
 
 #[test]
-fn undistort_refuses_what_it_cannot_do_yet() {
+fn undistorts_options_are_refused_without_it() {
     let Some(_) = shared::shared("data") else {
         return;
     };
@@ -115,19 +115,6 @@ fn undistort_refuses_what_it_cannot_do_yet() {
         assert_eq!(o.status.code(), Some(2), "{args:?}");
         String::from_utf8(o.stderr).unwrap()
     };
-    let err = usage(&[
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        out.path().to_str().unwrap(),
-        "--undistort",
-        "--semantics",
-        scene.join("images").to_str().unwrap(),
-    ]);
-    assert!(
-        err.contains("--undistort") && err.contains("--semantics"),
-        "{err}"
-    );
     let err = usage(&[
         "ingest",
         scene.to_str().unwrap(),

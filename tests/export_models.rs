@@ -15,26 +15,12 @@ use super::{ok, python};
 /// A SIMPLE_RADIAL synthetic scene (k1 = −0.2), ingested undistorted with views stored at a
 /// shorter side of 150 px (photos 220–260 px), one view held out: (scene, dataset).
 fn distorted_dataset(dir: &Path) -> (PathBuf, PathBuf) {
-    let scene = dir.join("scene");
-    let mut spec = nrw_synth::SceneSpec::demo().shrunk(5, (220, 260), 60_000);
-    spec.cameras.model = "SIMPLE_RADIAL".into();
-    spec.cameras.distortion = 5.0;
-    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let scene = super::undistort::lens_scene(dir, 5, "SIMPLE_RADIAL", 5.0, false);
     let ds = dir.join("ds");
-    ok(&[
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        ds.to_str().unwrap(),
-        "--undistort",
-        "--min-photo-side",
-        "100",
-        "--min-dim",
-        "150",
-        "--max-empty",
-        "1.0",
-        "--quiet",
-    ]);
+    let (s, d) = (scene.to_str().unwrap(), ds.to_str().unwrap());
+    let mut args = vec!["ingest", s, "--out", d, "--undistort", "--quiet"];
+    args.extend(super::undistort::SMALL_VIEWS);
+    ok(&args);
     ok(&["split", ds.to_str().unwrap(), "--val", "1"]);
     (scene, ds)
 }

@@ -5,7 +5,7 @@
 use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array};
 use nrw_dataset::reader::Dataset;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use super::{assert_same_files, column, data, fails, files, nrw, ok, shared};
 
@@ -170,6 +170,37 @@ fn undistorted_units_and_finalize_write_the_bytes_of_one_process() {
     assert_eq!(m["parameters"]["undistort"]["blank_pixels"], 0.0, "{m}");
 }
 
+/// Ingest's flags that keep every view of a small synthetic scene, stored at a shorter side
+/// of 150 px.
+pub(crate) const SMALL_VIEWS: [&str; 6] = [
+    "--min-photo-side",
+    "100",
+    "--min-dim",
+    "150",
+    "--max-empty",
+    "1.0",
+];
+
+/// A synthetic scene in DIR/scene of `photos` photos (220–260 px) taken through a `model`
+/// lens at `distortion` times its default coefficients, with people where `people`.
+pub(crate) fn lens_scene(
+    dir: &Path,
+    photos: usize,
+    model: &str,
+    distortion: f64,
+    people: bool,
+) -> PathBuf {
+    let scene = dir.join("scene");
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(photos, (220, 260), 60_000);
+    spec.cameras.model = model.into();
+    spec.cameras.distortion = distortion;
+    if people {
+        spec.effects.transients = Some(6.0);
+    }
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    scene
+}
+
 /// A scene of COLMAP 4's SIMPLE_DIVISION cameras: `ingest` renders it with its own lens and
 /// `--undistort` stores PINHOLE views that gsplat's layout exports; without `--undistort` that
 /// export is refused naming its reader and the command that fixes it. A 360° model
@@ -177,25 +208,13 @@ fn undistorted_units_and_finalize_write_the_bytes_of_one_process() {
 #[test]
 fn colmap_4_cameras_go_through_ingest_and_export_and_a_panorama_is_refused_by_name() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = tmp.path().join("scene");
-    let mut spec = nrw_synth::SceneSpec::demo().shrunk(5, (220, 260), 60_000);
-    spec.cameras.model = "SIMPLE_DIVISION".into();
-    spec.cameras.distortion = 3.0;
-    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let scene = lens_scene(tmp.path(), 5, "SIMPLE_DIVISION", 3.0, false);
     let s = scene.to_str().unwrap();
-    let small = [
-        "--min-photo-side",
-        "100",
-        "--min-dim",
-        "150",
-        "--max-empty",
-        "1.0",
-    ];
     for (name, undistort) in [("pinhole", true), ("division", false)] {
         let ds = tmp.path().join(name);
         let d = ds.to_str().unwrap();
         let mut args = vec!["ingest", s, "--out", d];
-        args.extend(small);
+        args.extend(SMALL_VIEWS);
         if undistort {
             args.push("--undistort");
         }
@@ -263,29 +282,25 @@ fn colmap_4_cameras_go_through_ingest_and_export_and_a_panorama_is_refused_by_na
 #[test]
 fn label_maps_are_undistorted_with_their_photos_nearest_class() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = tmp.path().join("scene");
-    let mut spec = nrw_synth::SceneSpec::demo().shrunk(4, (220, 260), 60_000);
-    spec.cameras.model = "SIMPLE_RADIAL".into();
-    spec.cameras.distortion = 5.0;
-    spec.effects.transients = Some(6.0);
-    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let scene = lens_scene(tmp.path(), 4, "SIMPLE_RADIAL", 5.0, true);
     let (ds, labels) = (tmp.path().join("ds"), scene.join("ground_truth/semantics"));
-    ok(&[
-        "ingest",
+    let (s, d, l) = (
         scene.to_str().unwrap(),
-        "--out",
         ds.to_str().unwrap(),
+        labels.to_str().unwrap(),
+    );
+    let mut args = vec![
+        "ingest",
+        s,
+        "--out",
+        d,
         "--undistort",
         "--semantics",
-        labels.to_str().unwrap(),
-        "--min-photo-side",
-        "100",
-        "--min-dim",
-        "150",
-        "--max-empty",
-        "1.0",
+        l,
         "--quiet",
-    ]);
+    ];
+    args.extend(SMALL_VIEWS);
+    ok(&args);
     let rec = nrw_colmap::read_model(&scene.join("sparse/0"), None).unwrap();
     let d = Dataset::open(ds.as_path()).unwrap();
     let (mut agree, mut total) = (0usize, 0usize);

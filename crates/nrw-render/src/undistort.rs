@@ -57,12 +57,11 @@ pub fn undistort_labels(ids: &[u8], from: &Camera, to: &Camera) -> Vec<u8> {
     let (sw, sh) = (from.width as usize, from.height as usize);
     assert_eq!(ids.len(), sw * sh, "the label map has its camera's size");
     let (w, h) = (to.width as usize, to.height as usize);
-    let (f, pp) = (to.focal(), to.principal_point());
+    let source = source_of(from, to);
     let mut out = vec![0u8; w * h];
     for (y, row) in out.chunks_exact_mut(w).enumerate() {
         for (x, class) in row.iter_mut().enumerate() {
-            let world = (DVec2::new(x as f64 + 0.5, y as f64 + 0.5) - pp) / f;
-            let Some(s) = from.img_from_cam(DVec3::new(world.x, world.y, 1.0)) else {
+            let Some(s) = source(x, y) else {
                 continue;
             };
             // The pixel whose square [i, i + 1) holds the sample.
@@ -75,16 +74,24 @@ pub fn undistort_labels(ids: &[u8], from: &Camera, to: &Camera) -> Vec<u8> {
     out
 }
 
+/// Where the centre of the pinhole camera `to`'s pixel (x, y) lies in the photo of camera
+/// `from`: unprojected by `to`, projected by `from`'s exact model; None where it has no pixel.
+fn source_of<'a>(from: &'a Camera, to: &Camera) -> impl Fn(usize, usize) -> Option<DVec2> + 'a {
+    let (f, pp) = (to.focal(), to.principal_point());
+    move |x, y| {
+        let world = (DVec2::new(x as f64 + 0.5, y as f64 + 0.5) - pp) / f;
+        from.img_from_cam(DVec3::new(world.x, world.y, 1.0))
+    }
+}
+
 /// Each pixel of the pinhole camera `to` sampled from the photo `src` (camera `from`).
 fn warp(src: &Rgb8, from: &Camera, to: &Camera) -> Rgb8 {
     let (w, h) = (to.width as u32, to.height as u32);
     let mut data = vec![0u8; w as usize * h as usize * 3];
-    let f = to.focal();
-    let pp = to.principal_point();
+    let source = source_of(from, to);
     for (y, row) in data.chunks_exact_mut(w as usize * 3).enumerate() {
         for (x, px) in row.chunks_exact_mut(3).enumerate() {
-            let world = (DVec2::new(x as f64 + 0.5, y as f64 + 0.5) - pp) / f;
-            let Some(s) = from.img_from_cam(DVec3::new(world.x, world.y, 1.0)) else {
+            let Some(s) = source(x, y) else {
                 continue;
             };
             if let Some(rgb) = bilinear(src, s.x - 0.5, s.y - 0.5) {

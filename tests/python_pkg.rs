@@ -123,3 +123,50 @@ fn the_python_package_reads_what_pyarrow_pillow_openexr_and_the_rust_loader_read
     assert!(o.status.success(), "pytest failed:\n{stdout}");
     assert!(stdout.contains(" passed"), "{stdout}");
 }
+
+/// Each package with its enabled features, one line each, as `cargo tree` resolves `scope`.
+fn resolved_features(scope: &[&str]) -> std::collections::BTreeMap<String, Vec<String>> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .current_dir(&root)
+        .args(["tree", "--locked", "--offline", "--prefix", "none", "-f", "{p}|{f}"])
+        .args(scope)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut by_package = std::collections::BTreeMap::<String, Vec<String>>::new();
+    for line in String::from_utf8(out.stdout).unwrap().lines() {
+        let line = line.replace(" (*)", "").replace(" (proc-macro)", "");
+        if let Some((package, features)) = line.split_once('|') {
+            let sets = by_package.entry(package.to_string()).or_default();
+            if !sets.iter().any(|s| s == features) {
+                sets.push(features.to_string());
+            }
+        }
+    }
+    by_package
+}
+
+/// python/Cargo.toml's feature pins keep every crate of the package's graph at the features
+/// the workspace's build gives it, so CI's `pip install ./python` builds what the tests reuse.
+#[test]
+fn the_package_builds_its_dependencies_with_the_workspace_s_features() {
+    let package = resolved_features(&["-p", "nrw-py", "-e", "normal,build"]);
+    let workspace = resolved_features(&["--workspace"]);
+    let mut differ = Vec::new();
+    for (name, sets) in &package {
+        let Some(theirs) = workspace.get(name) else {
+            continue;
+        };
+        for set in sets.iter().filter(|s| !theirs.contains(s)) {
+            differ.push(format!("{name}: the package [{set}], the workspace {theirs:?}"));
+        }
+    }
+    assert!(
+        package.len() > 100 && differ.is_empty(),
+        "pin these in python/Cargo.toml ({} packages compared):\n{}",
+        package.len(),
+        differ.join("\n")
+    );
+}

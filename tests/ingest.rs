@@ -537,3 +537,98 @@ fn semantics_are_stored_colour_coded_with_a_transient_mask() {
         "the scene asked for people; some must be labelled"
     );
 }
+
+/// `scene` rewritten as two sub-models: `sparse/0` keeps the first `small` images (and the
+/// observations among them), `sparse/1` the whole model, as COLMAP's mapper leaves a
+/// collection it could not connect.
+fn two_sub_models(scene: &Path, small: usize) -> (usize, usize) {
+    let full = nrw_colmap::read_scene(scene).unwrap();
+    let format = full.format.unwrap();
+    let big = scene.join("sparse/1");
+    std::fs::create_dir_all(&big).unwrap();
+    nrw_colmap::write_model(&full, &big, format).unwrap();
+    let mut part = full.clone();
+    let keep: Vec<u32> = part.images.keys().copied().take(small).collect();
+    part.images.retain(|id, _| keep.contains(id));
+    for p in part.points.values_mut() {
+        p.track.retain(|t| keep.contains(&t.image_id));
+    }
+    part.points.retain(|_, p| p.track.len() >= 2);
+    let kept: std::collections::BTreeSet<u64> = part.points.keys().copied().collect();
+    for img in part.images.values_mut() {
+        for kp in &mut img.points2d {
+            if kp.has_point3d() && !kept.contains(&kp.point3d_id) {
+                kp.point3d_id = nrw_colmap::model::NO_POINT3D;
+            }
+        }
+    }
+    nrw_colmap::write_model(&part, &scene.join("sparse/0"), format).unwrap();
+    (part.images.len(), full.images.len())
+}
+
+#[test]
+fn a_scene_with_two_sub_models_gives_the_larger_and_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 5);
+    let (small, large) = two_sub_models(&scene, 2);
+    assert_eq!((small, large), (2, 5));
+    let sc = scene.to_str().unwrap();
+
+    // inspect lists both, side by side, and says which it summarises.
+    let listed = ok(&["inspect", sc]);
+    eprintln!("{listed}");
+    assert!(
+        listed.contains("sparse/0") && listed.contains("sparse/1"),
+        "{listed}"
+    );
+    assert!(listed.contains("images       5"), "{listed}");
+    let json: serde_json::Value = serde_json::from_str(&ok(&["inspect", sc, "--json"])).unwrap();
+    let subs = json["sub_models"].as_array().unwrap();
+    let images: Vec<u64> = subs.iter().map(|m| m["images"].as_u64().unwrap()).collect();
+    assert_eq!(images, [2, 5]);
+    assert!(
+        subs.iter().all(|m| m["points"].as_u64().unwrap() > 0),
+        "{json}"
+    );
+
+    // ingest takes sparse/1 and says which and why.
+    let out = tmp.path().join("ds");
+    let o = ingest_small(&scene, &out, &["--max-empty", "1.0"]);
+    let said = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{said}");
+    eprintln!("{said}");
+    assert!(
+        said.contains("took")
+            && said.contains("sparse/1")
+            && said.contains("most registered images"),
+        "{said}"
+    );
+    let verdicts = nrw_dataset::scene::read_verdicts(
+        &nrw_dataset::Store::open(&nrw_dataset::Location::Local(out.clone())).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(verdicts.len(), 5);
+
+    // --model 0 takes the other; a sub-model the scene does not have is named.
+    let out0 = tmp.path().join("ds0");
+    let o = ingest_small(&scene, &out0, &["--max-empty", "1.0", "--model", "0"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let verdicts = nrw_dataset::scene::read_verdicts(
+        &nrw_dataset::Store::open(&nrw_dataset::Location::Local(out0)).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(verdicts.len(), 2);
+    let err = fails(&[
+        "ingest",
+        sc,
+        "--out",
+        tmp.path().join("ds7").to_str().unwrap(),
+        "--model",
+        "7",
+    ]);
+    assert!(
+        err.contains("sparse/7") && err.contains("sparse/0, sparse/1"),
+        "{err}"
+    );
+}

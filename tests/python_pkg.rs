@@ -130,11 +130,23 @@ fn resolved_features(scope: &[&str]) -> std::collections::BTreeMap<String, Vec<S
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let out = Command::new(cargo)
         .current_dir(&root)
-        .args(["tree", "--locked", "--offline", "--prefix", "none", "-f", "{p}|{f}"])
+        .args([
+            "tree",
+            "--locked",
+            "--offline",
+            "--prefix",
+            "none",
+            "-f",
+            "{p}|{f}",
+        ])
         .args(scope)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let mut by_package = std::collections::BTreeMap::<String, Vec<String>>::new();
     for line in String::from_utf8(out.stdout).unwrap().lines() {
         let line = line.replace(" (*)", "").replace(" (proc-macro)", "");
@@ -160,7 +172,9 @@ fn the_package_builds_its_dependencies_with_the_workspace_s_features() {
             continue;
         };
         for set in sets.iter().filter(|s| !theirs.contains(s)) {
-            differ.push(format!("{name}: the package [{set}], the workspace {theirs:?}"));
+            differ.push(format!(
+                "{name}: the package [{set}], the workspace {theirs:?}"
+            ));
         }
     }
     assert!(

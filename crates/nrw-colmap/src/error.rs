@@ -94,6 +94,9 @@ pub enum ColmapError {
     /// The folder holds no model in a layout we know.
     #[error("{}: no COLMAP model found; looked for cameras/images/points3D .bin or .txt in {looked}", path.display())]
     NoModel { path: PathBuf, looked: String },
+    /// `--model N` named a sub-model the scene does not have.
+    #[error("{}: no such sub-model; the scene has {have}", path.display())]
+    NoSubModel { path: PathBuf, have: String },
 }
 
 impl ColmapError {

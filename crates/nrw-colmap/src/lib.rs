@@ -32,7 +32,7 @@ pub use model::{
 };
 pub use ply::{read_ply, read_ply_file_into, read_ply_from, write_ply, PointCloud, VertexSink};
 pub use pose::{LocalRigid3, Rigid3};
-pub use scene::Scene;
+pub use scene::{sub_models, ModelChoice, Scene, SubModel};
 pub use stats::{observation_errors, reprojection_stats, ImageReprojection, ReprojectionStats};
 pub use undistort::{
     undistort_camera, undistort_reconstruction, undistorted_keypoint, UndistortError,

@@ -10,7 +10,8 @@ use crate::parse::PoseCheck;
 /// The three files every COLMAP sparse model has.
 pub const MODEL_FILES: [&str; 3] = ["cameras", "images", "points3D"];
 
-fn has_model(dir: &Path) -> bool {
+/// Whether `dir` holds a model's cameras file in either encoding.
+pub(crate) fn has_model(dir: &Path) -> bool {
     [Format::Binary, Format::Text]
         .iter()
         .any(|f| dir.join(format!("cameras.{}", f.ext())).is_file())

@@ -31,6 +31,22 @@ pub struct ModelSummary {
     pub rigs: usize,
     pub frames: usize,
     pub warnings: Vec<String>,
+    /// Every numbered sub-model of the scene (`sparse/N`) when it has two or more; which one
+    /// the rest of this summary describes, and why, is `chosen`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sub_models: Vec<SubModelSummary>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chosen: Option<String>,
+}
+
+/// One sub-model `sparse/N` of a scene, as `inspect` lists them side by side.
+#[derive(Debug, Clone, Serialize)]
+pub struct SubModelSummary {
+    /// N of `sparse/N`.
+    pub index: u32,
+    pub images: usize,
+    pub points: usize,
+    pub mean_reprojection_error_px: Option<f64>,
 }
 
 impl ModelSummary {
@@ -69,12 +85,17 @@ pub enum Inspected {
 
 /// Summarise `location`: a dataset when it is a URL or holds a manifest, else the COLMAP
 /// model of a scene folder (or a model folder itself), read as `format` when given.
-pub fn inspect(location: &nrw_dataset::Location, format: Option<Format>) -> Result<Inspected> {
+/// `pick` chooses a sub-model `sparse/N` (default: the one with the most registered images).
+pub fn inspect(
+    location: &nrw_dataset::Location,
+    format: Option<Format>,
+    pick: Option<u32>,
+) -> Result<Inspected> {
     let folder = match location {
         nrw_dataset::Location::Local(f) if !f.join(nrw_dataset::Manifest::FILE).is_file() => f,
         _ => return Ok(Inspected::Dataset(dataset_summary(location)?)),
     };
-    Ok(Inspected::Model(model_summary(folder, format)?))
+    Ok(Inspected::Model(model_summary(folder, format, pick)?))
 }
 
 fn dataset_summary(location: &nrw_dataset::Location) -> Result<DatasetSummary> {
@@ -96,8 +117,36 @@ fn dataset_summary(location: &nrw_dataset::Location) -> Result<DatasetSummary> {
     })
 }
 
-fn model_summary(location: &Path, format: Option<Format>) -> Result<ModelSummary> {
-    let (scene, rec) = crate::model::load_model(location, format)?;
+/// Each sub-model of a scene with two or more, read whole (counts and reprojection error).
+fn sub_model_summaries(
+    scene: &nrw_colmap::Scene,
+    format: Option<Format>,
+) -> Result<Vec<SubModelSummary>> {
+    let (nrw_colmap::ModelChoice::Largest(of) | nrw_colmap::ModelChoice::Given(of)) = &scene.choice
+    else {
+        return Ok(Vec::new());
+    };
+    of.iter()
+        .map(|m| {
+            let rec = nrw_colmap::read_model(&m.dir, format)?;
+            Ok(SubModelSummary {
+                index: m.index,
+                images: rec.images.len(),
+                points: rec.points.len(),
+                mean_reprojection_error_px: nrw_colmap::reprojection_stats(&rec).mean_px,
+            })
+        })
+        .collect()
+}
+
+fn model_summary(
+    location: &Path,
+    format: Option<Format>,
+    pick: Option<u32>,
+) -> Result<ModelSummary> {
+    let (scene, rec) = crate::model::load_model(location, format, pick)?;
+    let sub_models = sub_model_summaries(&scene, format)?;
+    let chosen = scene.choice.explain(&scene.model_dir);
     let dir = scene.model_dir;
     let stats = nrw_colmap::reprojection_stats(&rec);
     let (encoding, layout) = crate::model::encoding_and_layout(&rec);
@@ -117,5 +166,7 @@ fn model_summary(location: &Path, format: Option<Format>) -> Result<ModelSummary
         rigs: rec.rigs.len(),
         frames: rec.frames.len(),
         warnings: rec.warnings.iter().map(|w| w.to_string()).collect(),
+        sub_models,
+        chosen,
     })
 }

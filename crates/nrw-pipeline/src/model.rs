@@ -10,9 +10,14 @@ use nrw_dataset::{FileEntry, SceneSource};
 
 use crate::error::{PipelineError, Result, Setting};
 
-/// Find and read the model of a scene folder (or a model folder itself).
-pub fn load_model(scene: &Path, format: Option<Format>) -> Result<(Scene, Reconstruction)> {
-    let scene = Scene::find(scene)?;
+/// Find and read the model of a scene folder (or a model folder itself): the sub-model
+/// `sparse/N` given by `pick`, else the one with the most registered images.
+pub fn load_model(
+    scene: &Path,
+    format: Option<Format>,
+    pick: Option<u32>,
+) -> Result<(Scene, Reconstruction)> {
+    let scene = Scene::find_sub_model(scene, pick)?;
     let rec = scene.read(format)?;
     Ok((scene, rec))
 }

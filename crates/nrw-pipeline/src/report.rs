@@ -445,6 +445,21 @@ fn model(m: &ModelSummary) -> Report {
     if m.layout == "colmap4" {
         r.out(format!("rigs/frames  {} / {}", m.rigs, m.frames));
     }
+    if !m.sub_models.is_empty() {
+        r.out("sub-models   images  points  mean reprojection".into());
+        for s in &m.sub_models {
+            r.out(format!(
+                "  sparse/{:<4} {:>6}  {:>6}  {}",
+                s.index,
+                s.images,
+                s.points,
+                fmt_px(s.mean_reprojection_error_px)
+            ));
+        }
+    }
+    if let Some(c) = &m.chosen {
+        r.out(format!("chosen       {c}"));
+    }
     for w in &m.warnings {
         r.out(format!("warning: {w}"));
     }

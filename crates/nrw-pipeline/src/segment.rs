@@ -166,7 +166,7 @@ pub fn segment(cfg: &SegmentConfig, progress: &dyn Progress) -> Result<SegmentSu
 /// photos in image-id order, or every JPEG and PNG under the folder, sorted by path.
 fn photo_list(cfg: &SegmentConfig) -> Result<(PathBuf, Vec<String>)> {
     if let Some(scene) = &cfg.scene {
-        let (scene, rec) = crate::model::load_model(scene, cfg.format)?;
+        let (scene, rec) = crate::model::load_model(scene, cfg.format, None)?;
         let dir = crate::model::images_dir(cfg.images.as_deref(), &scene)?;
         return Ok((dir, rec.images.values().map(|i| i.name.clone()).collect()));
     }

@@ -24,8 +24,13 @@ Work units (--unit I/N) may run in any order, at the same time, on machines shar
 dataset folder; each renders its own shards and writes nothing else, and finalize merges
 them into the bytes one process writes. docs/scale-out.md shows Slurm and Kubernetes jobs.")]
 pub struct IngestArgs {
-    /// Scene folder holding sparse/0/ (or sparse/) and images/, or a model folder itself
+    /// Scene folder holding sparse/0/ (or sparse/) and images/, or a model folder itself;
+    /// with several sub-models (sparse/0, sparse/1, …) the one with the most registered
+    /// images is read, and the summary says which
     pub scene: PathBuf,
+    /// Read the sub-model sparse/N instead (`nrw-etl inspect SCENE` lists them)
+    #[arg(long, value_name = "N")]
+    pub model: Option<u32>,
     /// Dataset folder to write (created if missing; files in it are replaced atomically)
     #[arg(long)]
     pub out: nrw_dataset::Location,
@@ -78,6 +83,7 @@ impl IngestArgs {
         Ok(IngestConfig {
             images: self.images.clone(),
             format: self.format,
+            model: self.model,
             points: self.points.clone(),
             follow_outside_links: self.follow_outside_links,
             stop_after_groups: self.stop_after_groups,

@@ -18,11 +18,15 @@ pub struct InspectArgs {
     /// Read this encoding even if the other exists [default: bin when present, else txt]
     #[arg(long, value_parser = super::names(&Format::ALL, Format::name, Format::summary))]
     pub format: Option<Format>,
+    /// Summarise the sub-model sparse/N [default: the one with the most registered images;
+    /// a scene with several lists them all]
+    #[arg(long, value_name = "N")]
+    pub model: Option<u32>,
 }
 
 /// Run `inspect`.
 pub fn run(args: &InspectArgs) -> Result<()> {
-    let found = nrw_pipeline::inspect::inspect(&args.scene, args.format)?;
+    let found = nrw_pipeline::inspect::inspect(&args.scene, args.format, args.model)?;
     if args.json {
         // Through a JSON value, so keys print sorted as they always have.
         let v = match &found {

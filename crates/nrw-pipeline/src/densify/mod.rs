@@ -105,7 +105,7 @@ pub fn finalize_densify(cfg: &DensifyConfig, progress: &dyn Progress) -> Result<
 /// holds the undistorted views under these settings (undistorting them if not).
 fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<Prepared> {
     check(cfg)?;
-    let (scene, mut rec) = crate::model::load_model(&cfg.scene, None)?;
+    let (scene, mut rec) = crate::model::load_model(&cfg.scene, None, None)?;
     crate::model::refuse_panoramas(&scene, &rec)?;
     let out = cfg
         .out

@@ -23,6 +23,8 @@ pub struct IngestConfig {
     pub images: Option<PathBuf>,
     /// Model encoding to read [default: bin when present].
     pub format: Option<Format>,
+    /// Sub-model `sparse/N` to read [default: the one with the most registered images].
+    pub model: Option<u32>,
     /// Point cloud [default: dense/fused.ply, else the sparse points].
     pub points: Option<PathBuf>,
     /// Folder of per-photo ADE20K label maps.
@@ -63,6 +65,7 @@ impl IngestConfig {
             out: out.into(),
             images: None,
             format: None,
+            model: None,
             points: None,
             semantics: None,
             segment: None,

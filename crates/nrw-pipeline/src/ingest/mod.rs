@@ -123,11 +123,12 @@ fn hashed_inputs(files: impl Iterator<Item = PathBuf>) -> Result<Vec<FileEntry>>
 
 fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     check_config(cfg)?;
-    let (scene, mut rec) = load_model(&cfg.scene, cfg.format)?;
+    let (scene, mut rec) = load_model(&cfg.scene, cfg.format, cfg.model)?;
     crate::model::refuse_panoramas(&scene, &rec)?;
     let model_dir = scene.model_dir.clone();
     let photos_dir = images_dir(cfg.images.as_deref(), &scene)?;
     let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
+    warnings.extend(scene.choice.explain(&model_dir));
     let photos = photo_sizes(&rec, &photos_dir, cfg, &mut warnings)?;
     let distorted = match &cfg.undistort {
         Some(o) => Some(undistort_model(&mut rec, o, &model_dir)?),

@@ -40,6 +40,8 @@ mod official;
 mod paper_code;
 #[path = "pipeline.rs"]
 mod pipeline;
+#[path = "provenance.rs"]
+mod provenance;
 #[path = "support/python.rs"]
 mod python;
 #[path = "python_pkg.rs"]

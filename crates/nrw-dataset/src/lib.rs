@@ -16,6 +16,7 @@ pub mod manifest;
 pub mod panic_guard;
 pub mod parquet_io;
 pub mod payload;
+pub mod photo_info;
 pub mod provenance;
 pub mod publish;
 pub mod reader;

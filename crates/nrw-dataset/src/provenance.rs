@@ -38,6 +38,9 @@ pub struct IngestParameters {
     pub segment_model_sha256: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub segment_mode: Option<String>,
+    /// The photo-info file read (`--photo-info`): licence, author, source per photo.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photo_info: Option<String>,
 }
 
 /// The undistorter's settings, as COLMAP's image_undistorter takes them.
@@ -125,6 +128,7 @@ mod tests {
             estimated_normals_k: None,
             segment_model_sha256: None,
             segment_mode: None,
+            photo_info: None,
         };
         let mut m = to_parameters(&p);
         assert!(!m.contains_key("semantics") && !m.contains_key("denoise"));

@@ -205,7 +205,7 @@ struct RowAt {
 }
 
 /// An opened dataset.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Dataset {
     /// Where the dataset is (a folder or a URL).
     pub dir: Location,
@@ -323,6 +323,17 @@ impl Dataset {
     /// Number of kept views.
     pub fn len(&self) -> usize {
         self.index.len()
+    }
+
+    /// The dataset without the views `left_out` names (an export of only what may be
+    /// shared reads the rest as if they were all there is).
+    pub fn without(&self, left_out: &std::collections::BTreeSet<u32>) -> Dataset {
+        let mut ds = self.clone();
+        ds.index.retain(|id, _| !left_out.contains(id));
+        for ids in ds.splits.values_mut() {
+            ids.retain(|id| !left_out.contains(id));
+        }
+        ds
     }
 
     /// Whether the dataset holds no view.

@@ -31,7 +31,7 @@ pub use inputs::{DepthPrior, DistMatrix, DistRows, Inputs, Prior, ScenePoint, RE
 pub use layouts::Layout;
 pub use staging::{join_under, EXPORT_JSON};
 pub use stream::index_width;
-pub use summary::{DepthRecord, ExportConfig, ExportSummary, Skipped, SplitExport};
+pub use summary::{DepthRecord, ExportConfig, ExportSummary, LicenceFilter, Skipped, SplitExport};
 pub use tfrecord::tfrecord_name;
 pub use writer::About;
 
@@ -46,6 +46,29 @@ pub fn export(
     inputs: &Inputs,
     tick: &(dyn Fn() + Sync),
 ) -> Result<ExportSummary> {
+    let attributions = nrw_dataset::photo_info::read_attributions(&ds.store)?;
+    let filtered;
+    let (ds, licences) = match &cfg.licences {
+        Some(kept) => {
+            let left_out: std::collections::BTreeSet<u32> = ds
+                .all_ids()
+                .into_iter()
+                .filter(|id| {
+                    let licence = attributions
+                        .get(id)
+                        .map_or(nrw_dataset::photo_info::UNKNOWN, |a| a.licence.as_str());
+                    !kept.iter().any(|k| k == licence)
+                })
+                .collect();
+            filtered = ds.without(&left_out);
+            let filter = LicenceFilter {
+                kept: kept.clone(),
+                left_out: left_out.len(),
+            };
+            (&filtered, Some(filter))
+        }
+        None => (ds, None),
+    };
     let (about, writer) = layout.parts();
     let job = writer::Job {
         ds,
@@ -58,7 +81,12 @@ pub fn export(
     writer.check(&job)?;
     let staged = staging::Staged::new(&cfg.out)?;
     let mut summary = ExportSummary::begin(&ds.dir.to_string(), about.name, cfg);
+    summary.licences = licences;
     let written = writer.write(&job, &staged, &mut summary).and_then(|()| {
+        staged.write(
+            nrw_dataset::photo_info::ATTRIBUTION_FILE,
+            &attribution(&summary, &attributions),
+        )?;
         staged.write(
             EXPORT_JSON,
             &serde_json::to_vec_pretty(&summary).expect("json"),
@@ -74,4 +102,20 @@ pub fn export(
             Err(e)
         }
     }
+}
+
+/// `attribution.csv` of what the export wrote: one row per exported photo, in split order,
+/// "unknown" where the dataset records no licence.
+fn attribution(
+    summary: &ExportSummary,
+    attributions: &std::collections::BTreeMap<u32, nrw_dataset::photo_info::Attribution>,
+) -> Vec<u8> {
+    let unknown = nrw_dataset::photo_info::Attribution::default();
+    let rows = summary.splits.iter().flat_map(|s| {
+        s.image_ids
+            .iter()
+            .zip(&s.names)
+            .map(|(id, name)| (name.as_str(), attributions.get(id).unwrap_or(&unknown)))
+    });
+    nrw_dataset::photo_info::attribution_csv(rows)
 }

@@ -25,6 +25,9 @@ pub struct ExportConfig {
     pub tfrecord_files: usize,
     /// Metres a model unit, when known: IMC 2022's `scaling_factors.csv` (megadepth layout).
     pub metres_per_unit: Option<f64>,
+    /// Export only photos under these licences (SPDX ids, `unknown` for photos nobody gave
+    /// one for; [`nrw_dataset::photo_info`]); `None` exports every view.
+    pub licences: Option<Vec<String>>,
 }
 
 impl ExportConfig {
@@ -38,6 +41,7 @@ impl ExportConfig {
             depth: DepthMapping::Linear,
             tfrecord_files: 1,
             metres_per_unit: None,
+            licences: None,
         }
     }
 }
@@ -101,6 +105,17 @@ pub struct ExportSummary {
     /// Where a known consumer's loader would misread this export, naming the loader and rule.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// With `--licences`: the licences exported and how many views the others left out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub licences: Option<LicenceFilter>,
+}
+
+/// What `--licences` kept and left out.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LicenceFilter {
+    pub kept: Vec<String>,
+    /// Views whose photo is under another licence (or none known), not exported.
+    pub left_out: usize,
 }
 
 impl ExportSummary {
@@ -120,6 +135,7 @@ impl ExportSummary {
             dist_pickle: None,
             depth_source: None,
             warnings: Vec::new(),
+            licences: None,
         }
     }
 

@@ -134,6 +134,7 @@ pub enum Setting {
     TfrecordFiles,
     /// Metres a model unit (IMC 2022's scaling factor).
     MetresPerUnit,
+    Licences,
     /// Whether an export writes the views' semantic labels.
     ExportSemantics,
     /// The corpus index's list of scenes and their outcomes.
@@ -154,7 +155,7 @@ pub enum Setting {
 
 impl Setting {
     /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 33] = [
+    pub const ALL: [Setting; 34] = [
         Setting::RowsPerShard,
         Setting::Radius,
         Setting::MaxEmpty,
@@ -180,6 +181,7 @@ impl Setting {
         Setting::Crop,
         Setting::TfrecordFiles,
         Setting::MetresPerUnit,
+        Setting::Licences,
         Setting::ExportSemantics,
         Setting::Entries,
         Setting::FollowOutsideLinks,
@@ -218,6 +220,7 @@ impl Setting {
             Setting::Crop => "export.crop",
             Setting::TfrecordFiles => "export.tfrecord_files",
             Setting::MetresPerUnit => "export.metres_per_unit",
+            Setting::Licences => "export.licences",
             Setting::ExportSemantics => "export.semantics",
             Setting::Entries => "corpus.entries",
             Setting::FollowOutsideLinks => "follow_outside_links",
@@ -306,6 +309,7 @@ impl Setting {
             S::Crop => "--crop",
             S::TfrecordFiles => "--tfrecord-files",
             S::MetresPerUnit => "--metres-per-unit",
+            S::Licences => "--licences",
             // The flag turns the setting off.
             S::ExportSemantics => "--no-semantics",
             S::Entries => "--entries",

@@ -74,6 +74,10 @@ pub struct DatasetSummary {
     pub shards: usize,
     pub splits: BTreeMap<String, usize>,
     pub parameters: serde_json::Map<String, serde_json::Value>,
+    /// Registered photos by licence (`unknown`: nobody gave one), from `--photo-info`.
+    pub licences: BTreeMap<String, usize>,
+    /// Registered photos whose EXIF orientation is not 1 (pixels are read as stored).
+    pub rotated_by_exif: Vec<String>,
 }
 
 /// What [`inspect`] found.
@@ -105,7 +109,20 @@ fn dataset_summary(location: &nrw_dataset::Location) -> Result<DatasetSummary> {
     for (_, _, v) in &verdicts {
         *counts.entry(v.clone()).or_insert(0usize) += 1;
     }
+    let attributions = nrw_dataset::photo_info::read_attributions(&ds.store)?;
+    let mut licences = BTreeMap::new();
+    let mut rotated_by_exif = Vec::new();
+    let unknown = nrw_dataset::photo_info::Attribution::default();
+    for (id, name, _) in &verdicts {
+        let a = attributions.get(id).unwrap_or(&unknown);
+        *licences.entry(a.licence.clone()).or_insert(0usize) += 1;
+        if a.orientation.is_some_and(|o| o != 1) {
+            rotated_by_exif.push(name.clone());
+        }
+    }
     Ok(DatasetSummary {
+        licences,
+        rotated_by_exif,
         dataset: location.to_string(),
         schema_version: ds.manifest.schema_version,
         registered: verdicts.len(),

@@ -121,6 +121,13 @@ pub fn export(dataset: &Location, out: &Location, s: &ExportSummary) -> Report {
         out,
         s.layout
     ));
+    if let Some(l) = &s.licences {
+        r.out(format!(
+            "licences {}: {} views under other licences (or none known) left out; attribution.csv lists the photos exported",
+            l.kept.join(", "),
+            l.left_out
+        ));
+    }
     for k in &s.skipped {
         r.err(format!(
             "skipped {} (image {}, {} split): {}×{} is {}",
@@ -406,6 +413,17 @@ fn dataset(d: &DatasetSummary) -> Report {
     for (k, n) in &d.splits {
         r.out(format!("split {k:<6} {n}"));
     }
+    r.out("licences".into());
+    for (k, n) in &d.licences {
+        r.out(format!("  {k:<10} {n}"));
+    }
+    if !d.rotated_by_exif.is_empty() {
+        r.err(format!(
+            "warning: {} photos have an EXIF orientation other than 1 ({}); COLMAP reads pixels as stored, and so does nrw-etl: their views are as the model saw them, not as a viewer shows them",
+            d.rotated_by_exif.len(),
+            d.rotated_by_exif.iter().take(5).cloned().collect::<Vec<_>>().join(", ")
+        ));
+    }
     r
 }
 
@@ -499,6 +517,7 @@ mod tests {
             dist_pickle: Some("dist_n.pckl".into()),
             depth_source: None,
             warnings: Vec::new(),
+            licences: None,
         };
         let warned = |s: &ExportSummary| {
             export(&"d".into(), &"o".into(), s)

@@ -43,6 +43,13 @@ pub struct IngestArgs {
     /// Point cloud to render [default: <scene>/dense/fused.ply if present, else the sparse points]
     #[arg(long)]
     pub points: Option<PathBuf>,
+    /// Each photo's origin: a CSV (header row) or JSON Lines file keyed by image name, with
+    /// licence, author, source URL and date taken (any other column kept as given); stored in
+    /// scene/photos.parquet, counted by `inspect`, written by every export as attribution.csv.
+    /// Licences as SPDX ids (CC-BY-2.0), Creative Commons names or URLs, Flickr's ids 0-10
+    /// or names; photos it does not name are "unknown", never guessed
+    #[arg(long, value_name = "FILE")]
+    pub photo_info: Option<PathBuf>,
     /// Segment each kept photo with this SegFormer (config.json + model.safetensors) instead
     /// of reading --semantics; see `nrw-etl segment --help`
     #[arg(long, conflicts_with = "semantics")]
@@ -84,6 +91,7 @@ impl IngestArgs {
             images: self.images.clone(),
             format: self.format,
             model: self.model,
+            photo_info: self.photo_info.clone(),
             points: self.points.clone(),
             follow_outside_links: self.follow_outside_links,
             stop_after_groups: self.stop_after_groups,

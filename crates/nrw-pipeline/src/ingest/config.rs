@@ -29,6 +29,9 @@ pub struct IngestConfig {
     pub points: Option<PathBuf>,
     /// Folder of per-photo ADE20K label maps.
     pub semantics: Option<PathBuf>,
+    /// CSV or JSON Lines file of each photo's licence, author and source, keyed by image
+    /// name ([`nrw_dataset::photo_info`]).
+    pub photo_info: Option<PathBuf>,
     /// Segment each kept photo with this model instead of reading label maps.
     pub segment: Option<InlineSegment>,
     /// Store every view as COLMAP's `image_undistorter` would: the PINHOLE camera it computes
@@ -68,6 +71,7 @@ impl IngestConfig {
             model: None,
             points: None,
             semantics: None,
+            photo_info: None,
             segment: None,
             undistort: None,
             denoise: None,

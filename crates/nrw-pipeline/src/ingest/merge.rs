@@ -5,6 +5,7 @@ use nrw_dataset::provenance::{from_parameters, IngestParameters};
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use nrw_dataset::photo_info::{PhotoInfo, PhotoRecord};
 use nrw_dataset::scene::VerdictKind;
 use nrw_dataset::units::{self, GroupRecord};
 use nrw_dataset::{
@@ -32,6 +33,50 @@ pub struct IngestMerge {
 
 fn count(outcomes: &BTreeMap<u32, ImageOutcome>, verdict: &str) -> usize {
     outcomes.values().filter(|o| o.verdict == verdict).count()
+}
+
+/// Each registered image's provenance: its row of the photo-info file ingest read (checked
+/// unchanged since), and its photo's EXIF.
+fn photo_records(
+    rec: &nrw_colmap::Reconstruction,
+    scene: &nrw_dataset::SceneSource,
+    recorded: &IngestParameters,
+    inputs: &[FileEntry],
+    dataset: &Store,
+) -> Result<Vec<PhotoRecord>> {
+    let mut info = BTreeMap::new();
+    if let Some(file) = &recorded.photo_info {
+        let path = Path::new(file);
+        let (_, sha) = nrw_dataset::manifest::sha256_file(path)?;
+        if !inputs.iter().any(|i| &i.path == file && i.sha256 == sha) {
+            return Err(units_error(
+                dataset,
+                format!("{file} changed since the ingest units read it: run the units again"),
+            ));
+        }
+        info = nrw_dataset::photo_info::read_photo_info(path)?;
+    }
+    let photos = scene.images_dir.as_deref().map(Path::new);
+    Ok(rec
+        .images
+        .values()
+        .map(|img| PhotoRecord {
+            image_id: img.id,
+            name: img.name.clone(),
+            info: info
+                .remove(&img.name)
+                .map(|(_, i)| i)
+                .unwrap_or_else(|| PhotoInfo {
+                    licence: nrw_dataset::photo_info::UNKNOWN.into(),
+                    ..PhotoInfo::default()
+                }),
+            // The one checked join of a model's name into a path (no links out of the folder).
+            exif: photos
+                .and_then(|d| nrw_colmap::names::photo_path(d, &img.name, false).ok())
+                .map(|p| nrw_dataset::photo_info::read_exif(&p))
+                .unwrap_or_default(),
+        })
+        .collect())
 }
 
 /// Merge ingest's units: scene tables and manifest from the group records, stale shards
@@ -93,6 +138,10 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         dataset.delete(&stale)?;
     }
     let mut tables = nrw_dataset::write_scene_tables(dataset, &rec, &photos, &outcomes)?;
+    let records = photo_records(&rec, &scene, &recorded, &unit.inputs, dataset)?;
+    tables.extend(nrw_dataset::photo_info::write_photos_table(
+        dataset, &records,
+    )?);
     tables.extend(shards.iter().cloned());
     // A split from an earlier run stays (split assigns only new photos when run again).
     if dataset.exists(nrw_dataset::split::SPLITS_TABLE)? {

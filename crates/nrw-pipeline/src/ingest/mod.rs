@@ -121,6 +121,46 @@ fn hashed_inputs(files: impl Iterator<Item = PathBuf>) -> Result<Vec<FileEntry>>
     Ok(inputs)
 }
 
+/// Read `--photo-info` (so a malformed file stops ingest before any rendering) and say which
+/// of its names are not images of the model: a warning each time, never a silent drop.
+fn photo_info_names(cfg: &IngestConfig, rec: &nrw_colmap::Reconstruction) -> Result<Vec<String>> {
+    let Some(path) = &cfg.photo_info else {
+        return Ok(Vec::new());
+    };
+    let info = nrw_dataset::photo_info::read_photo_info(path)?;
+    let names: std::collections::HashSet<&str> =
+        rec.images.values().map(|i| i.name.as_str()).collect();
+    let strangers: Vec<String> = info
+        .iter()
+        .filter(|(name, _)| !names.contains(name.as_str()))
+        .map(|(name, (line, _))| format!("{name} (line {line})"))
+        .collect();
+    let missing = names.iter().filter(|n| !info.contains_key(**n)).count();
+    let mut warnings = Vec::new();
+    if !strangers.is_empty() {
+        warnings.push(format!(
+            "{}: {} names are not images of the model, not used: {}",
+            path.display(),
+            strangers.len(),
+            strangers
+                .iter()
+                .take(10)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", ")
+                + if strangers.len() > 10 { ", …" } else { "" }
+        ));
+    }
+    if missing > 0 {
+        warnings.push(format!(
+            "{}: {missing} of {} registered images have no row: their licence is unknown",
+            path.display(),
+            names.len()
+        ));
+    }
+    Ok(warnings)
+}
+
 fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     check_config(cfg)?;
     let (scene, mut rec) = load_model(&cfg.scene, cfg.format, cfg.model)?;
@@ -136,7 +176,14 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     };
     let (raw, source, source_path) = point_source(cfg, &scene, &rec)?;
     let (cloud, cleaned) = render_cloud(cfg, raw, rec.scene_origin(), &mut warnings);
-    let inputs = hashed_inputs(rec.files.iter().cloned().chain(source_path))?;
+    warnings.extend(photo_info_names(cfg, &rec)?);
+    let inputs = hashed_inputs(
+        rec.files
+            .iter()
+            .cloned()
+            .chain(source_path)
+            .chain(cfg.photo_info.clone()),
+    )?;
     let (enc, layout) = encoding_and_layout(&rec);
     let segmenter = match &cfg.segment {
         Some(s) => Some((crate::segment::load_segformer(&s.weights)?, s.mode)),
@@ -158,6 +205,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
         estimated_normals_k: cleaned.estimated_normals_k,
         segment_model_sha256: segmenter.as_ref().map(|(m, _)| m.sha256.clone()),
         segment_mode: segmenter.as_ref().map(|(_, mode)| mode.to_string()),
+        photo_info: cfg.photo_info.as_ref().map(|p| p.display().to_string()),
     });
     let record = UnitRecord {
         stage: units::INGEST.into(),

@@ -43,6 +43,12 @@ pub struct ExportSettings {
     /// evaluation multiplies translations by (SfM does not know it: measure a known length)
     #[arg(long, value_parser = parse_scale)]
     pub metres_per_unit: Option<f64>,
+    /// Export only photos under these licences, comma-separated (SPDX ids, Creative Commons
+    /// names or URLs, Flickr ids; `unknown` for photos nobody gave one for), e.g.
+    /// CC-BY-2.0,CC-BY-SA-2.0,CC0-1.0; the summary says how many views that leaves out.
+    /// Licences come from `ingest --photo-info` [default: every view]
+    #[arg(long, value_delimiter = ',', value_parser = parse_licence)]
+    pub licences: Option<Vec<String>>,
 }
 
 impl Default for ExportSettings {
@@ -56,6 +62,7 @@ impl Default for ExportSettings {
             depth: c.depth,
             tfrecord_files: c.tfrecord_files,
             metres_per_unit: c.metres_per_unit,
+            licences: None,
         }
     }
 }
@@ -84,6 +91,16 @@ fn parse_crop(s: &str) -> std::result::Result<Crop, String> {
             .map(Crop::Side)
             .map_err(|_| format!("{n:?} is neither a side in pixels (e.g. 512) nor `none`")),
     }
+}
+
+/// `--licences` values: one accepted spelling each, kept as its SPDX id.
+fn parse_licence(s: &str) -> std::result::Result<String, String> {
+    nrw_dataset::photo_info::normalise_licence(s).ok_or_else(|| {
+        format!(
+            "{s:?} is not a licence nrw-etl knows; give {}",
+            nrw_dataset::photo_info::LICENCE_SPELLINGS
+        )
+    })
 }
 
 /// `--metres-per-unit` values: a finite length above zero.
@@ -129,6 +146,18 @@ impl ExportSettings {
             depth: self.depth,
             tfrecord_files: self.tfrecord_files,
             metres_per_unit: self.metres_per_unit,
+            licences: self
+                .licences
+                .as_ref()
+                .map(|l| {
+                    l.iter()
+                        .map(|s| {
+                            parse_licence(s)
+                                .map_err(|e| PipelineError::config(Setting::Licences, e))
+                        })
+                        .collect::<Result<Vec<_>>>()
+                })
+                .transpose()?,
             ..crate::export::official(dataset, out)
         })
     }

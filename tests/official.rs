@@ -105,6 +105,7 @@ fn official_and_tfrecord_exports_are_what_the_published_code_reads() {
     assert_eq!(
         listing(&tfr),
         [
+            "attribution.csv",
             "export.json",
             "tiny-00000-of-00002_train.tfrecord",
             "tiny-00000-of-00002_val.tfrecord",
@@ -240,7 +241,8 @@ fn official_export_refuses_bad_requests_and_never_leaves_stale_files() {
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("split val has no view: not written"), "{err}");
     let files = listing(&out);
-    assert_eq!(files.len(), 5 * 3 + 1, "{files:?}");
+    // Three files a view, export.json and attribution.csv.
+    assert_eq!(files.len(), 5 * 3 + 2, "{files:?}");
     assert!(files.iter().all(|f| !f.contains("seg_rgb")));
     assert_eq!(export_json(&out)["semantics"], serde_json::Value::Null);
     // No published converter reads a folder without *_seg_rgb.png (AlignedRenderedDataset
@@ -338,7 +340,7 @@ fn official_export_refuses_bad_requests_and_never_leaves_stale_files() {
         "--quiet",
     ]);
     let now = listing(&out);
-    assert_eq!(now.len(), 3 * 3 + 1, "{now:?}");
+    assert_eq!(now.len(), 3 * 3 + 2, "{now:?}");
     let json = export_json(&out);
     let listed: usize = json["splits"]
         .as_array()
@@ -346,7 +348,11 @@ fn official_export_refuses_bad_requests_and_never_leaves_stale_files() {
         .iter()
         .map(|s| s["files"].as_array().unwrap().len())
         .sum();
-    assert_eq!(listed + 1, now.len(), "every file is the new export's");
+    assert_eq!(
+        listed + 2,
+        now.len(),
+        "every file is the new export's (and export.json, attribution.csv)"
+    );
     assert_eq!(leftovers(), 0, "no staging folder left behind");
     // A folder of someone else's files is not replaced; a file is not a folder.
     let foreign = tmp.path().join("foreign");

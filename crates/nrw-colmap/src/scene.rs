@@ -67,7 +67,8 @@ impl ModelChoice {
     }
 }
 
-/// The numbered sub-models of a scene folder (`sparse/N` holding a model), by N.
+/// The numbered sub-models of a scene folder (`sparse/N` holding a model), by N; their
+/// images are counted only when there are two or more to choose from.
 pub fn sub_models(dir: &Path) -> Result<Vec<SubModel>> {
     let sparse = dir.join("sparse");
     let Ok(entries) = std::fs::read_dir(&sparse) else {
@@ -86,11 +87,19 @@ pub fn sub_models(dir: &Path) -> Result<Vec<SubModel>> {
         };
         let dir = sparse.join(index.to_string());
         if crate::load::has_model(&dir) {
-            let images = registered_images(&dir)?;
-            found.push(SubModel { index, dir, images });
+            found.push(SubModel {
+                index,
+                dir,
+                images: 0,
+            });
         }
     }
     found.sort_by_key(|m| m.index);
+    if found.len() >= 2 {
+        for m in &mut found {
+            m.images = registered_images(&m.dir)?;
+        }
+    }
     Ok(found)
 }
 

@@ -368,6 +368,25 @@ fn utf8(values: impl Iterator<Item = Option<String>>) -> ArrayRef {
     Arc::new(StringArray::from_iter(values))
 }
 
+/// Arrow schema of `scene/photos.parquet` (documented in schemas/scene_photos.toml).
+pub fn photos_schema() -> arrow_schema::SchemaRef {
+    let text = |name: &str| Field::new(name, DataType::Utf8, true);
+    Arc::new(Schema::new(vec![
+        Field::new("image_id", DataType::UInt32, false),
+        Field::new("name", DataType::Utf8, false),
+        Field::new("licence", DataType::Utf8, false),
+        text("licence_given"),
+        text("author"),
+        text("url"),
+        text("date_taken"),
+        text("extra_json"),
+        text("exif_date_taken"),
+        text("exif_make"),
+        text("exif_model"),
+        Field::new("exif_orientation", DataType::UInt16, true),
+    ]))
+}
+
 /// Write [`PHOTOS_TABLE`] when any photo has a photo-info row or EXIF (nothing otherwise, so
 /// a dataset without provenance keeps its bytes); its manifest entry.
 pub fn write_photos_table(
@@ -378,20 +397,7 @@ pub fn write_photos_table(
         return Ok(None);
     }
     let s = |f: fn(&PhotoRecord) -> Option<String>| utf8(records.iter().map(f));
-    let schema = Arc::new(Schema::new(vec![
-        Field::new("image_id", DataType::UInt32, false),
-        Field::new("name", DataType::Utf8, false),
-        Field::new("licence", DataType::Utf8, false),
-        Field::new("licence_given", DataType::Utf8, true),
-        Field::new("author", DataType::Utf8, true),
-        Field::new("url", DataType::Utf8, true),
-        Field::new("date_taken", DataType::Utf8, true),
-        Field::new("extra_json", DataType::Utf8, true),
-        Field::new("exif_date_taken", DataType::Utf8, true),
-        Field::new("exif_make", DataType::Utf8, true),
-        Field::new("exif_model", DataType::Utf8, true),
-        Field::new("exif_orientation", DataType::UInt16, true),
-    ]));
+    let schema = photos_schema();
     let columns: Vec<ArrayRef> = vec![
         Arc::new(UInt32Array::from_iter_values(
             records.iter().map(|r| r.image_id),

@@ -15,6 +15,11 @@ fn written_tables() -> Vec<(&'static str, &'static str, SchemaRef)> {
         ("scene_cameras.toml", CAMERAS_TABLE, cameras_schema()),
         ("scene_images.toml", IMAGES_TABLE, images_schema()),
         (
+            "scene_photos.toml",
+            nrw_dataset::photo_info::PHOTOS_TABLE,
+            nrw_dataset::photo_info::photos_schema(),
+        ),
+        (
             "views.toml",
             "shards/views-NNNNN.parquet",
             nrw_dataset::views_schema(),

@@ -147,6 +147,7 @@ pub fn render(inp: &Inputs) -> Result<String> {
         }
         h.push_str("</div>");
     }
+    licences(&mut h, inp);
     drops(&mut h, inp)?;
     distributions(&mut h, inp)?;
     // Views are read only when something was kept (an all-dropped dataset has no shards).
@@ -160,6 +161,20 @@ pub fn render(inp: &Inputs) -> Result<String> {
     triplets(&mut h, inp, ds.as_ref())?;
     let _ = writeln!(h, "<script>{CHECK}</script></body></html>");
     Ok(h)
+}
+
+/// Photos by licence, or a line saying nobody recorded them.
+fn licences(h: &mut String, inp: &Inputs) {
+    h.push_str("<h2>Licences</h2>");
+    if inp.figures.licences.is_empty() {
+        h.push_str("<p>No photo-info was given: every photo's licence is unknown (<code>nrw-etl ingest --photo-info FILE</code> records licence, author and source per photo).</p>");
+        return;
+    }
+    h.push_str("<table><tr><th>licence</th><th>photos</th></tr>");
+    for (l, n) in &inp.figures.licences {
+        let _ = write!(h, "<tr><td>{}</td><td>{n}</td></tr>", esc(l));
+    }
+    h.push_str("</table>");
 }
 
 fn drops(h: &mut String, inp: &Inputs) -> Result<()> {

@@ -32,6 +32,10 @@ pub struct Figures {
     pub distributions: BTreeMap<String, Summary>,
     pub triplets: Option<TripletFigures>,
     pub warnings: Vec<Warning>,
+    /// Registered photos by licence, when the dataset records provenance
+    /// (`ingest --photo-info`, or photos with EXIF); empty otherwise (every licence unknown).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub licences: BTreeMap<String, usize>,
 }
 
 /// Photos at every stage.
@@ -196,8 +200,11 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
             distributions.insert(name.to_string(), s);
         }
     }
-    let warnings = warnings(&images, &counts, max_empty);
+    let mut warnings = warnings(&images, &counts, max_empty);
+    let attributions = nrw_dataset::photo_info::read_attributions(dir)?;
+    let licences = provenance_warnings(&images, &attributions, &mut warnings);
     let figures = Figures {
+        licences,
         dataset: dir.root().to_string(),
         scene_dir: manifest.scene.scene_dir.clone(),
         tool: format!("{} {}", manifest.tool.name, manifest.tool.version),
@@ -228,6 +235,46 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         json: out.name(QA_JSON),
         figures,
     })
+}
+
+/// Photos by licence, and warnings for photos without one and photos whose EXIF orientation
+/// is not 1; nothing when the dataset records no provenance.
+fn provenance_warnings(
+    images: &[ImageRow],
+    attributions: &BTreeMap<u32, nrw_dataset::photo_info::Attribution>,
+    warnings: &mut Vec<Warning>,
+) -> BTreeMap<String, usize> {
+    let mut licences = BTreeMap::new();
+    if attributions.is_empty() {
+        return licences;
+    }
+    let unknown = nrw_dataset::photo_info::Attribution::default();
+    let (mut without, mut rotated) = (Vec::new(), Vec::new());
+    for r in images {
+        let a = attributions.get(&r.image_id).unwrap_or(&unknown);
+        *licences.entry(a.licence.clone()).or_insert(0) += 1;
+        if a.licence == nrw_dataset::photo_info::UNKNOWN {
+            without.push(r.name.clone());
+        }
+        if a.orientation.is_some_and(|o| o != 1) {
+            rotated.push(r.name.clone());
+        }
+    }
+    if !without.is_empty() {
+        warnings.push(Warning {
+            kind: "licence_unknown".into(),
+            message: format!("{} photos have no licence: export --licences leaves them out unless `unknown` is listed", without.len()),
+            photos: without,
+        });
+    }
+    if !rotated.is_empty() {
+        warnings.push(Warning {
+            kind: "exif_orientation".into(),
+            message: format!("{} photos have an EXIF orientation other than 1: COLMAP reads pixels as stored, and so does nrw-etl, so these views are as the model saw them, not as a photo viewer shows them", rotated.len()),
+            photos: rotated,
+        });
+    }
+    licences
 }
 
 fn warnings(images: &[ImageRow], counts: &Counts, max_empty: f64) -> Vec<Warning> {

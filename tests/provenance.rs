@@ -180,6 +180,18 @@ fn every_export_attributes_exactly_the_photos_it_wrote_and_licences_leave_out_ex
             serde_json::from_str(&ok(&["inspect", ds.to_str().unwrap(), "--json"])).unwrap();
         assert_eq!(inspected["licences"]["unknown"], 1, "{inspected}");
         assert_eq!(inspected["licences"]["CC-BY-2.0"], 1, "{inspected}");
+        // QA counts them too and names the photo without a licence.
+        ok(&["qa", ds.to_str().unwrap()]);
+        let qa: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(ds.join("qa/qa.json")).unwrap()).unwrap();
+        assert_eq!(qa["licences"]["CC-BY-NC-2.0"], 1, "{qa}");
+        let unknown = qa["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|w| w["kind"] == "licence_unknown")
+            .unwrap_or_else(|| panic!("{qa}"));
+        assert_eq!(unknown["photos"], serde_json::json!([names[5]]), "{qa}");
         for layout in LAYOUTS {
             let out = tmp.path().join(format!("{form}-{layout}"));
             ok(&[

@@ -632,3 +632,23 @@ fn a_scene_with_two_sub_models_gives_the_larger_and_says_so() {
         "{err}"
     );
 }
+
+#[test]
+fn sub_models_of_equal_size_go_to_the_lowest_number() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    small_scene(&scene, 3);
+    // sparse/0 keeps every image: both sub-models register 3.
+    assert_eq!(two_sub_models(&scene, 3), (3, 3));
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", scene.to_str().unwrap(), "--json"])).unwrap();
+    let chosen = json["chosen"].as_str().unwrap();
+    assert!(
+        json["model_dir"].as_str().unwrap().ends_with("sparse/0"),
+        "{json}"
+    );
+    assert!(
+        chosen.contains("sparse/0: 3 images, sparse/1: 3 images"),
+        "{chosen}"
+    );
+}

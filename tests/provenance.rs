@@ -119,6 +119,20 @@ fn ingest(scene: &Path, out: &Path, extra: &[&str]) -> String {
     err
 }
 
+/// `export DATASET --layout LAYOUT --out OUT EXTRA…`: what it printed.
+fn export(ds: &Path, layout: &str, out: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "export",
+        ds.to_str().unwrap(),
+        "--layout",
+        layout,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    ok(&args)
+}
+
 /// attribution.csv's rows as image → licence, checked against export.json's views.
 fn attribution(export: &Path) -> BTreeMap<String, String> {
     let text = std::fs::read_to_string(export.join("attribution.csv")).unwrap();
@@ -194,15 +208,7 @@ fn every_export_attributes_exactly_the_photos_it_wrote_and_licences_leave_out_ex
         assert_eq!(unknown["photos"], serde_json::json!([names[5]]), "{qa}");
         for layout in LAYOUTS {
             let out = tmp.path().join(format!("{form}-{layout}"));
-            ok(&[
-                "export",
-                ds.to_str().unwrap(),
-                "--layout",
-                layout,
-                "--out",
-                out.to_str().unwrap(),
-                "--quiet",
-            ]);
+            export(&ds, layout, &out, &["--quiet"]);
             let rows = attribution(&out);
             assert_eq!(rows.len(), 6, "{layout}");
             assert_eq!(rows, want, "{form} {layout}");
@@ -210,16 +216,12 @@ fn every_export_attributes_exactly_the_photos_it_wrote_and_licences_leave_out_ex
             assert!(text.contains("\"Doe, J.\""), "{text}");
             // --licences: exactly the photos under those licences, the rest counted as left out.
             let only = tmp.path().join(format!("{form}-{layout}-open"));
-            let said = ok(&[
-                "export",
-                ds.to_str().unwrap(),
-                "--layout",
+            let said = export(
+                &ds,
                 layout,
-                "--out",
-                only.to_str().unwrap(),
-                "--licences",
-                "CC BY 2.0,cc0-1.0,unknown",
-            ]);
+                &only,
+                &["--licences", "CC BY 2.0,cc0-1.0,unknown"],
+            );
             assert!(said.contains("3 views under other licences"), "{said}");
             let rows = attribution(&only);
             let open: BTreeMap<String, String> = want

@@ -33,7 +33,7 @@ pub const ATTRIBUTION_FILE: &str = "attribution.csv";
 pub const UNKNOWN: &str = "unknown";
 
 /// What a photo-info file says about one photo.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PhotoInfo {
     /// The licence as an SPDX id (or `LicenseRef-…`, or [`UNKNOWN`]).
     pub licence: String,
@@ -44,6 +44,20 @@ pub struct PhotoInfo {
     pub date_taken: Option<String>,
     /// Every other column, as given.
     pub extra: BTreeMap<String, String>,
+}
+
+impl Default for PhotoInfo {
+    /// A photo nobody gave a row for: licence unknown, nothing else.
+    fn default() -> Self {
+        PhotoInfo {
+            licence: UNKNOWN.into(),
+            licence_given: None,
+            author: None,
+            url: None,
+            date_taken: None,
+            extra: BTreeMap::new(),
+        }
+    }
 }
 
 /// What a photo's own EXIF says, where it has one.
@@ -173,10 +187,7 @@ fn row_info(path: &Path, line: u64, fields: Vec<(String, String)>) -> Result<(St
         problem,
     };
     let mut name = None;
-    let mut info = PhotoInfo {
-        licence: UNKNOWN.into(),
-        ..PhotoInfo::default()
-    };
+    let mut info = PhotoInfo::default();
     for (column, value) in fields {
         let value = value.trim().to_string();
         let keep = (!value.is_empty()).then(|| value.clone());
@@ -356,12 +367,7 @@ pub fn read_exif(photo: &Path) -> Exif {
 
 /// Whether a record has anything a table should keep.
 fn recorded(r: &PhotoRecord) -> bool {
-    r.info
-        != PhotoInfo {
-            licence: UNKNOWN.into(),
-            ..PhotoInfo::default()
-        }
-        || r.exif != Exif::default()
+    r.info != PhotoInfo::default() || r.exif != Exif::default()
 }
 
 fn utf8(values: impl Iterator<Item = Option<String>>) -> ArrayRef {
@@ -480,6 +486,35 @@ pub fn read_attributions(store: &Store) -> Result<BTreeMap<u32, Attribution>> {
         }
     }
     Ok(out)
+}
+
+/// Registered photos counted by licence, with the names of those without one and of those
+/// whose EXIF orientation is not 1: what `inspect` and QA show.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Tally {
+    pub licences: BTreeMap<String, usize>,
+    pub without_licence: Vec<String>,
+    pub rotated_by_exif: Vec<String>,
+}
+
+/// The [`Tally`] of `photos` (image id, name), a photo missing from `attributions` unknown.
+pub fn tally<'a>(
+    photos: impl Iterator<Item = (u32, &'a str)>,
+    attributions: &BTreeMap<u32, Attribution>,
+) -> Tally {
+    let unknown = Attribution::default();
+    let mut t = Tally::default();
+    for (id, name) in photos {
+        let a = attributions.get(&id).unwrap_or(&unknown);
+        *t.licences.entry(a.licence.clone()).or_insert(0) += 1;
+        if a.licence == UNKNOWN {
+            t.without_licence.push(name.to_string());
+        }
+        if a.orientation.is_some_and(|o| o != 1) {
+            t.rotated_by_exif.push(name.to_string());
+        }
+    }
+    t
 }
 
 /// One CSV cell, quoted when it holds a comma, quote or line break (RFC 4180).

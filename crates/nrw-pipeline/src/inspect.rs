@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use nrw_colmap::Format;
+use nrw_colmap::{Format, Reconstruction};
 use serde::Serialize;
 
 use crate::error::Result;
@@ -110,19 +110,13 @@ fn dataset_summary(location: &nrw_dataset::Location) -> Result<DatasetSummary> {
         *counts.entry(v.clone()).or_insert(0usize) += 1;
     }
     let attributions = nrw_dataset::photo_info::read_attributions(&ds.store)?;
-    let mut licences = BTreeMap::new();
-    let mut rotated_by_exif = Vec::new();
-    let unknown = nrw_dataset::photo_info::Attribution::default();
-    for (id, name, _) in &verdicts {
-        let a = attributions.get(id).unwrap_or(&unknown);
-        *licences.entry(a.licence.clone()).or_insert(0usize) += 1;
-        if a.orientation.is_some_and(|o| o != 1) {
-            rotated_by_exif.push(name.clone());
-        }
-    }
+    let tally = nrw_dataset::photo_info::tally(
+        verdicts.iter().map(|(id, name, _)| (*id, name.as_str())),
+        &attributions,
+    );
     Ok(DatasetSummary {
-        licences,
-        rotated_by_exif,
+        licences: tally.licences,
+        rotated_by_exif: tally.rotated_by_exif,
         dataset: location.to_string(),
         schema_version: ds.manifest.schema_version,
         registered: verdicts.len(),
@@ -134,8 +128,10 @@ fn dataset_summary(location: &nrw_dataset::Location) -> Result<DatasetSummary> {
     })
 }
 
-/// Each sub-model of a scene with two or more, read whole (counts and reprojection error).
+/// Each sub-model of a scene with two or more (counts and reprojection error): `chosen`, the
+/// one already read, and the others read whole.
 fn sub_model_summaries(
+    chosen: &Reconstruction,
     scene: &nrw_colmap::Scene,
     format: Option<Format>,
 ) -> Result<Vec<SubModelSummary>> {
@@ -145,12 +141,18 @@ fn sub_model_summaries(
     };
     of.iter()
         .map(|m| {
-            let rec = nrw_colmap::read_model(&m.dir, format)?;
+            let other;
+            let rec = if m.dir == scene.model_dir {
+                chosen
+            } else {
+                other = nrw_colmap::read_model(&m.dir, format)?;
+                &other
+            };
             Ok(SubModelSummary {
                 index: m.index,
                 images: rec.images.len(),
                 points: rec.points.len(),
-                mean_reprojection_error_px: nrw_colmap::reprojection_stats(&rec).mean_px,
+                mean_reprojection_error_px: nrw_colmap::reprojection_stats(rec).mean_px,
             })
         })
         .collect()
@@ -162,7 +164,7 @@ fn model_summary(
     pick: Option<u32>,
 ) -> Result<ModelSummary> {
     let (scene, rec) = crate::model::load_model(location, format, pick)?;
-    let sub_models = sub_model_summaries(&scene, format)?;
+    let sub_models = sub_model_summaries(&rec, &scene, format)?;
     let chosen = scene.choice.explain(&scene.model_dir);
     let dir = scene.model_dir;
     let stats = nrw_colmap::reprojection_stats(&rec);

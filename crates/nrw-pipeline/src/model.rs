@@ -125,14 +125,19 @@ pub fn reread_model(
     };
     let rec = nrw_colmap::read_model(Path::new(&scene.model_dir), format)?;
     for f in &rec.files {
-        let (_, sha) = nrw_dataset::manifest::sha256_file(f)?;
-        let path = f.display().to_string();
-        if !inputs.iter().any(|i| i.path == path && i.sha256 == sha) {
+        if !unchanged(f, inputs)? {
             let changed = f.clone();
             return Ok((rec, Some(changed)));
         }
     }
     Ok((rec, None))
+}
+
+/// Whether `file` still has the SHA-256 a stage recorded for it among `inputs`.
+pub fn unchanged(file: &Path, inputs: &[FileEntry]) -> Result<bool> {
+    let (_, sha) = nrw_dataset::manifest::sha256_file(file)?;
+    let path = file.display().to_string();
+    Ok(inputs.iter().any(|i| i.path == path && i.sha256 == sha))
 }
 
 /// `bin`/`txt` and `colmap3`/`colmap4`, as reports and manifests spell them.

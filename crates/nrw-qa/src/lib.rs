@@ -244,22 +244,17 @@ fn provenance_warnings(
     attributions: &BTreeMap<u32, nrw_dataset::photo_info::Attribution>,
     warnings: &mut Vec<Warning>,
 ) -> BTreeMap<String, usize> {
-    let mut licences = BTreeMap::new();
     if attributions.is_empty() {
-        return licences;
+        return BTreeMap::new();
     }
-    let unknown = nrw_dataset::photo_info::Attribution::default();
-    let (mut without, mut rotated) = (Vec::new(), Vec::new());
-    for r in images {
-        let a = attributions.get(&r.image_id).unwrap_or(&unknown);
-        *licences.entry(a.licence.clone()).or_insert(0) += 1;
-        if a.licence == nrw_dataset::photo_info::UNKNOWN {
-            without.push(r.name.clone());
-        }
-        if a.orientation.is_some_and(|o| o != 1) {
-            rotated.push(r.name.clone());
-        }
-    }
+    let nrw_dataset::photo_info::Tally {
+        licences,
+        without_licence: without,
+        rotated_by_exif: rotated,
+    } = nrw_dataset::photo_info::tally(
+        images.iter().map(|r| (r.image_id, r.name.as_str())),
+        attributions,
+    );
     if !without.is_empty() {
         warnings.push(Warning {
             kind: "licence_unknown".into(),

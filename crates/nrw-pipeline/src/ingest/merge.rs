@@ -5,7 +5,7 @@ use nrw_dataset::provenance::{from_parameters, IngestParameters};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use nrw_dataset::photo_info::{PhotoInfo, PhotoRecord};
+use nrw_dataset::photo_info::PhotoRecord;
 use nrw_dataset::scene::VerdictKind;
 use nrw_dataset::units::{self, GroupRecord};
 use nrw_dataset::{
@@ -47,8 +47,7 @@ fn photo_records(
     let mut info = BTreeMap::new();
     if let Some(file) = &recorded.photo_info {
         let path = Path::new(file);
-        let (_, sha) = nrw_dataset::manifest::sha256_file(path)?;
-        if !inputs.iter().any(|i| &i.path == file && i.sha256 == sha) {
+        if !crate::model::unchanged(path, inputs)? {
             return Err(units_error(
                 dataset,
                 format!("{file} changed since the ingest units read it: run the units again"),
@@ -63,13 +62,7 @@ fn photo_records(
         .map(|img| PhotoRecord {
             image_id: img.id,
             name: img.name.clone(),
-            info: info
-                .remove(&img.name)
-                .map(|(_, i)| i)
-                .unwrap_or_else(|| PhotoInfo {
-                    licence: nrw_dataset::photo_info::UNKNOWN.into(),
-                    ..PhotoInfo::default()
-                }),
+            info: info.remove(&img.name).map(|(_, i)| i).unwrap_or_default(),
             // The one checked join of a model's name into a path (no links out of the folder).
             exif: photos
                 .and_then(|d| nrw_colmap::names::photo_path(d, &img.name, false).ok())

@@ -18,6 +18,8 @@ mod export_models;
 mod golden;
 #[path = "gsplat.rs"]
 mod gsplat;
+#[path = "duplicates.rs"]
+mod duplicates;
 #[path = "ingest.rs"]
 mod ingest;
 #[path = "inspect.rs"]

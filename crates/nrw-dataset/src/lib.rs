@@ -8,6 +8,7 @@ pub mod codec;
 pub mod corpus;
 pub mod depth;
 pub mod descriptors;
+pub mod duplicates;
 pub mod error;
 pub mod fuzz_entry;
 pub mod jpeg;
@@ -43,7 +44,8 @@ pub const QA_DIR: &str = "qa";
 pub const EXPORT_DIR: &str = "export";
 pub use manifest::{FileEntry, Manifest, SceneSource, Tool, SCHEMA_VERSION};
 pub use scene::{
-    cameras_schema, images_schema, write_scene_tables, ImageOutcome, CAMERAS_TABLE, IMAGES_TABLE,
+    cameras_schema, images_schema, write_scene_tables, ImageOutcome, PhotoSignals, CAMERAS_TABLE,
+    IMAGES_TABLE,
     VERDICT_KEPT, VERDICT_UNREADABLE,
 };
 pub use schema::TableDoc;

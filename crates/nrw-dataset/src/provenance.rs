@@ -41,6 +41,9 @@ pub struct IngestParameters {
     /// The photo-info file read (`--photo-info`): licence, author, source per photo.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub photo_info: Option<String>,
+    /// Photos less sharp than this were dropped (`--min-sharpness`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_sharpness: Option<f64>,
 }
 
 /// The undistorter's settings, as COLMAP's image_undistorter takes them.
@@ -129,6 +132,7 @@ mod tests {
             segment_model_sha256: None,
             segment_mode: None,
             photo_info: None,
+            min_sharpness: None,
         };
         let mut m = to_parameters(&p);
         assert!(!m.contains_key("semantics") && !m.contains_key("denoise"));

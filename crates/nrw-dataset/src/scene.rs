@@ -30,15 +30,18 @@ pub enum VerdictKind {
     /// The photo or label map cannot be decoded whole (truncated, corrupt, not an image);
     /// `verdict_detail` holds the decoder's message.
     Unreadable,
+    /// The photo's sharpness (variance of the Laplacian) is under `--min-sharpness`.
+    TooBlurry,
 }
 
 impl VerdictKind {
     /// Every verdict.
-    pub const ALL: [VerdictKind; 4] = [
+    pub const ALL: [VerdictKind; 5] = [
         VerdictKind::Kept,
         VerdictKind::TooSmall,
         VerdictKind::TooSparse,
         VerdictKind::Unreadable,
+        VerdictKind::TooBlurry,
     ];
 
     /// The word the images table holds.
@@ -48,6 +51,7 @@ impl VerdictKind {
             VerdictKind::TooSmall => "too_small",
             VerdictKind::TooSparse => "too_sparse",
             VerdictKind::Unreadable => "unreadable",
+            VerdictKind::TooBlurry => "too_blurry",
         }
     }
 
@@ -112,7 +116,44 @@ pub fn images_schema() -> SchemaRef {
         Field::new("shard", DataType::Utf8, true),
         Field::new("depth_min", DataType::Float64, true),
         Field::new("depth_max", DataType::Float64, true),
+        Field::new("sharpness", DataType::Float64, true),
+        Field::new("luma_mean", DataType::Float64, true),
+        Field::new("luma_std", DataType::Float64, true),
+        Field::new("dark_fraction", DataType::Float64, true),
+        Field::new("bright_fraction", DataType::Float64, true),
+        Field::new("phash", DataType::Utf8, true),
     ]))
+}
+
+/// What a photo's pixels say about it before any model does: blur, exposure, and a
+/// perceptual hash that finds copies of one picture (recorded for every photo ingest decodes).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PhotoSignals {
+    /// Variance of the Laplacian of the photo's grey levels, as instant-ngp's colmap2nerf
+    /// records it (OpenCV's 3×3 kernel on the full-size photo: it grows with resolution).
+    pub sharpness: f64,
+    /// Mean grey level, 0–255.
+    pub luma_mean: f64,
+    /// Standard deviation of the grey levels (a flat photo, all black or all white, has 0:
+    /// its hash says nothing and it is in no near-duplicate group).
+    pub luma_std: f64,
+    /// Fraction of pixels at grey level ≤ [`DARK_LEVEL`] (crushed shadows).
+    pub dark_fraction: f64,
+    /// Fraction of pixels at grey level ≥ [`BRIGHT_LEVEL`] (clipped highlights).
+    pub bright_fraction: f64,
+    /// 64-bit DCT perceptual hash (imagehash's `phash` layout: bit 63 is the DCT's (0, 0)).
+    pub phash: u64,
+}
+
+/// Grey level at or under which a pixel counts as crushed in [`PhotoSignals::dark_fraction`].
+pub const DARK_LEVEL: u8 = 5;
+/// Grey level at or over which a pixel counts as clipped in [`PhotoSignals::bright_fraction`].
+pub const BRIGHT_LEVEL: u8 = 250;
+
+/// A perceptual hash as the images table holds it: 16 lower-case hex digits, as imagehash
+/// prints one.
+pub fn phash_hex(h: u64) -> String {
+    format!("{h:016x}")
 }
 
 /// What ingest decided about one image (the render stage's output for the images table).
@@ -132,6 +173,10 @@ pub struct ImageOutcome {
     /// message).
     #[serde(default)]
     pub detail: Option<String>,
+    /// Sharpness, exposure and perceptual hash of the photo, when ingest decoded it (kept
+    /// views and those dropped as too blurry).
+    #[serde(default)]
+    pub signals: Option<PhotoSignals>,
 }
 
 fn to_u32(v: u64, table: &str, record: String, field: &str) -> Result<u32> {
@@ -219,6 +264,11 @@ pub fn images_batch(
     let col = |f: &dyn Fn(&nrw_colmap::Image) -> f64| -> ArrayRef {
         Arc::new(Float64Array::from_iter_values(imgs.iter().map(|i| f(i))))
     };
+    let signal = |f: &dyn Fn(&PhotoSignals) -> f64| -> ArrayRef {
+        Arc::new(Float64Array::from_iter(
+            outs.iter().map(|o| o.signals.as_ref().map(f)),
+        ))
+    };
     let size = |i: &nrw_colmap::Image| photos.get(&i.id).copied().flatten();
     let matches = |i: &nrw_colmap::Image| {
         size(i).map(|(w, h)| {
@@ -294,6 +344,14 @@ pub fn images_batch(
             )),
             Arc::new(Float64Array::from_iter(
                 outs.iter().map(|o| o.depth_range.map(|r| r.1)),
+            )),
+            signal(&|s| s.sharpness),
+            signal(&|s| s.luma_mean),
+            signal(&|s| s.luma_std),
+            signal(&|s| s.dark_fraction),
+            signal(&|s| s.bright_fraction),
+            Arc::new(StringArray::from_iter(
+                outs.iter().map(|o| o.signals.map(|s| phash_hex(s.phash))),
             )),
         ],
     )

@@ -69,6 +69,59 @@ pub fn assign(
     val: usize,
     seed: u64,
 ) -> std::result::Result<(Vec<Assignment>, SplitChange), String> {
+    assign_grouped(eligible, previous, val, seed, &BTreeMap::new())
+}
+
+/// New photos in units that go to one side together: a near-duplicate group's new members
+/// (ranked by their best-ranked member), or one photo; a unit whose group already has an
+/// assigned member goes that member's way (`follows`).
+struct Unit<'a> {
+    rank: u64,
+    members: Vec<(&'a str, u32)>,
+    follows: Option<&'a str>,
+}
+
+fn units<'a>(
+    fresh: &[(u64, &'a str, u32)],
+    groups: &BTreeMap<String, u32>,
+    assigned: &BTreeMap<u32, &'a str>,
+) -> Vec<Unit<'a>> {
+    let mut by_group: BTreeMap<u32, Unit<'a>> = BTreeMap::new();
+    let mut out = Vec::new();
+    for &(rank, name, id) in fresh {
+        match groups.get(name) {
+            Some(g) => {
+                let u = by_group.entry(*g).or_insert(Unit {
+                    rank,
+                    members: Vec::new(),
+                    follows: assigned.get(g).copied(),
+                });
+                u.rank = u.rank.min(rank);
+                u.members.push((name, id));
+            }
+            None => out.push(Unit {
+                rank,
+                members: vec![(name, id)],
+                follows: None,
+            }),
+        }
+    }
+    out.extend(by_group.into_values());
+    out.sort_by(|a, b| (a.rank, a.members[0].0).cmp(&(b.rank, b.members[0].0)));
+    out
+}
+
+/// [`assign`] keeping each near-duplicate group (`groups`: photo name → group) on one side:
+/// groups are drawn whole, in the order of their best-ranked member, and one that would
+/// overfill validation goes to training. A photo joining a group that already has assigned
+/// members goes their way.
+pub fn assign_grouped(
+    eligible: &[(u32, String)],
+    previous: &[Assignment],
+    val: usize,
+    seed: u64,
+    groups: &BTreeMap<String, u32>,
+) -> std::result::Result<(Vec<Assignment>, SplitChange), String> {
     let by_name: BTreeMap<&str, &Assignment> =
         previous.iter().map(|a| (a.name.as_str(), a)).collect();
     let mut out = Vec::with_capacity(eligible.len());
@@ -112,22 +165,58 @@ pub fn assign(
         ));
     }
     fresh.sort();
-    for (k, (_, name, id)) in fresh.iter().enumerate() {
-        let split = if k < need { VAL } else { TRAIN };
-        if split == VAL {
-            change.new_val += 1;
-        } else {
-            change.new_train += 1;
+    // The side each group's earlier-assigned members are on.
+    let assigned: BTreeMap<u32, &str> = out
+        .iter()
+        .filter_map(|a| groups.get(&a.name).map(|g| (*g, a.split.as_str())))
+        .map(|(g, s)| (g, if s == VAL { VAL } else { TRAIN }))
+        .collect();
+    let mut left = need;
+    for unit in units(&fresh, groups, &assigned) {
+        let split = match unit.follows {
+            Some(side) => side,
+            None if unit.members.len() <= left => VAL,
+            None => TRAIN,
+        };
+        for (name, id) in unit.members {
+            if split == VAL {
+                change.new_val += 1;
+                left = left.saturating_sub(1);
+            } else {
+                change.new_train += 1;
+            }
+            out.push(Assignment {
+                image_id: id,
+                name: name.to_string(),
+                split: split.into(),
+                seed,
+            });
         }
-        out.push(Assignment {
-            image_id: *id,
-            name: name.to_string(),
-            split: split.into(),
-            seed,
-        });
     }
     out.sort_by_key(|a| a.image_id);
     Ok((out, change))
+}
+
+/// Near-duplicate groups with members on both sides of a split: (group, its members'
+/// names), for the warning a published split earns.
+pub fn straddling(rows: &[Assignment], groups: &BTreeMap<String, u32>) -> Vec<(u32, Vec<String>)> {
+    let mut sides: BTreeMap<u32, (bool, bool, Vec<String>)> = BTreeMap::new();
+    for a in rows {
+        if let Some(g) = groups.get(&a.name) {
+            let e = sides.entry(*g).or_default();
+            if a.split == VAL {
+                e.1 = true;
+            } else {
+                e.0 = true;
+            }
+            e.2.push(a.name.clone());
+        }
+    }
+    sides
+        .into_iter()
+        .filter(|(_, (t, v, _))| *t && *v)
+        .map(|(g, (_, _, n))| (g, n))
+        .collect()
 }
 
 /// One row of a published Phototourism split file that nerf_pl keeps (it has an id).

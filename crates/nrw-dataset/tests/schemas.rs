@@ -20,6 +20,11 @@ fn written_tables() -> Vec<(&'static str, &'static str, SchemaRef)> {
             nrw_dataset::photo_info::photos_schema(),
         ),
         (
+            "scene_duplicates.toml",
+            nrw_dataset::duplicates::DUPLICATES_TABLE,
+            nrw_dataset::duplicates::duplicates_schema(),
+        ),
+        (
             "views.toml",
             "shards/views-NNNNN.parquet",
             nrw_dataset::views_schema(),

@@ -99,6 +99,8 @@ pub enum Setting {
     RowsPerShard,
     Radius,
     MaxEmpty,
+    /// `--min-sharpness`: the blur filter.
+    MinSharpness,
     EstimateNormals,
     Undistort,
     SegmentWeights,
@@ -155,10 +157,11 @@ pub enum Setting {
 
 impl Setting {
     /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 34] = [
+    pub const ALL: [Setting; 35] = [
         Setting::RowsPerShard,
         Setting::Radius,
         Setting::MaxEmpty,
+        Setting::MinSharpness,
         Setting::EstimateNormals,
         Setting::Undistort,
         Setting::SegmentWeights,
@@ -198,6 +201,7 @@ impl Setting {
             Setting::RowsPerShard => "ingest.rows_per_shard",
             Setting::Radius => "ingest.radius",
             Setting::MaxEmpty => "ingest.max_empty",
+            Setting::MinSharpness => "ingest.min_sharpness",
             Setting::EstimateNormals => "ingest.estimate_normals",
             Setting::Undistort => "ingest.undistort",
             Setting::SegmentWeights => "ingest.segment_weights",
@@ -286,6 +290,7 @@ impl Setting {
             S::RowsPerShard => "--rows-per-shard",
             S::Radius => "--radius",
             S::MaxEmpty => "--max-empty",
+            S::MinSharpness => "--min-sharpness",
             S::EstimateNormals => "--estimate-normals",
             S::Undistort => "--undistort",
             S::SegmentWeights => "--segment-weights",

@@ -82,6 +82,18 @@ pub fn ingest(s: &IngestSummary) -> Report {
         s.point_source,
         s.seconds
     ));
+    if let Some(min) = s.min_sharpness {
+        r.err(format!(
+            "{} too blurry (sharpness under {min}; each one's value is its verdict_value in scene/images.parquet)",
+            s.too_blurry
+        ));
+    }
+    if s.duplicate_groups > 0 {
+        r.err(format!(
+            "{} photos are copies of one another in {} groups (scene/duplicates.parquet): split keeps each group on one side",
+            s.duplicate_photos, s.duplicate_groups
+        ));
+    }
     if s.kept == 0 {
         r.err(format!(
             "no view survived the filters{}: the dataset records every verdict but holds no view (`nrw-etl inspect {}` shows each verdict)",
@@ -195,10 +207,25 @@ pub fn split(cfg: &SplitConfig, s: &SplitSummary) -> Report {
             "warning: {g} was assigned earlier but is no longer kept; removed from the split"
         ));
     }
+    for names in &s.straddling {
+        r.err(format!(
+            "warning: near-duplicates on both sides of the split (one picture in train and val): {}",
+            names.join(", ")
+        ));
+    }
     let Some(tsv) = &cfg.from_tsv else {
         r.out(format!(
-            "split {}: {} train, {} val ({} kept as before, {} newly assigned with seed {})",
-            cfg.dataset, s.train, s.val, s.kept, s.new, cfg.seed
+            "split {}: {} train, {} val ({} kept as before, {} newly assigned with seed {}){}",
+            cfg.dataset,
+            s.train,
+            s.val,
+            s.kept,
+            s.new,
+            cfg.seed,
+            match s.duplicate_groups {
+                0 => String::new(),
+                n => format!("; {n} near-duplicate groups each kept on one side"),
+            }
         ));
         return r;
     };

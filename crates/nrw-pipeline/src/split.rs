@@ -3,7 +3,7 @@
 use nrw_dataset::split::VAL;
 use std::path::PathBuf;
 
-use nrw_dataset::split::{assign, read_splits, write_splits};
+use nrw_dataset::split::{assign_grouped, read_splits, write_splits};
 use nrw_dataset::{Manifest, Store};
 
 use crate::error::{PipelineError, Result};
@@ -47,6 +47,32 @@ pub struct SplitSummary {
     pub listed_not_kept: Vec<String>,
     /// Kept photos a split file does not list (in no split, as in nerf_pl).
     pub unlisted: usize,
+    /// Near-duplicate groups (scene/duplicates.parquet) the split holds.
+    pub duplicate_groups: usize,
+    /// Groups with members on both sides (a published split, or one assigned before ingest
+    /// looked for copies): each group's members' names.
+    pub straddling: Vec<Vec<String>>,
+}
+
+/// Each kept photo's near-duplicate group, by name, and how many groups there are.
+fn duplicate_groups(store: &Store) -> Result<(std::collections::BTreeMap<String, u32>, usize)> {
+    let members = nrw_dataset::duplicates::read_duplicates(store)?;
+    let groups = nrw_dataset::duplicates::group_of(&members);
+    let n = groups
+        .values()
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
+    Ok((groups, n))
+}
+
+fn straddling(
+    rows: &[nrw_dataset::split::Assignment],
+    groups: &std::collections::BTreeMap<String, u32>,
+) -> Vec<Vec<String>> {
+    nrw_dataset::split::straddling(rows, groups)
+        .into_iter()
+        .map(|(_, names)| names)
+        .collect()
 }
 
 /// Largest split file read: a Phototourism tsv is a few hundred kB.
@@ -74,6 +100,7 @@ fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> 
         .collect();
     let model: Vec<(u32, String)> = verdicts.into_iter().map(|(i, n, _)| (i, n)).collect();
     let a = nrw_dataset::split::assign_from_tsv(tsv, &rows, &model, &kept)?;
+    let (groups, duplicate_groups) = duplicate_groups(store)?;
     let mut manifest = Manifest::read(store)?;
     manifest.replace_table(write_splits(store, &a.rows)?);
     manifest.parameters.insert(
@@ -92,8 +119,10 @@ fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> 
         kept: 0,
         new: a.rows.len(),
         gone: Vec::new(),
+        straddling: straddling(&a.rows, &groups),
         listed_not_kept: a.not_kept,
         unlisted: a.unlisted,
+        duplicate_groups,
     })
 }
 
@@ -111,7 +140,8 @@ pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
             .map(|(id, name, _)| (id, name))
             .collect();
         let previous = read_splits(store)?;
-        let (rows, change) = assign(&kept, &previous, cfg.val, cfg.seed)
+        let (groups, duplicate_groups) = duplicate_groups(store)?;
+        let (rows, change) = assign_grouped(&kept, &previous, cfg.val, cfg.seed, &groups)
             .map_err(|e| PipelineError::dataset(&cfg.dataset, e.to_string()))?;
         manifest.replace_table(write_splits(store, &rows)?);
         manifest
@@ -127,6 +157,8 @@ pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
             gone: change.gone,
             listed_not_kept: Vec::new(),
             unlisted: 0,
+            duplicate_groups,
+            straddling: straddling(&rows, &groups),
         })
     })
 }

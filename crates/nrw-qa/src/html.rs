@@ -194,6 +194,9 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
         Some(VerdictKind::Unreadable) => {
             "photo or label map cannot be decoded whole: empty, truncated or corrupt".into()
         }
+        Some(VerdictKind::TooBlurry) => {
+            "sharpness (variance of the Laplacian) under --min-sharpness".into()
+        }
         Some(VerdictKind::Kept) | None => r.to_string(),
     };
     h.push_str("<div class=\"charts\"><table><tr><th>reason</th><th>photos</th></tr>");
@@ -228,6 +231,7 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
             Some(VerdictKind::TooSparse) => format!("{:.1}% empty", r.verdict_value * 100.0),
             Some(VerdictKind::TooSmall) => format!("{:.0} px shorter side", r.verdict_value),
             Some(VerdictKind::Unreadable) => r.verdict_detail.clone().unwrap_or_default(),
+            Some(VerdictKind::TooBlurry) => format!("sharpness {:.1}", r.verdict_value),
             Some(VerdictKind::Kept) | None => format!("{}", r.verdict_value),
         };
         let caption = format!("{} — {} ({measured})", r.name, r.verdict);

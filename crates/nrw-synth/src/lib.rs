@@ -6,6 +6,7 @@
 //! simulated. Deterministic: same spec and seed, same bytes, whatever the thread count.
 
 pub mod cameras;
+pub mod copies;
 pub mod error;
 pub mod geometry;
 pub mod look;

@@ -47,6 +47,9 @@ pub struct IngestConfig {
     pub radius: f32,
     /// The paper's filters: 85% empty, 450 px.
     pub filters: Filters,
+    /// Drop a photo whose sharpness (variance of the Laplacian, [`nrw_dataset::PhotoSignals`])
+    /// is under this (`ingest --min-sharpness`; off by default).
+    pub min_sharpness: Option<f64>,
     /// Images per shard (the unit of resumption and of work units).
     pub rows_per_shard: usize,
     /// Make an unreadable photo or label map an error instead of an `unreadable` verdict.
@@ -76,6 +79,7 @@ impl IngestConfig {
             undistort: None,
             denoise: None,
             estimate_normals: None,
+            min_sharpness: None,
             min_dim: 600,
             radius: 1.0,
             filters: Filters::default(),

@@ -23,8 +23,13 @@ pub struct IngestMerge {
     pub kept: usize,
     pub too_small: usize,
     pub too_sparse: usize,
+    /// Photos less sharp than `--min-sharpness`.
+    pub too_blurry: usize,
     /// Photos (or label maps) that could not be decoded whole: each is named in `warnings`.
     pub unreadable: usize,
+    /// Groups of kept photos that are one picture, and the photos in them.
+    pub duplicate_groups: usize,
+    pub duplicate_photos: usize,
     pub shards: usize,
     /// Empty ratio of the least empty render (what the filter would have to allow).
     pub least_empty: Option<f64>,
@@ -72,6 +77,24 @@ fn photo_records(
         .collect())
 }
 
+/// The groups of kept photos that are one picture ([`super::duplicates`], default options);
+/// without a photo folder only the hashes can say.
+fn near_duplicates(
+    rec: &nrw_colmap::Reconstruction,
+    outcomes: &BTreeMap<u32, ImageOutcome>,
+    scene: &nrw_dataset::SceneSource,
+) -> Result<Vec<nrw_dataset::duplicates::Member>> {
+    use super::duplicates as d;
+    let photos = d::photos(rec, outcomes);
+    let mut options = d::DuplicateOptions::default();
+    if scene.images_dir.is_none() {
+        options.centre_fraction = -1.0;
+    }
+    let dir = Path::new(scene.images_dir.as_deref().unwrap_or(""));
+    let scores = d::score_pairs(&photos, dir, &options)?;
+    Ok(d::groups(&photos, &scores, &options))
+}
+
 /// Merge ingest's units: scene tables and manifest from the group records, stale shards
 /// (of runs with other parameters) removed.
 pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
@@ -114,6 +137,9 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
             ),
         ));
     }
+    // Near-duplicates are found on the photos as they are on disk, with their own cameras
+    // (before any undistortion).
+    let members = near_duplicates(&rec, &outcomes, &scene)?;
     // `ingest --undistort` stored the undistorted PINHOLE cameras: the scene tables list those.
     let recorded: IngestParameters = from_parameters(
         &dataset.name(&format!(
@@ -134,6 +160,9 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
     let records = photo_records(&rec, &scene, &recorded, &unit.inputs, dataset)?;
     tables.extend(nrw_dataset::photo_info::write_photos_table(
         dataset, &records,
+    )?);
+    tables.push(nrw_dataset::duplicates::write_duplicates(
+        dataset, &members,
     )?);
     tables.extend(shards.iter().cloned());
     // A split from an earlier run stays (split assigns only new photos when run again).
@@ -180,7 +209,14 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
         kept: count(&outcomes, nrw_dataset::scene::VERDICT_KEPT),
         too_small: count(&outcomes, VerdictKind::TooSmall.name()),
         too_sparse: count(&outcomes, VerdictKind::TooSparse.name()),
+        too_blurry: count(&outcomes, VerdictKind::TooBlurry.name()),
         unreadable: count(&outcomes, VERDICT_UNREADABLE),
+        duplicate_groups: members
+            .iter()
+            .map(|m| m.group)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len(),
+        duplicate_photos: members.len(),
         shards: shards.len(),
         least_empty: outcomes
             .values()

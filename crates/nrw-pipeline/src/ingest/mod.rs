@@ -30,6 +30,8 @@ mod cloud;
 mod config;
 mod merge;
 mod photos;
+pub mod duplicates;
+pub mod signals;
 mod view;
 
 use config::Prepared;
@@ -81,6 +83,12 @@ fn check_config(cfg: &IngestConfig) -> Result<()> {
                 "{} is not a fraction in 0..=1 (the paper drops views above 0.85)",
                 cfg.filters.max_empty_ratio
             ),
+        ));
+    }
+    if let Some(s) = cfg.min_sharpness.filter(|s| !(s.is_finite() && *s >= 0.0)) {
+        return Err(PipelineError::config(
+            Setting::MinSharpness,
+            format!("{s} is not a variance (a number ≥ 0; colmap2nerf's sharp photos score in the hundreds)"),
         ));
     }
     if cfg.estimate_normals.is_some_and(|k| k < 3) {
@@ -206,6 +214,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
         segment_model_sha256: segmenter.as_ref().map(|(m, _)| m.sha256.clone()),
         segment_mode: segmenter.as_ref().map(|(_, mode)| mode.to_string()),
         photo_info: cfg.photo_info.as_ref().map(|p| p.display().to_string()),
+        min_sharpness: cfg.min_sharpness,
     });
     let record = UnitRecord {
         stage: units::INGEST.into(),
@@ -330,8 +339,14 @@ pub struct IngestSummary {
     pub kept: usize,
     pub too_small: usize,
     pub too_sparse: usize,
+    /// Photos less sharp than `min_sharpness`.
+    pub too_blurry: usize,
     /// Photos (or label maps) that could not be decoded whole, each named in `warnings`.
     pub unreadable: usize,
+    /// Groups of kept photos that are one picture (split keeps each on one side), and the
+    /// photos in them.
+    pub duplicate_groups: usize,
+    pub duplicate_photos: usize,
     pub shards: usize,
     pub point_source: String,
     pub points: usize,
@@ -340,8 +355,10 @@ pub struct IngestSummary {
     pub least_empty: Option<f64>,
     /// The filters the verdicts came from: renders emptier than this fraction are too sparse,
     pub max_empty: f64,
-    /// and photos with a shorter side under this many pixels too small.
+    /// and photos with a shorter side under this many pixels too small,
     pub min_photo_side: u32,
+    /// and photos less sharp than this too blurry (when given).
+    pub min_sharpness: Option<f64>,
     pub warnings: Vec<String>,
     pub seconds: f64,
 }
@@ -358,11 +375,14 @@ pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSumma
     Ok(IngestSummary {
         dataset: u.dataset,
         registered: f.registered,
-        rendered: f.kept + f.too_sparse,
+        rendered: f.kept + f.too_sparse + f.too_blurry,
         kept: f.kept,
         too_small: f.too_small,
         too_sparse: f.too_sparse,
+        too_blurry: f.too_blurry,
         unreadable: f.unreadable,
+        duplicate_groups: f.duplicate_groups,
+        duplicate_photos: f.duplicate_photos,
         shards: f.shards,
         point_source: u.point_source,
         points: u.points,
@@ -370,6 +390,7 @@ pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSumma
         least_empty: f.least_empty,
         max_empty: cfg.filters.max_empty_ratio,
         min_photo_side: cfg.filters.min_photo_side,
+        min_sharpness: cfg.min_sharpness,
         warnings: f.warnings,
         seconds: t0.elapsed().as_secs_f64(),
     })

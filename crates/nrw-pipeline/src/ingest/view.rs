@@ -6,7 +6,8 @@ use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
 };
 use nrw_dataset::units::{self, GroupImage, GroupRecord};
-use nrw_dataset::{FileEntry, ImageOutcome, Store, ViewRow};
+use nrw_dataset::scene::VerdictKind;
+use nrw_dataset::{FileEntry, ImageOutcome, PhotoSignals, Store, ViewRow};
 use nrw_render::{render, render_size, Verdict, View};
 use rayon::prelude::*;
 
@@ -39,6 +40,23 @@ pub(super) fn outcome(
         shard: None,
         depth_range: None,
         detail: None,
+        signals: None,
+    }
+}
+
+/// The outcome of a view whose photo is less sharp than `--min-sharpness`: its render
+/// stays measured (empty ratio, size), the verdict's value is the sharpness.
+fn too_blurry(rendered: ImageOutcome, signals: PhotoSignals, min: f64) -> ImageOutcome {
+    ImageOutcome {
+        verdict: VerdictKind::TooBlurry.name().into(),
+        verdict_value: signals.sharpness,
+        detail: Some(format!(
+            "sharpness {:.1} is under --min-sharpness {min}",
+            signals.sharpness
+        )),
+        signals: Some(signals),
+        depth_range: None,
+        ..rendered
     }
 }
 
@@ -56,6 +74,7 @@ pub(super) fn unreadable(path: &nrw_dataset::Location, problem: String) -> Image
         shard: None,
         depth_range: None,
         detail: Some(problem),
+        signals: None,
     }
 }
 
@@ -148,6 +167,10 @@ pub(super) fn process(
     let decoded = load_photo(&photo_path)
         .map_err(PipelineError::from)
         .and_then(|photo| {
+            let signals = super::signals::signals(&photo);
+            if let Some(min) = cfg.min_sharpness.filter(|min| signals.sharpness < *min) {
+                return Ok(Err(too_blurry(o.clone(), signals, min)));
+            }
             let original = (photo.width(), photo.height());
             let photo = match undistort {
                 Some((from, to)) => crate::model::undistorted_photo(&photo, from, to),
@@ -163,10 +186,11 @@ pub(super) fn process(
                 undistort,
                 (w, h),
             )?;
-            Ok((photo, labels))
+            Ok(Ok((photo, labels, signals)))
         });
-    let (photo, (semantics_png, transient_png, labels_png)) = match decoded {
-        Ok(d) => d,
+    let (photo, (semantics_png, transient_png, labels_png), signals) = match decoded {
+        Ok(Ok(d)) => d,
+        Ok(Err(blurry)) => return Ok((blurry, None)),
         Err(PipelineError::Dataset(nrw_dataset::DatasetError::Unreadable { path, problem }))
             if !cfg.strict =>
         {
@@ -175,6 +199,10 @@ pub(super) fn process(
         Err(e) => return Err(e),
     };
     let photo = resize_photo(&photo, w, h);
+    let o = ImageOutcome {
+        signals: Some(signals),
+        ..o
+    };
     let row = ViewRow {
         image_id: img.id,
         name: img.name.clone(),

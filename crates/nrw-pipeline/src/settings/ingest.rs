@@ -30,6 +30,12 @@ pub struct IngestSettings {
     /// Drop photos whose shorter side is under this many pixels (the paper: 450)
     #[arg(long, default_value_t = IngestSettings::default().min_photo_side)]
     pub min_photo_side: u32,
+    /// Drop photos less sharp than this: the variance of the Laplacian of the full-size
+    /// photo's grey levels, as instant-ngp's colmap2nerf records it (higher is sharper; it
+    /// grows with resolution). Every kept photo's value is in scene/images.parquet's
+    /// `sharpness` and QA's sharpness plot [default: keep every photo]
+    #[arg(long, value_name = "VAR")]
+    pub min_sharpness: Option<f64>,
     /// Images per shard (one shard per group of this many images, in id order; the unit of
     /// resumption and of --unit work units)
     #[arg(long, default_value_t = IngestSettings::default().rows_per_shard)]
@@ -85,6 +91,7 @@ impl Default for IngestSettings {
             radius: paper.radius,
             max_empty: paper.filters.max_empty_ratio,
             min_photo_side: paper.filters.min_photo_side,
+            min_sharpness: None,
             rows_per_shard: paper.rows_per_shard,
             strict: paper.strict,
             semantics: None,
@@ -184,6 +191,7 @@ impl IngestSettings {
                 max_empty_ratio: self.max_empty,
                 min_photo_side: self.min_photo_side,
             },
+            min_sharpness: self.min_sharpness,
             rows_per_shard: self.rows_per_shard,
             strict: self.strict,
             ..IngestConfig::new(scene, out)
@@ -209,10 +217,12 @@ mod tests {
             "--undistort",
             "--undistort-max-size",
             "640",
+            "--min-sharpness",
+            "40.5",
         ]);
         assert_eq!(
             cli,
-            table("min_dim = 96\ndenoise = \"16,2\"\nsegment_mode = \"slide\"\nundistort = true\nundistort_max_size = 640")
+            table("min_dim = 96\ndenoise = \"16,2\"\nsegment_mode = \"slide\"\nundistort = true\nundistort_max_size = 640\nmin_sharpness = 40.5")
         );
         let e = toml::from_str::<IngestSettings>("denoise = \"1,2\"").unwrap_err();
         assert!(e.to_string().contains("K must be at least 2"), "{e}");

@@ -1,0 +1,192 @@
+//! Near-duplicates: on a synthetic collection with copies planted on purpose (the same
+//! upload twice, resized, re-encoded, cropped, recoloured), ingest finds every planted
+//! group and no other; split keeps each group on one side for every seed; a published split
+//! that puts one on both sides is warned about; blur is measured and filtered.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use super::{nrw, ok};
+
+/// A PINHOLE scene of 20 photos with a copy of every fourth (5 copies, one of each kind).
+fn planted(dir: &Path) -> (PathBuf, Vec<nrw_synth::copies::Planted>) {
+    let scene = dir.join("scene");
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(20, (300, 360), 60_000);
+    spec.cameras.model = "PINHOLE".into();
+    spec.cameras.distortion = 0.0;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let depth = spec.cameras.min_distance;
+    let planted = nrw_synth::copies::plant_copies(&scene, 4, depth, 7).unwrap();
+    assert_eq!(planted.len(), 5);
+    (scene, planted)
+}
+
+fn ingest(scene: &Path, out: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--min-dim",
+        "96",
+        "--min-photo-side",
+        "150",
+        "--max-empty",
+        "1",
+    ];
+    args.extend_from_slice(extra);
+    let o = nrw(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The groups found, as sets of names.
+fn found(ds: &Path) -> BTreeSet<BTreeSet<String>> {
+    let store = nrw_dataset::Store::local(ds);
+    let members = nrw_dataset::duplicates::read_duplicates(&store).unwrap();
+    let mut groups: BTreeMap<u32, BTreeSet<String>> = BTreeMap::new();
+    for m in members {
+        groups.entry(m.group).or_default().insert(m.name);
+    }
+    groups.into_values().collect()
+}
+
+/// Each photo's side in the split.
+fn sides(ds: &Path) -> BTreeMap<String, String> {
+    let store = nrw_dataset::Store::local(ds);
+    nrw_dataset::split::read_splits(&store)
+        .unwrap()
+        .into_iter()
+        .map(|a| (a.name, a.split))
+        .collect()
+}
+
+#[test]
+fn planted_copies_are_found_and_never_straddle_the_split() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, planted) = planted(dir.path());
+    let ds = dir.path().join("ds");
+    let err = ingest(&scene, &ds, &[]);
+    let want: BTreeSet<BTreeSet<String>> = planted
+        .iter()
+        .map(|p| [p.original.clone(), p.copy.clone()].into())
+        .collect();
+    // Every planted group, and no group among the 20 distinct photos.
+    assert_eq!(found(&ds), want, "{err}");
+    assert!(
+        err.contains("10 photos are copies of one another in 5 groups"),
+        "{err}"
+    );
+    let d = ds.to_str().unwrap();
+    for seed in 0..40 {
+        let o = ok(&["split", d, "--val", "6", "--seed", &seed.to_string()]);
+        let side = sides(&ds);
+        for g in &want {
+            let s: BTreeSet<&String> = g.iter().map(|n| &side[n]).collect();
+            assert_eq!(s.len(), 1, "seed {seed}: {g:?} straddles the split");
+        }
+        assert_eq!(side.values().filter(|s| *s == "val").count(), 6, "{o}");
+        std::fs::remove_file(ds.join("splits.parquet")).unwrap();
+    }
+    // A published split that puts one group on both sides is warned about, naming it.
+    let p = &planted[3];
+    let mut tsv = String::from("filename\tid\tsplit\tdataset\n");
+    for (k, name) in sides_of_scene(&scene).iter().enumerate() {
+        let split = if *name == p.copy { "test" } else { "train" };
+        tsv.push_str(&format!("{name}\t{k}\t{split}\tx\n"));
+    }
+    let file = dir.path().join("split.tsv");
+    std::fs::write(&file, tsv).unwrap();
+    let o = nrw(&["split", d, "--from-tsv", file.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("near-duplicates on both sides of the split")
+            && e.contains(&p.copy)
+            && e.contains(&p.original),
+        "{e}"
+    );
+}
+
+/// Every image name of the scene's model.
+fn sides_of_scene(scene: &Path) -> Vec<String> {
+    nrw_colmap::read_scene(scene)
+        .unwrap()
+        .images
+        .values()
+        .map(|i| i.name.clone())
+        .collect()
+}
+
+#[test]
+fn sharpness_and_exposure_are_recorded_and_the_blur_filter_drops_with_its_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene");
+    let mut spec = nrw_synth::SceneSpec::demo().shrunk(6, (160, 200), 30_000);
+    spec.cameras.model = "PINHOLE".into();
+    spec.cameras.distortion = 0.0;
+    nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    // Blur one photo hard and black out another.
+    let names = sides_of_scene(&scene);
+    let photo = |n: &str| scene.join("images").join(n);
+    let blurred = image::open(photo(&names[0])).unwrap().blur(6.0);
+    blurred.save(photo(&names[0])).unwrap();
+    let img = image::open(photo(&names[1])).unwrap();
+    image::RgbImage::new(img.width(), img.height())
+        .save(photo(&names[1]))
+        .unwrap();
+    let ds = dir.path().join("ds");
+    ingest(&scene, &ds, &[]);
+    let rows = images_table(&ds);
+    let sharp = |n: &str| rows[n].0.unwrap();
+    let others: Vec<f64> = names[2..].iter().map(|n| sharp(n)).collect();
+    assert!(others.iter().all(|s| *s > 4.0 * sharp(&names[0])), "{others:?} vs {}", sharp(&names[0]));
+    // The black photo: no sharpness, every pixel crushed, and in no group (its hash is empty).
+    assert_eq!(rows[&names[1]].0, Some(0.0));
+    assert_eq!(rows[&names[1]].1, Some(1.0));
+    assert!(found(&ds).is_empty());
+    // The filter drops the blurred photo (and the black one), with the value as the verdict's.
+    let min = (sharp(&names[0]) * 2.0).to_string();
+    let ds2 = dir.path().join("ds2");
+    let err = ingest(&scene, &ds2, &["--min-sharpness", &min]);
+    assert!(err.contains("2 too blurry"), "{err}");
+    let rows = images_table(&ds2);
+    assert_eq!(rows[&names[0]].2, "too_blurry");
+    assert_eq!(rows[&names[1]].2, "too_blurry");
+    assert!(names[2..].iter().all(|n| rows[n].2 == "kept"));
+}
+
+/// name → (sharpness, dark fraction, verdict) from scene/images.parquet.
+fn images_table(ds: &Path) -> BTreeMap<String, (Option<f64>, Option<f64>, String)> {
+    let f = std::fs::File::open(ds.join("scene/images.parquet")).unwrap();
+    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
+        .unwrap()
+        .build()
+        .unwrap();
+    let mut out = BTreeMap::new();
+    for b in r {
+        let b = b.unwrap();
+        let col = |n: &str| b.column_by_name(n).unwrap().clone();
+        let names = col("name");
+        let names = names.as_any().downcast_ref::<arrow_array::StringArray>().unwrap();
+        let f64s = |n: &str| {
+            col(n)
+                .as_any()
+                .downcast_ref::<arrow_array::Float64Array>()
+                .unwrap()
+                .clone()
+        };
+        let (s, d) = (f64s("sharpness"), f64s("dark_fraction"));
+        let v = col("verdict");
+        let v = v.as_any().downcast_ref::<arrow_array::StringArray>().unwrap();
+        use arrow_array::Array;
+        for i in 0..b.num_rows() {
+            let opt = |a: &arrow_array::Float64Array| (!a.is_null(i)).then(|| a.value(i));
+            out.insert(
+                names.value(i).to_string(),
+                (opt(&s), opt(&d), v.value(i).to_string()),
+            );
+        }
+    }
+    out
+}

@@ -106,6 +106,35 @@ fn planted_copies_are_found_and_never_straddle_the_split() {
             && e.contains(&p.original),
         "{e}"
     );
+    // QA shows every group with its photos, and warns about the one on both sides.
+    ok(&["qa", d]);
+    let qa: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(ds.join("qa/qa.json")).unwrap()).unwrap();
+    let groups: BTreeSet<BTreeSet<String>> =
+        serde_json::from_value(qa["near_duplicates"].clone()).unwrap();
+    assert_eq!(groups, want);
+    let warned = warning(&qa, "near_duplicates_split");
+    assert_eq!(warned, BTreeSet::from([p.copy.clone(), p.original.clone()]));
+    let html = std::fs::read_to_string(ds.join("qa/report.html")).unwrap();
+    let section = &html[html.find("<h2>Near-duplicates</h2>").unwrap()..];
+    let section = &section[..section[4..].find("<h2>").map_or(section.len(), |e| e + 4)];
+    for g in &want {
+        for name in g {
+            assert!(section.contains(&format!("alt=\"{name}\"")), "{name} has no thumbnail");
+        }
+    }
+}
+
+/// The photos a QA warning of this kind lists.
+fn warning(qa: &serde_json::Value, kind: &str) -> BTreeSet<String> {
+    qa["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|w| w["kind"] == kind)
+        .flat_map(|w| w["photos"].as_array().unwrap().iter())
+        .map(|p| p.as_str().unwrap().to_string())
+        .collect()
 }
 
 /// Every image name of the scene's model.
@@ -145,6 +174,13 @@ fn sharpness_and_exposure_are_recorded_and_the_blur_filter_drops_with_its_reason
     assert_eq!(rows[&names[1]].0, Some(0.0));
     assert_eq!(rows[&names[1]].1, Some(1.0));
     assert!(found(&ds).is_empty());
+    ok(&["qa", ds.to_str().unwrap()]);
+    let qa: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(ds.join("qa/qa.json")).unwrap()).unwrap();
+    assert_eq!(
+        warning(&qa, "low_sharpness"),
+        BTreeSet::from([names[0].clone(), names[1].clone()])
+    );
     // The filter drops the blurred photo (and the black one), with the value as the verdict's.
     let min = (sharp(&names[0]) * 2.0).to_string();
     let ds2 = dir.path().join("ds2");

@@ -416,3 +416,42 @@ pub fn read_depth_max(dir: &Store) -> Result<Option<f64>> {
     // Ingest writes depth_min and depth_max together (both or neither per view).
     Ok(read_depth_range(dir)?.map(|(_, far)| far))
 }
+
+/// Each decoded photo's signals by image id, from `scene/images.parquet`; empty for a
+/// dataset ingested before they were recorded (its table has no `sharpness` column).
+pub fn read_signals(dir: &Store) -> Result<BTreeMap<u32, PhotoSignals>> {
+    use crate::parquet_io::column;
+    use arrow_array::Array;
+    let path = dir.name(IMAGES_TABLE);
+    let mut out = BTreeMap::new();
+    for b in crate::parquet_io::read_batches(dir, IMAGES_TABLE, None)? {
+        if b.column_by_name("sharpness").is_none() {
+            return Ok(out);
+        }
+        let ids = column::<UInt32Array>(&b, "image_id", &path)?;
+        let f = |n: &str| column::<Float64Array>(&b, n, &path);
+        let (sharp, mean, std) = (f("sharpness")?, f("luma_mean")?, f("luma_std")?);
+        let (dark, bright) = (f("dark_fraction")?, f("bright_fraction")?);
+        let hash = column::<StringArray>(&b, "phash", &path)?;
+        for i in (0..b.num_rows()).filter(|i| !sharp.is_null(*i)) {
+            let phash = u64::from_str_radix(hash.value(i), 16).map_err(|e| DatasetError::Value {
+                path: path.clone(),
+                record: format!("image {}", ids.value(i)),
+                field: "phash".into(),
+                problem: format!("`{}` is not 16 hex digits: {e}", hash.value(i)),
+            })?;
+            out.insert(
+                ids.value(i),
+                PhotoSignals {
+                    sharpness: sharp.value(i),
+                    luma_mean: mean.value(i),
+                    luma_std: std.value(i),
+                    dark_fraction: dark.value(i),
+                    bright_fraction: bright.value(i),
+                    phash,
+                },
+            );
+        }
+    }
+    Ok(out)
+}

@@ -24,6 +24,10 @@ pub struct Inputs<'a> {
     pub descriptors: Option<&'a nrw_dataset::descriptors::Index>,
     pub max_empty: f64,
     pub min_side: f64,
+    /// The blur filter ingest ran with, if any.
+    pub min_sharpness: Option<f64>,
+    /// Members of near-duplicate groups (scene/duplicates.parquet).
+    pub duplicates: &'a [nrw_dataset::duplicates::Member],
 }
 
 fn esc(s: &str) -> String {
@@ -150,6 +154,8 @@ pub fn render(inp: &Inputs) -> Result<String> {
     licences(&mut h, inp);
     drops(&mut h, inp)?;
     distributions(&mut h, inp)?;
+    sharpness(&mut h, inp)?;
+    near_duplicates(&mut h, inp);
     // Views are read only when something was kept (an all-dropped dataset has no shards).
     let ds = if inp.figures.counts.shard_rows > 0 {
         Some(Dataset::open(inp.dir)?)
@@ -219,7 +225,6 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
     h.push_str("</div>");
     unreadable_list(h, inp);
     // A few dropped photos with the measured value, from the scene's images when reachable.
-    let images_dir = inp.manifest.scene.images_dir.as_deref().map(Path::new);
     let mut strip = String::new();
     for r in inp
         .images
@@ -235,24 +240,7 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
             Some(VerdictKind::Kept) | None => format!("{}", r.verdict_value),
         };
         let caption = format!("{} — {} ({measured})", r.name, r.verdict);
-        // The name is data from the dataset: joined through the one check, and a photo
-        // linking out of the images folder is not opened (the caption stays).
-        let img = images_dir
-            .and_then(|d| nrw_colmap::names::photo_path(d, &r.name, false).ok())
-            .and_then(|p| image::open(p).ok());
-        match img {
-            Some(img) => {
-                let t = thumbs::thumb(&img.to_rgb8(), THUMB);
-                strip.push_str(&figure(&thumbs::data_uri(&t), &r.name, &caption));
-            }
-            None => {
-                let _ = write!(
-                    strip,
-                    "<figure><figcaption>{} (photo not found)</figcaption></figure>",
-                    esc(&caption)
-                );
-            }
-        }
+        strip.push_str(&photo_figure(inp, &r.name, &caption));
     }
     let _ = write!(h, "<p>Some dropped photos, with the value that dropped them:</p><div class=\"strip\">{strip}</div>");
     Ok(())
@@ -331,6 +319,121 @@ fn distributions(h: &mut String, inp: &Inputs) -> Result<()> {
     h.push_str("</div>");
     Ok(())
 }
+
+/// A thumbnail of a photo from the scene's images folder with a caption, or the caption
+/// alone where the photo cannot be read (the name is data: joined through the one check,
+/// and a photo linking out of the folder is not opened).
+fn photo_figure(inp: &Inputs, name: &str, caption: &str) -> String {
+    let images_dir = inp.manifest.scene.images_dir.as_deref().map(Path::new);
+    let img = images_dir
+        .and_then(|d| nrw_colmap::names::photo_path(d, name, false).ok())
+        .and_then(|p| nrw_dataset::codec::load_photo(&p).ok());
+    match img {
+        Some(img) => {
+            let t = thumbs::thumb(&img, THUMB);
+            figure(&thumbs::data_uri(&t), name, caption)
+        }
+        None => format!(
+            "<figure><figcaption>{} (photo not found)</figcaption></figure>",
+            esc(caption)
+        ),
+    }
+}
+
+/// Sharpness and exposure of the kept photos, and the least sharp of them.
+fn sharpness(h: &mut String, inp: &Inputs) -> Result<()> {
+    h.push_str("<h2>Sharpness and exposure</h2>");
+    let mut kept: Vec<(&ImageRow, nrw_dataset::PhotoSignals)> = inp
+        .images
+        .iter()
+        .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)
+        .filter_map(|r| Some((r, r.signals?)))
+        .collect();
+    if kept.is_empty() {
+        h.push_str("<p>No photo signals recorded (no kept view, or ingested before they were).</p>");
+        return Ok(());
+    }
+    h.push_str("<p>Sharpness is the variance of the Laplacian of the full-size photo's grey levels, as instant-ngp's colmap2nerf records it: higher is sharper, and it grows with resolution, so compare photos of similar size. Exposure is the mean grey level (0–255) and the share of crushed (≤ 5) and clipped (≥ 250) pixels.</p><div class=\"charts\">");
+    let log_sharp: Vec<f64> = kept.iter().map(|(_, s)| (s.sharpness.max(1e-3)).log10()).collect();
+    let lines: Vec<(&str, f64)> = inp
+        .min_sharpness
+        .map(|m| ("--min-sharpness", m.max(1e-3).log10()))
+        .into_iter()
+        .collect();
+    h.push_str(&plots::histogram(
+        "sharpness of kept photos",
+        "log10 variance of the Laplacian",
+        &[("photos", &log_sharp)],
+        None,
+        &lines,
+    )?);
+    let luma: Vec<f64> = kept.iter().map(|(_, s)| s.luma_mean).collect();
+    let clipped: Vec<f64> = kept.iter().map(|(_, s)| s.bright_fraction).collect();
+    let crushed: Vec<f64> = kept.iter().map(|(_, s)| s.dark_fraction).collect();
+    h.push_str(&plots::histogram(
+        "exposure of kept photos",
+        "mean grey level",
+        &[("photos", &luma)],
+        Some((0.0, 255.0)),
+        &[],
+    )?);
+    h.push_str(&plots::histogram(
+        "crushed and clipped pixels",
+        "fraction of the photo",
+        &[("≤ 5 (crushed)", &crushed), ("≥ 250 (clipped)", &clipped)],
+        Some((0.0, 1.0)),
+        &[],
+    )?);
+    h.push_str("</div><p>The least sharp kept photos:</p><div class=\"strip\">");
+    kept.sort_by(|a, b| a.1.sharpness.total_cmp(&b.1.sharpness));
+    for (r, s) in kept.iter().take(4) {
+        let caption = format!("{} — sharpness {:.1}, mean grey {:.0}", r.name, s.sharpness, s.luma_mean);
+        h.push_str(&photo_figure(inp, &r.name, &caption));
+    }
+    h.push_str("</div>");
+    Ok(())
+}
+
+/// Each group of photos that are one picture, side by side, with its split and evidence.
+fn near_duplicates(h: &mut String, inp: &Inputs) {
+    h.push_str("<h2>Near-duplicates</h2>");
+    let groups = &inp.figures.near_duplicates;
+    if groups.is_empty() {
+        h.push_str("<p class=\"ok\">No two kept photos are one picture (resized, re-encoded, cropped or recoloured copies would be shown here; split keeps each group on one side).</p>");
+        return;
+    }
+    let _ = write!(h, "<p>{} groups of photos that are one picture (scene/duplicates.parquet). Split keeps each group on one side, so validation never sees a copy of a training photo. Each photo: its split, and the evidence that matched it (hash bits apart of 64; correlation of the photos aligned through their cameras).</p>", groups.len());
+    let split: std::collections::BTreeMap<&str, &str> = inp
+        .images
+        .iter()
+        .filter_map(|r| Some((r.name.as_str(), r.split.as_deref()?)))
+        .collect();
+    for group in groups.iter().take(MAX_GROUPS_SHOWN) {
+        h.push_str("<div class=\"strip\">");
+        for name in group {
+            let m = inp.duplicates.iter().find(|m| &m.name == name);
+            let evidence = m.map_or(String::new(), |m| {
+                format!(
+                    "{} bits{}",
+                    m.phash_distance.unwrap_or(64),
+                    m.ncc.map_or(String::new(), |c| format!(", ncc {c:.3}"))
+                )
+            });
+            let caption = format!(
+                "{name} — {} ({evidence})",
+                split.get(name.as_str()).copied().unwrap_or("not split")
+            );
+            h.push_str(&photo_figure(inp, name, &caption));
+        }
+        h.push_str("</div>");
+    }
+    if groups.len() > MAX_GROUPS_SHOWN {
+        let _ = write!(h, "<p>… and {} more groups (qa.json lists them all).</p>", groups.len() - MAX_GROUPS_SHOWN);
+    }
+}
+
+/// Near-duplicate groups shown with thumbnails (qa.json lists every group).
+const MAX_GROUPS_SHOWN: usize = 24;
 
 fn contact_sheet(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<()> {
     h.push_str("<h2>Alignment</h2>");

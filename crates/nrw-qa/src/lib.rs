@@ -9,7 +9,7 @@ pub mod tables;
 pub mod thumbs;
 
 use nrw_dataset::split::{TRAIN, VAL};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Serialize;
 
@@ -36,6 +36,77 @@ pub struct Figures {
     /// (`ingest --photo-info`, or photos with EXIF); empty otherwise (every licence unknown).
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub licences: BTreeMap<String, usize>,
+    /// Groups of kept photos that are one picture (scene/duplicates.parquet), by name.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub near_duplicates: Vec<Vec<String>>,
+}
+
+/// The near-duplicate groups as lists of names, in group order.
+fn duplicate_groups(members: &[nrw_dataset::duplicates::Member]) -> Vec<Vec<String>> {
+    let mut groups: BTreeMap<u32, Vec<String>> = BTreeMap::new();
+    for m in members {
+        groups.entry(m.group).or_default().push(m.name.clone());
+    }
+    groups.into_values().collect()
+}
+
+/// A kept photo this much less sharp than the dataset's median is worth a look.
+const BLUR_FACTOR: f64 = 10.0;
+
+/// Warnings from the photos' own pixels: kept photos far less sharp than the rest, and
+/// near-duplicate groups that the split puts on both sides.
+fn signal_warnings(
+    images: &[ImageRow],
+    members: &[nrw_dataset::duplicates::Member],
+    warnings: &mut Vec<Warning>,
+) {
+    let kept: Vec<(&str, f64)> = images
+        .iter()
+        .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)
+        .filter_map(|r| Some((r.name.as_str(), r.signals?.sharpness)))
+        .collect();
+    if let Some(median) = Summary::of(&kept.iter().map(|k| k.1).collect::<Vec<_>>()).map(|s| s.median) {
+        let blurry: Vec<String> = kept
+            .iter()
+            .filter(|(_, s)| *s * BLUR_FACTOR < median)
+            .map(|(n, _)| n.to_string())
+            .collect();
+        if !blurry.is_empty() {
+            warnings.push(Warning {
+                kind: "low_sharpness".into(),
+                message: format!(
+                    "{} kept photos are less than a tenth as sharp as the median ({median:.1}, variance of the Laplacian): blurred or out of focus? `ingest --min-sharpness` drops them",
+                    blurry.len()
+                ),
+                photos: blurry,
+            });
+        }
+    }
+    let split: BTreeMap<&str, &str> = images
+        .iter()
+        .filter_map(|r| Some((r.name.as_str(), r.split.as_deref()?)))
+        .collect();
+    let mut sides: BTreeMap<u32, BTreeSet<&str>> = BTreeMap::new();
+    for m in members {
+        if let Some(s) = split.get(m.name.as_str()) {
+            sides.entry(m.group).or_default().insert(s);
+        }
+    }
+    let both: Vec<String> = members
+        .iter()
+        .filter(|m| sides.get(&m.group).is_some_and(|s| s.len() > 1))
+        .map(|m| m.name.clone())
+        .collect();
+    if !both.is_empty() {
+        warnings.push(Warning {
+            kind: "near_duplicates_split".into(),
+            message: format!(
+                "{} photos are in near-duplicate groups with members in both train and val: validation sees copies of training photos",
+                both.len()
+            ),
+            photos: both,
+        });
+    }
 }
 
 /// Photos at every stage.
@@ -173,7 +244,12 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         _ => None,
     };
     let mut distributions = BTreeMap::new();
-    let series: [(&str, Vec<f64>); 5] = [
+    let signal = |f: fn(&nrw_dataset::PhotoSignals) -> f64| -> Vec<f64> {
+        kept.iter().filter_map(|r| r.signals.as_ref().map(f)).collect()
+    };
+    let series: [(&str, Vec<f64>); 7] = [
+        ("sharpness", signal(|s| s.sharpness)),
+        ("luma_mean", signal(|s| s.luma_mean)),
         (
             "empty_ratio",
             images.iter().filter_map(|r| r.empty_ratio).collect(),
@@ -203,6 +279,9 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
     let mut warnings = warnings(&images, &counts, max_empty);
     let attributions = nrw_dataset::photo_info::read_attributions(dir)?;
     let licences = provenance_warnings(&images, &attributions, &mut warnings);
+    let members = nrw_dataset::duplicates::read_duplicates(dir)?;
+    let near_duplicates = duplicate_groups(&members);
+    signal_warnings(&images, &members, &mut warnings);
     let figures = Figures {
         licences,
         dataset: dir.root().to_string(),
@@ -215,6 +294,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         distributions,
         triplets: triplets.as_ref().map(|t| t.settings.clone()),
         warnings,
+        near_duplicates,
     };
     let page = html::render(&html::Inputs {
         dir,
@@ -225,6 +305,8 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         descriptors: descriptors.as_ref(),
         max_empty,
         min_side: ingest.min_photo_side as f64,
+        min_sharpness: ingest.min_sharpness,
+        duplicates: &members,
     })?;
     out.write(REPORT_FILE, page.into_bytes())?;
     let mut text = serde_json::to_string_pretty(&figures).expect("figures serialise");

@@ -28,6 +28,8 @@ pub struct ImageRow {
     pub depth_max: Option<f64>,
     /// "train", "val", or None when not split (or dropped).
     pub split: Option<String>,
+    /// Sharpness, exposure and hash, when ingest decoded the photo.
+    pub signals: Option<nrw_dataset::PhotoSignals>,
 }
 
 /// A table of the dataset as a lazy frame (read whole: these tables are small).
@@ -103,6 +105,7 @@ pub fn images(dir: &Store) -> Result<Vec<ImageRow>> {
     let dmin = column!(df, &path, "depth_min", f64);
     let dmax = column!(df, &path, "depth_max", f64);
     let splits: std::collections::HashMap<u32, String> = splits(dir)?.into_iter().collect();
+    let signals = nrw_dataset::scene::read_signals(dir)?;
     let mut rows = Vec::with_capacity(df.height());
     for i in 0..df.height() {
         let image_id = ids
@@ -123,6 +126,7 @@ pub fn images(dir: &Store) -> Result<Vec<ImageRow>> {
             depth_min: dmin.get(i),
             depth_max: dmax.get(i),
             split: splits.get(&image_id).cloned(),
+            signals: signals.get(&image_id).copied(),
         });
     }
     rows.sort_by_key(|r| r.image_id);

@@ -126,6 +126,7 @@ pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result
         camera.id = next_camera;
         let stem = Path::new(&img.name).file_stem().map_or("", |s| s.to_str().unwrap_or(""));
         let copy = match kind {
+            CopyKind::Identical => format!("copy_{}", img.name),
             CopyKind::Reencoded(_) => format!("copy_{stem}.jpg"),
             _ => format!("copy_{stem}.png"),
         };

@@ -226,3 +226,71 @@ fn images_table(ds: &Path) -> BTreeMap<String, (Option<f64>, Option<f64>, String
     }
     out
 }
+
+/// colmap2nerf's sharpness (instant-ngp, scripts/colmap2nerf.py: `variance_of_laplacian`
+/// and `sharpness`, line for line) and imagehash's `phash`, for each photo named on stdin.
+const ORACLE: &str = r#"
+import sys, json, cv2, imagehash, PIL.Image
+def variance_of_laplacian(image):
+    return cv2.Laplacian(image, cv2.CV_64F).var()
+def sharpness(imagePath):
+    image = cv2.imread(imagePath)
+    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    fm = variance_of_laplacian(gray)
+    return fm
+out = {}
+for p in sys.stdin.read().split("\n"):
+    if p:
+        out[p] = [sharpness(p), str(imagehash.phash(PIL.Image.open(p)))]
+print(json.dumps(out))
+"#;
+
+#[test]
+fn sharpness_is_colmap2nerf_s_and_the_hash_imagehash_s_on_a_real_scene() {
+    let Some(scene) = super::shared::shared("data/sceaux_castle") else {
+        return;
+    };
+    if !super::python_has("import cv2, imagehash") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("ds");
+    ok(&["ingest", scene.to_str().unwrap(), "--out", ds.to_str().unwrap()]);
+    let store = nrw_dataset::Store::local(&ds);
+    let signals = nrw_dataset::scene::read_signals(&store).unwrap();
+    let rec = nrw_colmap::read_scene(&scene).unwrap();
+    let paths: BTreeMap<String, u32> = rec
+        .images
+        .values()
+        .map(|i| (scene.join("images").join(&i.name).display().to_string(), i.id))
+        .collect();
+    assert_eq!(signals.len(), paths.len(), "every photo kept and measured");
+    let mut py = std::process::Command::new("python3")
+        .args(["-c", ORACLE])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write;
+    let list: Vec<&str> = paths.keys().map(String::as_str).collect();
+    py.stdin.take().unwrap().write_all(list.join("\n").as_bytes()).unwrap();
+    let o = py.wait_with_output().unwrap();
+    assert!(o.status.success());
+    let oracle: BTreeMap<String, (f64, String)> = serde_json::from_slice(&o.stdout).unwrap();
+    let mut bits = Vec::new();
+    for (path, (sharp, hash)) in &oracle {
+        let s = &signals[&paths[path]];
+        // Exact integer sums here, NumPy's pairwise float sums there: the last digits only.
+        assert!(
+            (s.sharpness - sharp).abs() <= 1e-12 * sharp,
+            "{path}: {} against colmap2nerf's {sharp}",
+            s.sharpness
+        );
+        bits.push((s.phash ^ u64::from_str_radix(hash, 16).unwrap()).count_ones());
+    }
+    // An area average where imagehash resizes with Lanczos: a few bits whose DCT term lies
+    // at the median may flip, never more than the accepting distance's half.
+    let worst = *bits.iter().max().unwrap();
+    eprintln!("pHash against imagehash, bits apart per photo: {bits:?}");
+    assert!(worst <= 4, "{bits:?}");
+}

@@ -12,14 +12,15 @@ pub struct Grey {
     pub pixels: Vec<u8>,
 }
 
-/// OpenCV's `cvtColor(…, COLOR_RGB2GRAY)` for 8-bit pixels: fixed-point weights
-/// 4899 / 9617 / 1868 over 2¹⁴, rounded (what colmap2nerf's `cv2.cvtColor` computes).
+/// OpenCV's `cvtColor(…, COLOR_RGB2GRAY)` for 8-bit pixels as opencv-python 5.1 computes
+/// it (what colmap2nerf's `cv2.cvtColor` gives): fixed-point weights 9798 / 19235 / 3735
+/// over 2¹⁵, rounded (the 2¹⁴ weights of older OpenCV round some pixels the other way).
 pub fn grey(photo: &RgbImage) -> Grey {
     let pixels = photo
         .pixels()
         .map(|p| {
             let [r, g, b] = p.0;
-            ((r as u32 * 4899 + g as u32 * 9617 + b as u32 * 1868 + (1 << 13)) >> 14) as u8
+            ((r as u32 * 9798 + g as u32 * 19235 + b as u32 * 3735 + (1 << 14)) >> 15) as u8
         })
         .collect();
     Grey {

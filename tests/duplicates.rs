@@ -8,17 +8,22 @@ use std::path::{Path, PathBuf};
 
 use super::{nrw, ok};
 
-/// A PINHOLE scene of 20 photos with a copy of every fourth (5 copies, one of each kind).
-fn planted(dir: &Path) -> (PathBuf, Vec<nrw_synth::copies::Planted>) {
+/// A PINHOLE scene of 20 photos with a copy of every fourth (5 copies, one of each kind),
+/// and, from every fifth photo's very place, another picture taken at another moment
+/// (other light, other people: 4 twins that are not copies).
+fn planted(dir: &Path) -> (PathBuf, Vec<nrw_synth::copies::Planted>, Vec<(String, String)>) {
     let scene = dir.join("scene");
     let mut spec = nrw_synth::SceneSpec::demo().shrunk(20, (300, 360), 60_000);
     spec.cameras.model = "PINHOLE".into();
     spec.cameras.distortion = 0.0;
     nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
+    let twin = dir.join("twin");
+    nrw_synth::generate(&nrw_synth::copies::other_moments(&spec), &twin, &|| {}).unwrap();
     let depth = spec.cameras.min_distance;
     let planted = nrw_synth::copies::plant_copies(&scene, 4, depth, 7).unwrap();
-    assert_eq!(planted.len(), 5);
-    (scene, planted)
+    let moments = nrw_synth::copies::plant_other_moments(&scene, &twin, 5, depth, 8).unwrap();
+    assert_eq!((planted.len(), moments.len()), (5, 4));
+    (scene, planted, moments)
 }
 
 fn ingest(scene: &Path, out: &Path, extra: &[&str]) -> String {
@@ -64,15 +69,18 @@ fn sides(ds: &Path) -> BTreeMap<String, String> {
 #[test]
 fn planted_copies_are_found_and_never_straddle_the_split() {
     let dir = tempfile::tempdir().unwrap();
-    let (scene, planted) = planted(dir.path());
+    let (scene, planted, moments) = planted(dir.path());
     let ds = dir.path().join("ds");
     let err = ingest(&scene, &ds, &[]);
     let want: BTreeSet<BTreeSet<String>> = planted
         .iter()
         .map(|p| [p.original.clone(), p.copy.clone()].into())
         .collect();
-    // Every planted group, and no group among the 20 distinct photos.
+    // Every planted group, and no group among the 20 distinct photos and their 4 twins from
+    // the same places.
     assert_eq!(found(&ds), want, "{err}");
+    let grouped: BTreeSet<String> = found(&ds).into_iter().flatten().collect();
+    assert!(moments.iter().all(|(_, twin)| !grouped.contains(twin)));
     assert!(
         err.contains("10 photos are copies of one another in 5 groups"),
         "{err}"

@@ -100,17 +100,95 @@ fn nudged(pose: &nrw_colmap::pose::Rigid3, depth: f64, rng: &mut impl Rng) -> nr
     }
 }
 
+/// The same scene at other moments: the spec's cameras (they are drawn from its seed alone)
+/// under the times of day rotated by one and twice the people, so each photo has a twin
+/// taken from its very place that is another picture — what near-duplicate search must not
+/// group.
+pub fn other_moments(spec: &crate::SceneSpec) -> crate::SceneSpec {
+    let mut other = spec.clone();
+    if let Some(a) = other.effects.appearance.as_mut() {
+        a.rotate_left(1);
+    }
+    other.effects.transients = Some(other.effects.transients.unwrap_or(1.0) * 2.0);
+    other
+}
+
+/// Add every `every`-th photo of `twin` (a scene made by [`other_moments`] from this scene's
+/// spec) to the scene at `scene` as `moment_NAME`, at its counterpart's pose nudged as SfM
+/// would: distinct pictures from one place. Returns the (counterpart, twin) name pairs.
+pub fn plant_other_moments(
+    scene: &Path,
+    twin: &Path,
+    every: usize,
+    depth: f64,
+    seed: u64,
+) -> Result<Vec<(String, String)>> {
+    let sparse = scene.join("sparse/0");
+    let mut rec = read(scene)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let originals = generated(&rec, every);
+    let mut next_image = rec.images.keys().max().copied().unwrap_or(0) + 1;
+    let mut pairs = Vec::new();
+    for img in originals {
+        let name = format!("moment_{}", img.name);
+        let (from, to) = (twin.join("images").join(&img.name), scene.join("images").join(&name));
+        std::fs::copy(&from, &to).map_err(|source| SynthError::Io { path: from.clone(), source })?;
+        rec.images.insert(
+            next_image,
+            Image {
+                id: next_image,
+                name: name.clone(),
+                camera_id: img.camera_id,
+                cam_from_world: nudged(&img.cam_from_world, depth, &mut rng),
+                stored_quat_norm: 1.0,
+                points2d: Vec::new(),
+            },
+        );
+        pairs.push((img.name.clone(), name));
+        next_image += 1;
+    }
+    write(&rec, &sparse)?;
+    Ok(pairs)
+}
+
+/// Every `every`-th photo the generator made (never one planted here).
+fn generated(rec: &Reconstruction, every: usize) -> Vec<Image> {
+    rec.images
+        .values()
+        .filter(|i| !PLANTED.iter().any(|p| i.name.starts_with(p)))
+        .step_by(every.max(1))
+        .cloned()
+        .collect()
+}
+
+/// Name prefixes of planted photos.
+const PLANTED: [&str; 2] = ["copy_", "moment_"];
+
+fn read(scene: &Path) -> Result<Reconstruction> {
+    nrw_colmap::read_scene(scene).map_err(|e| SynthError::Spec {
+        file: scene.join("sparse/0").display().to_string(),
+        problem: e.to_string(),
+    })
+}
+
+fn write(rec: &Reconstruction, sparse: &Path) -> Result<()> {
+    for f in [Format::Binary, Format::Text] {
+        nrw_colmap::write_model(rec, sparse, f).map_err(|source| SynthError::Io {
+            path: sparse.to_path_buf(),
+            source,
+        })?;
+    }
+    Ok(())
+}
+
 /// Plant one copy of every `every`-th image of the PINHOLE scene at `scene` (its
 /// `sparse/0` and `images/`), kinds in [`KINDS`] order; `depth` is the scene's typical
 /// viewing distance (the scale of the pose noise). Returns what was planted.
 pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result<Vec<Planted>> {
     let sparse = scene.join("sparse/0");
-    let mut rec: Reconstruction = nrw_colmap::read_scene(scene).map_err(|e| SynthError::Spec {
-        file: sparse.display().to_string(),
-        problem: e.to_string(),
-    })?;
+    let mut rec = read(scene)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let originals: Vec<Image> = rec.images.values().step_by(every.max(1)).cloned().collect();
+    let originals = generated(&rec, every);
     let (mut next_image, mut next_camera) = (
         rec.images.keys().max().copied().unwrap_or(0) + 1,
         rec.cameras.keys().max().copied().unwrap_or(0) + 1,
@@ -166,9 +244,6 @@ pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result
         next_image += 1;
         next_camera += 1;
     }
-    for f in [Format::Binary, Format::Text] {
-        nrw_colmap::write_model(&rec, &sparse, f)
-            .map_err(|source| SynthError::Io { path: sparse.clone(), source })?;
-    }
+    write(&rec, &sparse)?;
     Ok(planted)
 }

@@ -103,7 +103,8 @@ pub fn photos<'a>(
                 signals,
                 camera: rec.cameras.get(&img.camera_id)?,
                 pose: &img.cam_from_world,
-                depth: o.depth_range.map_or(f64::INFINITY, |(lo, hi)| (lo + hi) / 2.0),
+                // An empty render has no depth: then only one exact place counts as the same.
+                depth: o.depth_range.map_or(0.0, |(lo, hi)| (lo + hi) / 2.0),
             })
         })
         .collect()

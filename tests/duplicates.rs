@@ -86,6 +86,11 @@ fn planted_copies_are_found_and_never_straddle_the_split() {
         "{err}"
     );
     let d = ds.to_str().unwrap();
+    let inspected: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", d, "--json"])).unwrap();
+    let listed: BTreeSet<BTreeSet<String>> =
+        serde_json::from_value(inspected["near_duplicates"].clone()).unwrap();
+    assert_eq!(listed, want);
     for seed in 0..40 {
         let o = ok(&["split", d, "--val", "6", "--seed", &seed.to_string()]);
         let side = sides(&ds);

@@ -98,6 +98,15 @@ pub fn read_duplicates(store: &Store) -> Result<Vec<Member>> {
     Ok(out)
 }
 
+/// The groups as lists of their members' names, in group order (what inspect and QA show).
+pub fn names_by_group(members: &[Member]) -> Vec<Vec<String>> {
+    let mut groups: BTreeMap<u32, Vec<String>> = BTreeMap::new();
+    for m in members {
+        groups.entry(m.group).or_default().push(m.name.clone());
+    }
+    groups.into_values().collect()
+}
+
 /// Each photo's group, by name (what split joins on): photos in no group are absent.
 pub fn group_of(members: &[Member]) -> BTreeMap<String, u32> {
     members.iter().map(|m| (m.name.clone(), m.group)).collect()

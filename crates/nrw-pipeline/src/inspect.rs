@@ -78,6 +78,8 @@ pub struct DatasetSummary {
     pub licences: BTreeMap<String, usize>,
     /// Registered photos whose EXIF orientation is not 1 (pixels are read as stored).
     pub rotated_by_exif: Vec<String>,
+    /// Groups of kept photos that are one picture (scene/duplicates.parquet), by name.
+    pub near_duplicates: Vec<Vec<String>>,
 }
 
 /// What [`inspect`] found.
@@ -117,6 +119,9 @@ fn dataset_summary(location: &nrw_dataset::Location) -> Result<DatasetSummary> {
     Ok(DatasetSummary {
         licences: tally.licences,
         rotated_by_exif: tally.rotated_by_exif,
+        near_duplicates: nrw_dataset::duplicates::names_by_group(
+            &nrw_dataset::duplicates::read_duplicates(&ds.store)?,
+        ),
         dataset: location.to_string(),
         schema_version: ds.manifest.schema_version,
         registered: verdicts.len(),

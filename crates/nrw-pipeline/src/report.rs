@@ -444,6 +444,13 @@ fn dataset(d: &DatasetSummary) -> Report {
     for (k, n) in &d.licences {
         r.out(format!("  {k:<10} {n}"));
     }
+    if !d.near_duplicates.is_empty() {
+        r.out(format!(
+            "near-duplicates: {} groups of photos that are one picture (split keeps each on one side), e.g. {}",
+            d.near_duplicates.len(),
+            d.near_duplicates[0].join(" = ")
+        ));
+    }
     if !d.rotated_by_exif.is_empty() {
         r.err(format!(
             "warning: {} photos have an EXIF orientation other than 1 ({}); COLMAP reads pixels as stored, and so does nrw-etl: their views are as the model saw them, not as a viewer shows them",

@@ -41,15 +41,6 @@ pub struct Figures {
     pub near_duplicates: Vec<Vec<String>>,
 }
 
-/// The near-duplicate groups as lists of names, in group order.
-fn duplicate_groups(members: &[nrw_dataset::duplicates::Member]) -> Vec<Vec<String>> {
-    let mut groups: BTreeMap<u32, Vec<String>> = BTreeMap::new();
-    for m in members {
-        groups.entry(m.group).or_default().push(m.name.clone());
-    }
-    groups.into_values().collect()
-}
-
 /// A kept photo this much less sharp than the dataset's median is worth a look.
 const BLUR_FACTOR: f64 = 10.0;
 
@@ -280,7 +271,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
     let attributions = nrw_dataset::photo_info::read_attributions(dir)?;
     let licences = provenance_warnings(&images, &attributions, &mut warnings);
     let members = nrw_dataset::duplicates::read_duplicates(dir)?;
-    let near_duplicates = duplicate_groups(&members);
+    let near_duplicates = nrw_dataset::duplicates::names_by_group(&members);
     signal_warnings(&images, &members, &mut warnings);
     let figures = Figures {
         licences,

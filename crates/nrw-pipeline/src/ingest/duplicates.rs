@@ -1,9 +1,10 @@
 //! Near-duplicates: kept photos that are one picture — the same upload twice, resized,
-//! re-encoded, cropped or recoloured copies. Two routes find a pair: perceptual hashes a few
-//! bits apart (whole-frame copies, whatever the model says), or cameras that the model puts
-//! at one place looking one way whose pixels, aligned through those cameras, correlate
-//! (crops: a crop's hash is another picture's, but COLMAP registers it where its original
-//! is). Pairs join into groups (union-find); split keeps a group on one side.
+//! re-encoded, cropped or recoloured copies. Where the model puts two cameras at one place
+//! looking one way, their pixels aligned through those cameras decide (a crop's hash is
+//! another picture's, but COLMAP registers a crop where its original is; a photo from the
+//! same spot at another moment can hash close but does not correlate); elsewhere perceptual
+//! hashes a few bits apart do. Pairs join into groups (union-find); split keeps a group on
+//! one side. The defaults come from docs/bench/duplicates.md's synthetic collection.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -28,8 +29,10 @@ pub struct DuplicateOptions {
     pub max_degrees: f64,
     /// one picture when the aligned grey levels correlate at least this much
     pub min_ncc: f64,
-    /// over at least this fraction of the smaller view's pixels.
+    /// over at least this fraction of the smaller view's pixels,
     pub min_overlap: f64,
+    /// compared at this longest side in pixels (each photo averaged down to it).
+    pub working_side: usize,
 }
 
 impl Default for DuplicateOptions {
@@ -38,8 +41,9 @@ impl Default for DuplicateOptions {
             phash_bits: 6,
             centre_fraction: 0.05,
             max_degrees: 5.0,
-            min_ncc: 0.9,
+            min_ncc: 0.87,
             min_overlap: 0.5,
+            working_side: 80,
         }
     }
 }
@@ -47,9 +51,6 @@ impl Default for DuplicateOptions {
 /// Grey level spread under which a photo is flat (black, white, one colour): its hash says
 /// nothing, and it is in no group.
 pub const FLAT_STD: f64 = 1.0;
-
-/// Longest side of the grey image two candidate photos are compared at.
-const WORKING_SIDE: usize = 160;
 
 /// One kept photo as the search sees it.
 #[derive(Debug, Clone)]
@@ -76,12 +77,14 @@ pub struct PairScore {
 }
 
 impl PairScore {
-    /// Whether the pair is one picture under these options.
+    /// Whether the pair is one picture under these options: where the cameras are at one
+    /// place the aligned pixels decide (they see what the hash cannot: a crop is a copy, a
+    /// photo from the same spot at another moment is not); elsewhere the hashes do.
     pub fn is_duplicate(&self, o: &DuplicateOptions) -> bool {
-        self.phash_distance <= o.phash_bits
-            || self
-                .ncc
-                .is_some_and(|(ncc, overlap)| ncc >= o.min_ncc && overlap >= o.min_overlap)
+        match self.ncc {
+            Some((ncc, overlap)) => ncc >= o.min_ncc && overlap >= o.min_overlap,
+            None => self.phash_distance <= o.phash_bits,
+        }
     }
 }
 
@@ -133,9 +136,9 @@ fn candidates(photos: &[Photo], o: &DuplicateOptions) -> Vec<(usize, usize, u32,
         .collect()
 }
 
-/// A grey image averaged down so its longest side is at most [`WORKING_SIDE`].
-fn shrink(g: &Grey) -> (Vec<f32>, usize, usize) {
-    let f = (g.width.max(g.height) as f64 / WORKING_SIDE as f64).max(1.0);
+/// A grey image averaged down so its longest side is at most `side`.
+fn shrink(g: &Grey, side: usize) -> (Vec<f32>, usize, usize) {
+    let f = (g.width.max(g.height) as f64 / side.max(1) as f64).max(1.0);
     let (w, h) = (
         ((g.width as f64 / f).round() as usize).max(1),
         ((g.height as f64 / f).round() as usize).max(1),
@@ -252,7 +255,8 @@ pub fn score_pairs(
         .map(|&i| -> Result<(usize, Working)> {
             let path = nrw_colmap::names::photo_path(photos_dir, photos[i].name, false)
                 .map_err(|e| crate::error::PipelineError::input(photos_dir, e))?;
-            let (grey, w, h) = shrink(&grey(&nrw_dataset::codec::load_photo(&path)?));
+            let photo = nrw_dataset::codec::load_photo(&path)?;
+            let (grey, w, h) = shrink(&grey(&photo), o.working_side);
             Ok((
                 i,
                 Working {

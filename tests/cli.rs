@@ -12,14 +12,14 @@ mod colmap_dense;
 mod dataset;
 #[path = "densify.rs"]
 mod densify;
+#[path = "duplicates.rs"]
+mod duplicates;
 #[path = "export_models.rs"]
 mod export_models;
 #[path = "golden.rs"]
 mod golden;
 #[path = "gsplat.rs"]
 mod gsplat;
-#[path = "duplicates.rs"]
-mod duplicates;
 #[path = "ingest.rs"]
 mod ingest;
 #[path = "inspect.rs"]

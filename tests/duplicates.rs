@@ -11,7 +11,13 @@ use super::{nrw, ok};
 /// A PINHOLE scene of 20 photos with a copy of every fourth (5 copies, one of each kind),
 /// and, from every fifth photo's very place, another picture taken at another moment
 /// (other light, other people: 4 twins that are not copies).
-fn planted(dir: &Path) -> (PathBuf, Vec<nrw_synth::copies::Planted>, Vec<(String, String)>) {
+fn planted(
+    dir: &Path,
+) -> (
+    PathBuf,
+    Vec<nrw_synth::copies::Planted>,
+    Vec<(String, String)>,
+) {
     let scene = dir.join("scene");
     let mut spec = nrw_synth::SceneSpec::demo().shrunk(20, (300, 360), 60_000);
     spec.cameras.model = "PINHOLE".into();
@@ -133,7 +139,10 @@ fn planted_copies_are_found_and_never_straddle_the_split() {
     let section = &section[..section[4..].find("<h2>").map_or(section.len(), |e| e + 4)];
     for g in &want {
         for name in g {
-            assert!(section.contains(&format!("alt=\"{name}\"")), "{name} has no thumbnail");
+            assert!(
+                section.contains(&format!("alt=\"{name}\"")),
+                "{name} has no thumbnail"
+            );
         }
     }
 }
@@ -182,7 +191,11 @@ fn sharpness_and_exposure_are_recorded_and_the_blur_filter_drops_with_its_reason
     let rows = images_table(&ds);
     let sharp = |n: &str| rows[n].0.unwrap();
     let others: Vec<f64> = names[2..].iter().map(|n| sharp(n)).collect();
-    assert!(others.iter().all(|s| *s > 4.0 * sharp(&names[0])), "{others:?} vs {}", sharp(&names[0]));
+    assert!(
+        others.iter().all(|s| *s > 4.0 * sharp(&names[0])),
+        "{others:?} vs {}",
+        sharp(&names[0])
+    );
     // The black photo: no sharpness, every pixel crushed, and in no group (its hash is empty).
     assert_eq!(rows[&names[1]].0, Some(0.0));
     assert_eq!(rows[&names[1]].1, Some(1.0));
@@ -217,7 +230,10 @@ fn images_table(ds: &Path) -> BTreeMap<String, (Option<f64>, Option<f64>, String
         let b = b.unwrap();
         let col = |n: &str| b.column_by_name(n).unwrap().clone();
         let names = col("name");
-        let names = names.as_any().downcast_ref::<arrow_array::StringArray>().unwrap();
+        let names = names
+            .as_any()
+            .downcast_ref::<arrow_array::StringArray>()
+            .unwrap();
         let f64s = |n: &str| {
             col(n)
                 .as_any()
@@ -227,7 +243,10 @@ fn images_table(ds: &Path) -> BTreeMap<String, (Option<f64>, Option<f64>, String
         };
         let (s, d) = (f64s("sharpness"), f64s("dark_fraction"));
         let v = col("verdict");
-        let v = v.as_any().downcast_ref::<arrow_array::StringArray>().unwrap();
+        let v = v
+            .as_any()
+            .downcast_ref::<arrow_array::StringArray>()
+            .unwrap();
         use arrow_array::Array;
         for i in 0..b.num_rows() {
             let opt = |a: &arrow_array::Float64Array| (!a.is_null(i)).then(|| a.value(i));
@@ -268,14 +287,24 @@ fn sharpness_is_colmap2nerf_s_and_the_hash_imagehash_s_on_a_real_scene() {
     }
     let dir = tempfile::tempdir().unwrap();
     let ds = dir.path().join("ds");
-    ok(&["ingest", scene.to_str().unwrap(), "--out", ds.to_str().unwrap()]);
+    ok(&[
+        "ingest",
+        scene.to_str().unwrap(),
+        "--out",
+        ds.to_str().unwrap(),
+    ]);
     let store = nrw_dataset::Store::local(&ds);
     let signals = nrw_dataset::scene::read_signals(&store).unwrap();
     let rec = nrw_colmap::read_scene(&scene).unwrap();
     let paths: BTreeMap<String, u32> = rec
         .images
         .values()
-        .map(|i| (scene.join("images").join(&i.name).display().to_string(), i.id))
+        .map(|i| {
+            (
+                scene.join("images").join(&i.name).display().to_string(),
+                i.id,
+            )
+        })
         .collect();
     assert_eq!(signals.len(), paths.len(), "every photo kept and measured");
     let mut py = std::process::Command::new("python3")
@@ -286,7 +315,11 @@ fn sharpness_is_colmap2nerf_s_and_the_hash_imagehash_s_on_a_real_scene() {
         .unwrap();
     use std::io::Write;
     let list: Vec<&str> = paths.keys().map(String::as_str).collect();
-    py.stdin.take().unwrap().write_all(list.join("\n").as_bytes()).unwrap();
+    py.stdin
+        .take()
+        .unwrap()
+        .write_all(list.join("\n").as_bytes())
+        .unwrap();
     let o = py.wait_with_output().unwrap();
     assert!(o.status.success());
     let oracle: BTreeMap<String, (f64, String)> = serde_json::from_slice(&o.stdout).unwrap();

@@ -49,7 +49,9 @@ pub fn write_duplicates(store: &Store, members: &[Member]) -> Result<crate::File
     let mut rows: Vec<&Member> = members.iter().collect();
     rows.sort_by_key(|m| m.image_id);
     let columns: Vec<ArrayRef> = vec![
-        Arc::new(UInt32Array::from_iter_values(rows.iter().map(|m| m.image_id))),
+        Arc::new(UInt32Array::from_iter_values(
+            rows.iter().map(|m| m.image_id),
+        )),
         Arc::new(StringArray::from_iter_values(
             rows.iter().map(|m| m.name.as_str()),
         )),

@@ -45,8 +45,7 @@ pub const EXPORT_DIR: &str = "export";
 pub use manifest::{FileEntry, Manifest, SceneSource, Tool, SCHEMA_VERSION};
 pub use scene::{
     cameras_schema, images_schema, write_scene_tables, ImageOutcome, PhotoSignals, CAMERAS_TABLE,
-    IMAGES_TABLE,
-    VERDICT_KEPT, VERDICT_UNREADABLE,
+    IMAGES_TABLE, VERDICT_KEPT, VERDICT_UNREADABLE,
 };
 pub use schema::TableDoc;
 pub use views::{views_schema, write_shard, ViewRow};

@@ -434,12 +434,13 @@ pub fn read_signals(dir: &Store) -> Result<BTreeMap<u32, PhotoSignals>> {
         let (dark, bright) = (f("dark_fraction")?, f("bright_fraction")?);
         let hash = column::<StringArray>(&b, "phash", &path)?;
         for i in (0..b.num_rows()).filter(|i| !sharp.is_null(*i)) {
-            let phash = u64::from_str_radix(hash.value(i), 16).map_err(|e| DatasetError::Value {
-                path: path.clone(),
-                record: format!("image {}", ids.value(i)),
-                field: "phash".into(),
-                problem: format!("`{}` is not 16 hex digits: {e}", hash.value(i)),
-            })?;
+            let phash =
+                u64::from_str_radix(hash.value(i), 16).map_err(|e| DatasetError::Value {
+                    path: path.clone(),
+                    record: format!("image {}", ids.value(i)),
+                    field: "phash".into(),
+                    problem: format!("`{}` is not 16 hex digits: {e}", hash.value(i)),
+                })?;
             out.insert(
                 ids.value(i),
                 PhotoSignals {

@@ -466,24 +466,39 @@ mod tests {
         for seed in 0..200 {
             let (a, c) = assign_grouped(&all, &[], 10, seed, &groups).unwrap();
             assert!(straddling(&a, &groups).is_empty(), "seed {seed}");
-            assert_eq!(c.new_val, 10, "seed {seed}: singles fill what groups cannot");
+            assert_eq!(
+                c.new_val, 10,
+                "seed {seed}: singles fill what groups cannot"
+            );
         }
         // A photo that joins a group later goes where the group already is.
         let (first, _) = assign_grouped(&all[..59], &[], 10, 3, &groups).unwrap();
         let mut later = groups.clone();
         later.insert(all[59].1.clone(), 0);
-        let side0 = first.iter().find(|a| a.name == all[0].1).unwrap().split.clone();
+        let side0 = first
+            .iter()
+            .find(|a| a.name == all[0].1)
+            .unwrap()
+            .split
+            .clone();
         let (second, c) = assign_grouped(&all, &first, 10, 3, &later).unwrap();
         let joined = second.iter().find(|a| a.name == all[59].1).unwrap();
         assert_eq!((joined.split.clone(), c.new_train + c.new_val), (side0, 1));
         // A published split that parts a group is reported, naming its members.
         let mut parted = first.clone();
-        for a in parted.iter_mut().filter(|a| groups.get(&a.name) == Some(&1)).take(1) {
+        for a in parted
+            .iter_mut()
+            .filter(|a| groups.get(&a.name) == Some(&1))
+            .take(1)
+        {
             a.split = if a.split == VAL { TRAIN } else { VAL }.into();
         }
         let s = straddling(&parted, &groups);
         assert_eq!(s.len(), 1);
-        assert_eq!(s[0].1, vec![all[3].1.clone(), all[4].1.clone(), all[5].1.clone()]);
+        assert_eq!(
+            s[0].1,
+            vec![all[3].1.clone(), all[4].1.clone(), all[5].1.clone()]
+        );
     }
 
     #[test]

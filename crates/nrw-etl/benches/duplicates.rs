@@ -113,20 +113,32 @@ fn truth(
     planted: &[nrw_synth::copies::Planted],
     moments: &[(String, String)],
 ) -> Truth {
-    let id: BTreeMap<&str, u32> = rec.images.values().map(|i| (i.name.as_str(), i.id)).collect();
+    let id: BTreeMap<&str, u32> = rec
+        .images
+        .values()
+        .map(|i| (i.name.as_str(), i.id))
+        .collect();
     let kind = |k: nrw_synth::copies::CopyKind| {
-        serde_json::to_value(k)
-            .unwrap()
-            .as_object()
-            .map_or_else(
-                || serde_json::to_value(k).unwrap().as_str().unwrap().to_string(),
-                |o| o.keys().next().unwrap().clone(),
-            )
+        serde_json::to_value(k).unwrap().as_object().map_or_else(
+            || {
+                serde_json::to_value(k)
+                    .unwrap()
+                    .as_str()
+                    .unwrap()
+                    .to_string()
+            },
+            |o| o.keys().next().unwrap().clone(),
+        )
     };
     Truth {
         copies: planted
             .iter()
-            .map(|p| (key(id[p.original.as_str()], id[p.copy.as_str()]), kind(p.kind)))
+            .map(|p| {
+                (
+                    key(id[p.original.as_str()], id[p.copy.as_str()]),
+                    kind(p.kind),
+                )
+            })
             .collect(),
         twins: moments
             .iter()
@@ -192,10 +204,17 @@ print(time.perf_counter() - t, resource.getrusage(resource.RUSAGE_SELF).ru_maxrs
         .ok()?;
     use std::io::Write;
     let list: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
-    child.stdin.take()?.write_all(list.join("\n").as_bytes()).ok()?;
+    child
+        .stdin
+        .take()?
+        .write_all(list.join("\n").as_bytes())
+        .ok()?;
     let o = child.wait_with_output().ok()?;
     let text = String::from_utf8(o.stdout).ok()?;
-    let v: Vec<f64> = text.split_whitespace().filter_map(|x| x.parse().ok()).collect();
+    let v: Vec<f64> = text
+        .split_whitespace()
+        .filter_map(|x| x.parse().ok())
+        .collect();
     (o.status.success() && v.len() == 2).then(|| (v[0], v[1]))
 }
 
@@ -237,14 +256,17 @@ fn main() {
     let n = synthetic.rec.images.len();
     let mut md = String::new();
     let _ = writeln!(md, "# Near-duplicates: precision, recall and cost\n");
-    let _ = writeln!(md, "Made by `cargo bench -p nrw-etl --bench duplicates` on {}.\n", cpu::describe());
     let _ = writeln!(
         md,
-        "**Synthetic collection**: {} photos of the demo landmark (PINHOLE, shorter side 360–480 px), {} of them generated, {} planted copies (4 of each kind: {}) and {} twins from a photo's very place at another moment (light rotated, twice the people). Denominators: recall counts the {} planted (original, copy) pairs; false pairs count among the {} pairs that are not a planted copy ({} of them twins). **Real scenes** ({}): no known copy, every pair distinct ({}). Nothing here was tuned on the real scenes.\n",
+        "Made by `cargo bench -p nrw-etl --bench duplicates` on {}.\n",
+        cpu::describe()
+    );
+    let _ = writeln!(
+        md,
+        "**Synthetic collection**: {} photos of the demo landmark (PINHOLE, shorter side 360–480 px), {} of them generated, {} planted copies (4 of each kind: identical file, resized 60%, re-encoded JPEG q30, cropped 70%, recoloured) and {} twins from a photo's very place at another moment (light rotated, twice the people). Denominators: recall counts the {} planted (original, copy) pairs; false pairs count among the {} pairs that are not a planted copy ({} of them twins). **Real scenes** ({}): no known copy, every pair distinct ({}). Nothing here was tuned on the real scenes.\n",
         n,
         n - planted.len() - moments.len(),
         planted.len(),
-        "identical file, resized 60%, re-encoded JPEG q30, cropped 70%, recoloured",
         moments.len(),
         t.copies.len(),
         pairs(n) - t.copies.len(),
@@ -253,7 +275,13 @@ fn main() {
         real.iter().map(|c| format!("{} pairs", pairs(c.rec.images.len()))).collect::<Vec<_>>().join(", "),
     );
     let kinds: Vec<String> = {
-        let mut k: Vec<String> = t.copies.values().cloned().collect::<BTreeSet<_>>().into_iter().collect();
+        let mut k: Vec<String> = t
+            .copies
+            .values()
+            .cloned()
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect();
         k.sort();
         k
     };
@@ -262,7 +290,10 @@ fn main() {
             md,
             "| {first} | {} | recall | false pairs (synthetic) | of them twins | {} |",
             kinds.join(" | "),
-            real.iter().map(|c| format!("false pairs ({})", c.name)).collect::<Vec<_>>().join(" | ")
+            real.iter()
+                .map(|c| format!("false pairs ({})", c.name))
+                .collect::<Vec<_>>()
+                .join(" | ")
         );
         let cols = 4 + kinds.len() + real.len();
         let _ = writeln!(md, "|{}", "---|".repeat(cols));
@@ -272,29 +303,57 @@ fn main() {
         let _ = writeln!(
             md,
             "| {label} | {} | {found}/{} | {fp} | {ft} | {} |",
-            kinds.iter().map(|k| format!("{}/{}", by_kind[k].0, by_kind[k].1)).collect::<Vec<_>>().join(" | "),
+            kinds
+                .iter()
+                .map(|k| format!("{}/{}", by_kind[k].0, by_kind[k].1))
+                .collect::<Vec<_>>()
+                .join(" | "),
             t.copies.len(),
-            real_scores.iter().map(|s| real_false(s, accept).to_string()).collect::<Vec<_>>().join(" | ")
+            real_scores
+                .iter()
+                .map(|s| real_false(s, accept).to_string())
+                .collect::<Vec<_>>()
+                .join(" | ")
         );
     };
     let _ = writeln!(md, "## The perceptual hash alone\n\nA pair is one picture when its hashes are at most *b* bits apart (of 64).\n");
     header(&mut md, "b");
     for b in [0, 2, 4, 6, 8, 10, 12, 14, 16, 20] {
-        row(&mut md, format!("{b}{}", if b == o.phash_bits { " (default)" } else { "" }), &|p: &PairScore| p.phash_distance <= b);
+        row(
+            &mut md,
+            format!("{b}{}", if b == o.phash_bits { " (default)" } else { "" }),
+            &|p: &PairScore| p.phash_distance <= b,
+        );
     }
     let _ = writeln!(md, "\n## The cameras and pixels alone\n\nPairs whose cameras are at one place (centres within {:.0}% of the depth, axes within {}°) are aligned through their cameras; one picture when the grey levels correlate at least τ over at least {:.0}% of the smaller photo.\n", o.centre_fraction * 100.0, o.max_degrees, o.min_overlap * 100.0);
     header(&mut md, "τ");
     for tau in [0.5, 0.6, 0.7, 0.8, 0.85, 0.87, 0.9, 0.95, 0.98] {
-        let opts = DuplicateOptions { phash_bits: 0, min_ncc: tau, ..o };
+        let opts = DuplicateOptions {
+            phash_bits: 0,
+            min_ncc: tau,
+            ..o
+        };
         let label = format!("{tau}{}", if tau == o.min_ncc { " (default)" } else { "" });
         row(&mut md, label, &|p: &PairScore| {
-            p.ncc.is_some_and(|(c, ov)| c >= opts.min_ncc && ov >= opts.min_overlap)
+            p.ncc
+                .is_some_and(|(c, ov)| c >= opts.min_ncc && ov >= opts.min_overlap)
         });
     }
     let _ = writeln!(md, "\n## Both, at the defaults (what ingest runs)\n\nWhere the cameras are at one place the pixels decide; elsewhere the hash.\n");
     header(&mut md, "rule");
-    row(&mut md, format!("pixels τ ≥ {} at one place, else hash ≤ {} bits", o.min_ncc, o.phash_bits), &|p: &PairScore| p.is_duplicate(&o));
-    let either = |p: &PairScore| p.phash_distance <= o.phash_bits || p.ncc.is_some_and(|(c, ov)| c >= o.min_ncc && ov >= o.min_overlap);
+    row(
+        &mut md,
+        format!(
+            "pixels τ ≥ {} at one place, else hash ≤ {} bits",
+            o.min_ncc, o.phash_bits
+        ),
+        &|p: &PairScore| p.is_duplicate(&o),
+    );
+    let either = |p: &PairScore| {
+        p.phash_distance <= o.phash_bits
+            || p.ncc
+                .is_some_and(|(c, ov)| c >= o.min_ncc && ov >= o.min_overlap)
+    };
     row(&mut md, "either (hash or pixels)".into(), &either);
     let twin_ncc: Vec<f64> = syn_scores
         .iter()
@@ -318,31 +377,67 @@ fn main() {
     let _ = writeln!(md, "## What accuracy costs in time\n\nThe pixel comparison at four working sizes (longest side each photo is averaged down to), over the synthetic collection's {} pairs; the margin is the lowest copy correlation minus the highest twin correlation (larger separates better).\n", pairs(n));
     let _ = writeln!(md, "| working side (px) | search s | lowest copy ncc | highest twin ncc | margin |\n|---|---|---|---|---|");
     for side in [40, 80, 160, 320] {
-        let opts = DuplicateOptions { working_side: side, ..o };
+        let opts = DuplicateOptions {
+            working_side: side,
+            ..o
+        };
         let (s, secs) = scores(&synthetic, &opts);
         let ncc = |set: &dyn Fn(&PairScore) -> bool, pick: fn(f64, f64) -> f64, init: f64| {
-            s.iter().filter(|p| set(p)).filter_map(|p| p.ncc.map(|c| c.0)).fold(init, pick)
+            s.iter()
+                .filter(|p| set(p))
+                .filter_map(|p| p.ncc.map(|c| c.0))
+                .fold(init, pick)
         };
-        let lo = ncc(&|p: &PairScore| t.copies.contains_key(&key(p.a, p.b)), f64::min, f64::INFINITY);
-        let hi = ncc(&|p: &PairScore| t.twins.contains(&key(p.a, p.b)), f64::max, f64::NEG_INFINITY);
+        let lo = ncc(
+            &|p: &PairScore| t.copies.contains_key(&key(p.a, p.b)),
+            f64::min,
+            f64::INFINITY,
+        );
+        let hi = ncc(
+            &|p: &PairScore| t.twins.contains(&key(p.a, p.b)),
+            f64::max,
+            f64::NEG_INFINITY,
+        );
         let _ = writeln!(
             md,
             "| {side}{} | {secs:.3} | {lo:.3} | {hi:.3} | {:.3} |",
-            if side == o.working_side { " (default)" } else { "" },
+            if side == o.working_side {
+                " (default)"
+            } else {
+                ""
+            },
             lo - hi
         );
     }
     let files: Vec<PathBuf> = std::iter::once(&synthetic)
         .chain(real.iter())
-        .flat_map(|c| c.rec.images.values().map(|i| c.images.join(&i.name)).collect::<Vec<_>>())
+        .flat_map(|c| {
+            c.rec
+                .images
+                .values()
+                .map(|i| c.images.join(&i.name))
+                .collect::<Vec<_>>()
+        })
         .collect();
     let ours: f64 = synthetic.seconds + real.iter().map(|c| c.seconds).sum::<f64>();
     let _ = writeln!(md, "\n## Each photo's signals against Python\n\nSharpness, exposure and hash of all {} photos (decode included) in this process, against colmap2nerf's sharpness (`cv2.imread`, `cvtColor`, `Laplacian(...).var()`) plus `imagehash.phash` on the same files in one Python process.\n", files.len());
-    let _ = writeln!(md, "| | seconds | ms per photo | peak RSS (MB) |\n|---|---|---|---|");
-    let _ = writeln!(md, "| ours (one thread) | {ours:.2} | {:.1} | {:.0} (whole benchmark) |", 1e3 * ours / files.len() as f64, peak_rss_mb());
+    let _ = writeln!(
+        md,
+        "| | seconds | ms per photo | peak RSS (MB) |\n|---|---|---|---|"
+    );
+    let _ = writeln!(
+        md,
+        "| ours (one thread) | {ours:.2} | {:.1} | {:.0} (whole benchmark) |",
+        1e3 * ours / files.len() as f64,
+        peak_rss_mb()
+    );
     match python_peer(&files) {
         Some((secs, rss)) => {
-            let _ = writeln!(md, "| Python (cv2 + imagehash) | {secs:.2} | {:.1} | {rss:.0} |", 1e3 * secs / files.len() as f64);
+            let _ = writeln!(
+                md,
+                "| Python (cv2 + imagehash) | {secs:.2} | {:.1} | {rss:.0} |",
+                1e3 * secs / files.len() as f64
+            );
             let _ = writeln!(md, "\nOurs takes {:.2}× Python's time.", ours / secs);
         }
         None => {

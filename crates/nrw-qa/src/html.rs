@@ -350,11 +350,16 @@ fn sharpness(h: &mut String, inp: &Inputs) -> Result<()> {
         .filter_map(|r| Some((r, r.signals?)))
         .collect();
     if kept.is_empty() {
-        h.push_str("<p>No photo signals recorded (no kept view, or ingested before they were).</p>");
+        h.push_str(
+            "<p>No photo signals recorded (no kept view, or ingested before they were).</p>",
+        );
         return Ok(());
     }
     h.push_str("<p>Sharpness is the variance of the Laplacian of the full-size photo's grey levels, as instant-ngp's colmap2nerf records it: higher is sharper, and it grows with resolution, so compare photos of similar size. Exposure is the mean grey level (0–255) and the share of crushed (≤ 5) and clipped (≥ 250) pixels.</p><div class=\"charts\">");
-    let log_sharp: Vec<f64> = kept.iter().map(|(_, s)| (s.sharpness.max(1e-3)).log10()).collect();
+    let log_sharp: Vec<f64> = kept
+        .iter()
+        .map(|(_, s)| (s.sharpness.max(1e-3)).log10())
+        .collect();
     let lines: Vec<(&str, f64)> = inp
         .min_sharpness
         .map(|m| ("--min-sharpness", m.max(1e-3).log10()))
@@ -387,7 +392,10 @@ fn sharpness(h: &mut String, inp: &Inputs) -> Result<()> {
     h.push_str("</div><p>The least sharp kept photos:</p><div class=\"strip\">");
     kept.sort_by(|a, b| a.1.sharpness.total_cmp(&b.1.sharpness));
     for (r, s) in kept.iter().take(4) {
-        let caption = format!("{} — sharpness {:.1}, mean grey {:.0}", r.name, s.sharpness, s.luma_mean);
+        let caption = format!(
+            "{} — sharpness {:.1}, mean grey {:.0}",
+            r.name, s.sharpness, s.luma_mean
+        );
         h.push_str(&photo_figure(inp, &r.name, &caption));
     }
     h.push_str("</div>");
@@ -428,7 +436,11 @@ fn near_duplicates(h: &mut String, inp: &Inputs) {
         h.push_str("</div>");
     }
     if groups.len() > MAX_GROUPS_SHOWN {
-        let _ = write!(h, "<p>… and {} more groups (qa.json lists them all).</p>", groups.len() - MAX_GROUPS_SHOWN);
+        let _ = write!(
+            h,
+            "<p>… and {} more groups (qa.json lists them all).</p>",
+            groups.len() - MAX_GROUPS_SHOWN
+        );
     }
 }
 

@@ -56,7 +56,9 @@ fn signal_warnings(
         .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)
         .filter_map(|r| Some((r.name.as_str(), r.signals?.sharpness)))
         .collect();
-    if let Some(median) = Summary::of(&kept.iter().map(|k| k.1).collect::<Vec<_>>()).map(|s| s.median) {
+    if let Some(median) =
+        Summary::of(&kept.iter().map(|k| k.1).collect::<Vec<_>>()).map(|s| s.median)
+    {
         let blurry: Vec<String> = kept
             .iter()
             .filter(|(_, s)| *s * BLUR_FACTOR < median)
@@ -236,7 +238,9 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
     };
     let mut distributions = BTreeMap::new();
     let signal = |f: fn(&nrw_dataset::PhotoSignals) -> f64| -> Vec<f64> {
-        kept.iter().filter_map(|r| r.signals.as_ref().map(f)).collect()
+        kept.iter()
+            .filter_map(|r| r.signals.as_ref().map(f))
+            .collect()
     };
     let series: [(&str, Vec<f64>); 7] = [
         ("sharpness", signal(|s| s.sharpness)),

@@ -87,10 +87,18 @@ fn make(photo: &RgbImage, cam: &Camera, kind: CopyKind) -> (RgbImage, Camera) {
 }
 
 /// SfM-sized registration noise: the centre moved by 0.2% of `depth`, the rotation by 0.2°.
-fn nudged(pose: &nrw_colmap::pose::Rigid3, depth: f64, rng: &mut impl Rng) -> nrw_colmap::pose::Rigid3 {
+fn nudged(
+    pose: &nrw_colmap::pose::Rigid3,
+    depth: f64,
+    rng: &mut impl Rng,
+) -> nrw_colmap::pose::Rigid3 {
     let mut unit = || {
-        DVec3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5)
-            .normalize_or_zero()
+        DVec3::new(
+            rng.random::<f64>() - 0.5,
+            rng.random::<f64>() - 0.5,
+            rng.random::<f64>() - 0.5,
+        )
+        .normalize_or_zero()
     };
     let centre = pose.centre() + unit() * 0.002 * depth;
     let rotation = DQuat::from_axis_angle(unit(), 0.2f64.to_radians()) * pose.rotation;
@@ -127,12 +135,18 @@ pub fn plant_other_moments(
     let mut rec = read(scene)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let originals = generated(&rec, every);
-    let mut next_image = rec.images.keys().max().copied().unwrap_or(0) + 1;
+    let first = rec.images.keys().max().copied().unwrap_or(0) + 1;
     let mut pairs = Vec::new();
-    for img in originals {
+    for (next_image, img) in (first..).zip(originals) {
         let name = format!("moment_{}", img.name);
-        let (from, to) = (twin.join("images").join(&img.name), scene.join("images").join(&name));
-        std::fs::copy(&from, &to).map_err(|source| SynthError::Io { path: from.clone(), source })?;
+        let (from, to) = (
+            twin.join("images").join(&img.name),
+            scene.join("images").join(&name),
+        );
+        std::fs::copy(&from, &to).map_err(|source| SynthError::Io {
+            path: from.clone(),
+            source,
+        })?;
         rec.images.insert(
             next_image,
             Image {
@@ -145,7 +159,6 @@ pub fn plant_other_moments(
             },
         );
         pairs.push((img.name.clone(), name));
-        next_image += 1;
     }
     write(&rec, &sparse)?;
     Ok(pairs)
@@ -198,11 +211,16 @@ pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result
         let kind = KINDS[k % KINDS.len()];
         let path = scene.join("images").join(&img.name);
         let photo = image::open(&path)
-            .map_err(|source| SynthError::Image { path: path.clone(), source })?
+            .map_err(|source| SynthError::Image {
+                path: path.clone(),
+                source,
+            })?
             .to_rgb8();
         let (pixels, mut camera) = make(&photo, &rec.cameras[&img.camera_id], kind);
         camera.id = next_camera;
-        let stem = Path::new(&img.name).file_stem().map_or("", |s| s.to_str().unwrap_or(""));
+        let stem = Path::new(&img.name)
+            .file_stem()
+            .map_or("", |s| s.to_str().unwrap_or(""));
         let copy = match kind {
             CopyKind::Identical => format!("copy_{}", img.name),
             CopyKind::Reencoded(_) => format!("copy_{stem}.jpg"),
@@ -210,19 +228,30 @@ pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result
         };
         let out = scene.join("images").join(&copy);
         match kind {
-            CopyKind::Identical => std::fs::copy(&path, &out).map(|_| ()).map_err(|source| {
-                SynthError::Io { path: out.clone(), source }
-            })?,
+            CopyKind::Identical => {
+                std::fs::copy(&path, &out)
+                    .map(|_| ())
+                    .map_err(|source| SynthError::Io {
+                        path: out.clone(),
+                        source,
+                    })?
+            }
             CopyKind::Reencoded(q) => {
-                let file = std::fs::File::create(&out)
-                    .map_err(|source| SynthError::Io { path: out.clone(), source })?;
+                let file = std::fs::File::create(&out).map_err(|source| SynthError::Io {
+                    path: out.clone(),
+                    source,
+                })?;
                 image::codecs::jpeg::JpegEncoder::new_with_quality(file, q)
                     .encode_image(&pixels)
-                    .map_err(|source| SynthError::Image { path: out.clone(), source })?;
+                    .map_err(|source| SynthError::Image {
+                        path: out.clone(),
+                        source,
+                    })?;
             }
-            _ => pixels
-                .save(&out)
-                .map_err(|source| SynthError::Image { path: out.clone(), source })?,
+            _ => pixels.save(&out).map_err(|source| SynthError::Image {
+                path: out.clone(),
+                source,
+            })?,
         }
         rec.images.insert(
             next_image,

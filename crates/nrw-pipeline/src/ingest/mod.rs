@@ -28,9 +28,9 @@ use nrw_dataset::provenance::IngestParameters;
 
 mod cloud;
 mod config;
+pub mod duplicates;
 mod merge;
 mod photos;
-pub mod duplicates;
 pub mod signals;
 mod view;
 

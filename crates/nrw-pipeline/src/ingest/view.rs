@@ -5,8 +5,8 @@ use image::RgbImage;
 use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
 };
-use nrw_dataset::units::{self, GroupImage, GroupRecord};
 use nrw_dataset::scene::VerdictKind;
+use nrw_dataset::units::{self, GroupImage, GroupRecord};
 use nrw_dataset::{FileEntry, ImageOutcome, PhotoSignals, Store, ViewRow};
 use nrw_render::{render, render_size, Verdict, View};
 use rayon::prelude::*;

@@ -8,13 +8,18 @@ use std::path::{Path, PathBuf};
 
 use super::{fails, nrw, ok};
 
-/// The layouts the test exports (those a small PINHOLE scene without semantics can take).
-const LAYOUTS: [&str; 5] = [
+/// Every layout: the scene is PINHOLE (NeRF-W's loaders take it), its ground-truth label
+/// maps are ingested (the published code's layouts need them) and it has colour-statistics
+/// descriptors and triplets (the official layout's distance pickle).
+const LAYOUTS: [&str; 8] = [
     "files",
     "gsplat",
     "nerfbaselines",
     "nerfstudio",
     "megadepth",
+    "nerfw",
+    "official",
+    "tfrecord",
 ];
 
 /// A PINHOLE scene of 6 photos, stored unscaled: (scene, image names by id order).
@@ -97,13 +102,17 @@ fn write_jsonl(path: &Path, names: &[String]) {
     std::fs::write(path, lines.join("\n") + "\n").unwrap();
 }
 
-/// Ingest with `extra`, split with one val view: the dataset folder and ingest's stderr.
+/// Ingest with `extra` and the scene's label maps, split with one val view, colour-statistics
+/// descriptors and triplets: ingest's stderr.
 fn ingest(scene: &Path, out: &Path, extra: &[&str]) -> String {
+    let labels = scene.join(nrw_synth::truth::SEMANTICS);
     let mut args = vec![
         "ingest",
         scene.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
+        "--semantics",
+        labels.to_str().unwrap(),
         "--min-photo-side",
         "100",
         "--min-dim",
@@ -115,11 +124,15 @@ fn ingest(scene: &Path, out: &Path, extra: &[&str]) -> String {
     let o = nrw(&args);
     let err = String::from_utf8_lossy(&o.stderr).to_string();
     assert!(o.status.success(), "{err}");
-    ok(&["split", out.to_str().unwrap(), "--val", "1"]);
+    let d = out.to_str().unwrap();
+    ok(&["split", d, "--val", "1"]);
+    ok(&["style", d, "--tier", "color-stats"]);
+    ok(&["triplets", d, "--k", "2"]);
     err
 }
 
-/// `export DATASET --layout LAYOUT --out OUT EXTRA…`: what it printed.
+/// `export DATASET --layout LAYOUT --out OUT EXTRA…`: what it printed. The published code's
+/// layouts crop to 96 px (the test's photos are 121 px high; the paper's crop is 256).
 fn export(ds: &Path, layout: &str, out: &Path, extra: &[&str]) -> String {
     let mut args = vec![
         "export",
@@ -129,6 +142,9 @@ fn export(ds: &Path, layout: &str, out: &Path, extra: &[&str]) -> String {
         "--out",
         out.to_str().unwrap(),
     ];
+    if ["official", "tfrecord"].contains(&layout) {
+        args.extend(["--crop", "96"]);
+    }
     args.extend(extra);
     ok(&args)
 }

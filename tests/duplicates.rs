@@ -33,20 +33,9 @@ fn planted(
 }
 
 fn ingest(scene: &Path, out: &Path, extra: &[&str]) -> String {
-    let mut args = vec![
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--min-dim",
-        "96",
-        "--min-photo-side",
-        "150",
-        "--max-empty",
-        "1",
-    ];
-    args.extend_from_slice(extra);
-    let o = nrw(&args);
+    let mut extra = extra.to_vec();
+    extra.extend(["--max-empty", "1"]);
+    let o = nrw(&super::strs(&super::ingest_small_args(scene, out, &extra)));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -110,7 +99,7 @@ fn planted_copies_are_found_and_never_straddle_the_split() {
     // A published split that puts one group on both sides is warned about, naming it.
     let p = &planted[3];
     let mut tsv = String::from("filename\tid\tsplit\tdataset\n");
-    for (k, name) in sides_of_scene(&scene).iter().enumerate() {
+    for (k, name) in image_names(&scene).iter().enumerate() {
         let split = if *name == p.copy { "test" } else { "train" };
         tsv.push_str(&format!("{name}\t{k}\t{split}\tx\n"));
     }
@@ -160,7 +149,7 @@ fn warning(qa: &serde_json::Value, kind: &str) -> BTreeSet<String> {
 }
 
 /// Every image name of the scene's model.
-fn sides_of_scene(scene: &Path) -> Vec<String> {
+fn image_names(scene: &Path) -> Vec<String> {
     nrw_colmap::read_scene(scene)
         .unwrap()
         .images
@@ -178,7 +167,7 @@ fn sharpness_and_exposure_are_recorded_and_the_blur_filter_drops_with_its_reason
     spec.cameras.distortion = 0.0;
     nrw_synth::generate(&spec, &scene, &|| {}).unwrap();
     // Blur one photo hard and black out another.
-    let names = sides_of_scene(&scene);
+    let names = image_names(&scene);
     let photo = |n: &str| scene.join("images").join(n);
     let blurred = image::open(photo(&names[0])).unwrap().blur(6.0);
     blurred.save(photo(&names[0])).unwrap();
@@ -220,123 +209,17 @@ fn sharpness_and_exposure_are_recorded_and_the_blur_filter_drops_with_its_reason
 
 /// name → (sharpness, dark fraction, verdict) from scene/images.parquet.
 fn images_table(ds: &Path) -> BTreeMap<String, (Option<f64>, Option<f64>, String)> {
-    let f = std::fs::File::open(ds.join("scene/images.parquet")).unwrap();
-    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
-        .unwrap()
-        .build()
-        .unwrap();
-    let mut out = BTreeMap::new();
-    for b in r {
-        let b = b.unwrap();
-        let col = |n: &str| b.column_by_name(n).unwrap().clone();
-        let names = col("name");
-        let names = names
-            .as_any()
-            .downcast_ref::<arrow_array::StringArray>()
-            .unwrap();
-        let f64s = |n: &str| {
-            col(n)
-                .as_any()
-                .downcast_ref::<arrow_array::Float64Array>()
-                .unwrap()
-                .clone()
-        };
-        let (s, d) = (f64s("sharpness"), f64s("dark_fraction"));
-        let v = col("verdict");
-        let v = v
-            .as_any()
-            .downcast_ref::<arrow_array::StringArray>()
-            .unwrap();
-        use arrow_array::Array;
-        for i in 0..b.num_rows() {
-            let opt = |a: &arrow_array::Float64Array| (!a.is_null(i)).then(|| a.value(i));
-            out.insert(
-                names.value(i).to_string(),
-                (opt(&s), opt(&d), v.value(i).to_string()),
-            );
-        }
-    }
-    out
-}
-
-/// colmap2nerf's sharpness (instant-ngp, scripts/colmap2nerf.py: `variance_of_laplacian`
-/// and `sharpness`, line for line) and imagehash's `phash`, for each photo named on stdin.
-const ORACLE: &str = r#"
-import sys, json, cv2, imagehash, PIL.Image
-def variance_of_laplacian(image):
-    return cv2.Laplacian(image, cv2.CV_64F).var()
-def sharpness(imagePath):
-    image = cv2.imread(imagePath)
-    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    fm = variance_of_laplacian(gray)
-    return fm
-out = {}
-for p in sys.stdin.read().split("\n"):
-    if p:
-        out[p] = [sharpness(p), str(imagehash.phash(PIL.Image.open(p)))]
-print(json.dumps(out))
-"#;
-
-#[test]
-fn sharpness_is_colmap2nerf_s_and_the_hash_imagehash_s_on_a_real_scene() {
-    let Some(scene) = super::shared::shared("data/sceaux_castle") else {
-        return;
-    };
-    if !super::python_has("import cv2, imagehash") {
-        return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let ds = dir.path().join("ds");
-    ok(&[
-        "ingest",
-        scene.to_str().unwrap(),
-        "--out",
-        ds.to_str().unwrap(),
-    ]);
-    let store = nrw_dataset::Store::local(&ds);
+    let store = nrw_dataset::Store::local(ds);
     let signals = nrw_dataset::scene::read_signals(&store).unwrap();
-    let rec = nrw_colmap::read_scene(&scene).unwrap();
-    let paths: BTreeMap<String, u32> = rec
-        .images
-        .values()
-        .map(|i| {
+    nrw_dataset::scene::read_verdicts(&store)
+        .unwrap()
+        .into_iter()
+        .map(|(id, name, verdict)| {
+            let s = signals.get(&id);
             (
-                scene.join("images").join(&i.name).display().to_string(),
-                i.id,
+                name,
+                (s.map(|s| s.sharpness), s.map(|s| s.dark_fraction), verdict),
             )
         })
-        .collect();
-    assert_eq!(signals.len(), paths.len(), "every photo kept and measured");
-    let mut py = std::process::Command::new("python3")
-        .args(["-c", ORACLE])
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    use std::io::Write;
-    let list: Vec<&str> = paths.keys().map(String::as_str).collect();
-    py.stdin
-        .take()
-        .unwrap()
-        .write_all(list.join("\n").as_bytes())
-        .unwrap();
-    let o = py.wait_with_output().unwrap();
-    assert!(o.status.success());
-    let oracle: BTreeMap<String, (f64, String)> = serde_json::from_slice(&o.stdout).unwrap();
-    let mut bits = Vec::new();
-    for (path, (sharp, hash)) in &oracle {
-        let s = &signals[&paths[path]];
-        // Exact integer sums here, NumPy's pairwise float sums there: the last digits only.
-        assert!(
-            (s.sharpness - sharp).abs() <= 1e-12 * sharp,
-            "{path}: {} against colmap2nerf's {sharp}",
-            s.sharpness
-        );
-        bits.push((s.phash ^ u64::from_str_radix(hash, 16).unwrap()).count_ones());
-    }
-    // An area average where imagehash resizes with Lanczos: a few bits whose DCT term lies
-    // at the median may flip, never more than the accepting distance's half.
-    let worst = *bits.iter().max().unwrap();
-    eprintln!("pHash against imagehash, bits apart per photo: {bits:?}");
-    assert!(worst <= 4, "{bits:?}");
+        .collect()
 }

@@ -9,7 +9,7 @@ pub mod tables;
 pub mod thumbs;
 
 use nrw_dataset::split::{TRAIN, VAL};
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 
 use serde::Serialize;
 
@@ -75,20 +75,22 @@ fn signal_warnings(
             });
         }
     }
-    let split: BTreeMap<&str, &str> = images
+    // The split as assignments (the photos split has placed), and the groups that straddle it.
+    let rows: Vec<nrw_dataset::split::Assignment> = images
         .iter()
-        .filter_map(|r| Some((r.name.as_str(), r.split.as_deref()?)))
+        .filter_map(|r| {
+            Some(nrw_dataset::split::Assignment {
+                image_id: r.image_id,
+                name: r.name.clone(),
+                split: r.split.clone()?,
+                seed: 0,
+            })
+        })
         .collect();
-    let mut sides: BTreeMap<u32, BTreeSet<&str>> = BTreeMap::new();
-    for m in members {
-        if let Some(s) = split.get(m.name.as_str()) {
-            sides.entry(m.group).or_default().insert(s);
-        }
-    }
-    let both: Vec<String> = members
-        .iter()
-        .filter(|m| sides.get(&m.group).is_some_and(|s| s.len() > 1))
-        .map(|m| m.name.clone())
+    let groups = nrw_dataset::duplicates::group_of(members);
+    let both: Vec<String> = nrw_dataset::split::straddling(&rows, &groups)
+        .into_iter()
+        .flat_map(|(_, names)| names)
         .collect();
     if !both.is_empty() {
         warnings.push(Warning {

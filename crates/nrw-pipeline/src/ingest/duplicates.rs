@@ -14,7 +14,7 @@ use nrw_dataset::duplicates::Member;
 use nrw_dataset::{ImageOutcome, PhotoSignals};
 use rayon::prelude::*;
 
-use super::signals::{grey, Grey};
+use super::signals::{area_resize, grey, Grey};
 use crate::error::Result;
 
 /// Where two photos count as one picture; the defaults are what `ingest` uses.
@@ -143,21 +143,7 @@ fn shrink(g: &Grey, side: usize) -> (Vec<f32>, usize, usize) {
         ((g.width as f64 / f).round() as usize).max(1),
         ((g.height as f64 / f).round() as usize).max(1),
     );
-    let mut sums = vec![0f64; w * h];
-    let mut counts = vec![0u32; w * h];
-    for y in 0..g.height {
-        let cy = y * h / g.height;
-        for x in 0..g.width {
-            let c = cy * w + x * w / g.width;
-            sums[c] += g.pixels[y * g.width + x] as f64;
-            counts[c] += 1;
-        }
-    }
-    let v = sums
-        .iter()
-        .zip(&counts)
-        .map(|(s, n)| (s / (*n).max(1) as f64) as f32)
-        .collect();
+    let v = area_resize(g, w, h).into_iter().map(|v| v as f32).collect();
     (v, w, h)
 }
 

@@ -65,17 +65,17 @@ pub fn variance_of_laplacian(g: &Grey) -> f64 {
     (n * sum_sq - sum * sum) as f64 / (n * n) as f64
 }
 
-/// The grey image averaged down to `size`×`size` cells (each output pixel the mean of the
-/// input pixels whose centres fall in its cell): the perceptual hash's input.
-fn area_resize(g: &Grey, size: usize) -> Vec<f64> {
-    let mut sums = vec![0f64; size * size];
-    let mut counts = vec![0u32; size * size];
+/// The grey image averaged down to `w`×`h` cells, each the mean of the input pixels whose
+/// centres fall in it: the hash's 32×32 input, and the near-duplicate search's working size.
+pub fn area_resize(g: &Grey, w: usize, h: usize) -> Vec<f64> {
+    let mut sums = vec![0f64; w * h];
+    let mut counts = vec![0u32; w * h];
     for y in 0..g.height {
-        let cy = y * size / g.height;
+        let cy = y * h / g.height;
         for x in 0..g.width {
-            let cx = x * size / g.width;
-            sums[cy * size + cx] += g.pixels[y * g.width + x] as f64;
-            counts[cy * size + cx] += 1;
+            let c = cy * w + x * w / g.width;
+            sums[c] += g.pixels[y * g.width + x] as f64;
+            counts[c] += 1;
         }
     }
     sums.iter()
@@ -116,7 +116,7 @@ const PHASH_SIZE: usize = 8;
 /// The 32×32 image is an area average (imagehash resizes with Lanczos: the bits that
 /// differ are those whose term lies nearest the median).
 pub fn phash(g: &Grey) -> u64 {
-    let small = area_resize(g, PHASH_INPUT);
+    let small = area_resize(g, PHASH_INPUT, PHASH_INPUT);
     let dct = transpose(
         &dct_rows(
             &transpose(&dct_rows(&small, PHASH_INPUT), PHASH_INPUT),

@@ -22,7 +22,7 @@ use syn::visit::Visit;
 /// The crates from the bottom layer up: a crate's `[dependencies]` may name only crates of
 /// layers below its own (dev-dependencies are free: tests may use anything).
 const LAYERS: &[&[&str]] = &[
-    &["nrw-npy"],
+    &["nrw-npy", "nrw-gemm"],
     &[
         "nrw-colmap",
         "nrw-knn",

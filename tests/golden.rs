@@ -72,15 +72,19 @@ fn the_demo_dataset_and_every_export_layout_keep_their_bytes() {
     let demo = root.join("demo");
     ok(&["demo", "--out", &s(&demo)]);
     let ds = s(&demo.join("dataset"));
-    // NeRF-W takes pinhole cameras only: the demo scene undistorted.
+    // NeRF-W takes pinhole cameras only: the demo scene undistorted, with its label maps
+    // undistorted beside the photos (so gsplat's mask pyramid is pinned too).
     let pinhole = s(&root.join("undistorted"));
     let scene = s(&demo.join("scene"));
+    let labels = s(&demo.join("scene").join(nrw_synth::truth::SEMANTICS));
     ok(&[
         "ingest",
         &scene,
         "--out",
         &pinhole,
         "--undistort",
+        "--semantics",
+        &labels,
         "--quiet",
     ]);
     ok(&["split", &pinhole, "--val", "3"]);
@@ -158,8 +162,9 @@ type Lists = (Vec<u32>, Vec<f64>, Vec<u32>, Vec<f64>);
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
 struct Pinned {
     files: BTreeMap<String, String>,
-    /// image id → (values, Σv, Σv²) of its descriptor, summed in f64.
-    descriptors: BTreeMap<u32, (usize, f64, f64)>,
+    /// image id → (values, Σv, Σv², Σ(i+1)·vᵢ / values) of its descriptor, summed in f64: the
+    /// last moves when values trade places, which the first three do not see.
+    descriptors: BTreeMap<u32, (usize, f64, f64, f64)>,
     /// anchor id → (nearest ids, their d², furthest ids, their d²).
     triplets: BTreeMap<u32, Lists>,
 }
@@ -209,7 +214,10 @@ fn pinned(root: &Path) -> Pinned {
         .map(|r| {
             let sum: f64 = r.descriptor.iter().map(|v| *v as f64).sum();
             let sq: f64 = r.descriptor.iter().map(|v| (*v as f64).powi(2)).sum();
-            (r.image_id, (r.descriptor.len(), sum, sq))
+            (
+                r.image_id,
+                (r.descriptor.len(), sum, sq, placed(&r.descriptor)),
+            )
         })
         .collect();
     let t = nrw_dataset::triplets::read_triplets(&store)
@@ -231,6 +239,16 @@ fn pinned(root: &Path) -> Pinned {
     }
 }
 
+/// Σ(i+1)·vᵢ / n of a descriptor of n values: a sum that weighs each value by its place.
+fn placed(v: &[f32]) -> f64 {
+    let s: f64 = v
+        .iter()
+        .enumerate()
+        .map(|(i, x)| (i + 1) as f64 * *x as f64)
+        .sum();
+    s / v.len() as f64
+}
+
 /// Where `NRW_EXPECT_STYLE_ISA` names an instruction set (.ci/run's forced-AVX2 run on an
 /// AVX-512 machine), the descriptors were computed with it and no other.
 fn assert_instruction_set(manifest: &Path) {
@@ -250,6 +268,12 @@ fn assert_instruction_set(manifest: &Path) {
 /// `a` within [`ACROSS_ISAS`] of `b`, relative.
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= ACROSS_ISAS * a.abs().max(b.abs())
+}
+
+#[test]
+fn the_placed_sum_sees_two_values_trade_places() {
+    assert_eq!(placed(&[1.0, 2.0, 3.0]), (1.0 + 4.0 + 9.0) / 3.0);
+    assert_ne!(placed(&[1.0, 2.0, 3.0]), placed(&[2.0, 1.0, 3.0]));
 }
 
 #[test]
@@ -324,7 +348,7 @@ fn sceaux_castle_with_vgg_descriptors_and_pca_triplets_keeps_its_bytes_and_value
     for (id, w) in &want.descriptors {
         let g = got.descriptors[id];
         assert!(
-            w.0 == g.0 && close(w.1, g.1) && close(w.2, g.2),
+            w.0 == g.0 && close(w.1, g.1) && close(w.2, g.2) && close(w.3, g.3),
             "{SCEAUX}: descriptor of image {id}: {g:?}, pinned {w:?}"
         );
     }

@@ -197,3 +197,37 @@ fn style_describes_a_dataset_resumably_and_never_mixes_kinds() {
         relu1_2[0]
     );
 }
+
+#[test]
+fn an_nrw_isa_the_tool_cannot_honour_is_an_error_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("demo");
+    let demo_with = |isa: &str| {
+        Command::new(env!("CARGO_BIN_EXE_nrw-etl"))
+            .args(["demo", "--out", out.to_str().unwrap()])
+            .env("NRW_ISA", isa)
+            .output()
+            .unwrap()
+    };
+    let o = demo_with("avx2");
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        String::from_utf8_lossy(&o.stderr).trim(),
+        "error: NRW_ISA=\"avx2\" names no instruction set (known: avx512f, avx2+fma, baseline)"
+    );
+    assert!(!out.exists(), "nothing is written");
+    // Wider than this CPU: refused too (on an AVX-512 machine nothing is wider to ask for).
+    if let Some(wider) = nrw_gemm::Isa::ALL
+        .into_iter()
+        .find(|i| *i > nrw_gemm::widest())
+    {
+        let o = demo_with(wider.name());
+        assert_eq!(o.status.code(), Some(1));
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains("asks for instructions this CPU lacks"),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(!out.exists());
+    }
+}

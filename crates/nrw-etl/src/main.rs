@@ -48,6 +48,12 @@ fn main() -> std::process::ExitCode {
             return std::process::ExitCode::FAILURE;
         }
     }
+    // NRW_ISA caps the GEMM kernels' instruction set (how one machine computes what a
+    // narrower one does); a value it cannot honour stops the run before any work.
+    if let Err(e) = nrw_gemm::configured() {
+        eprintln!("error: {e}");
+        return std::process::ExitCode::FAILURE;
+    }
     let result = commands::run(&cli.command);
     match result {
         Ok(code) => code,

@@ -123,9 +123,9 @@ fn main() {
          descriptor) in four appearance clusters whose Gram energies differ 500-fold (day … night), each spread on a \
          24-dimensional subspace plus noise; k = {K} nearest and {K} furthest per anchor; {threads} threads. Recall@{K}: the \
          fraction of the exact lists an approximate method also returns. faiss `IndexFlatL2` finds nearest neighbours only \
-         (no furthest search), so its time is for half the work.\n\nMachine: {}; the `gemm` crate's AVX-512 kernels: {}.\n",
+         (no furthest search), so its time is for half the work.\n\nMachine: {}; the GEMM kernels' instruction set: {} (`NRW_ISA` caps it).\n",
         cpu::describe(),
-        if cfg!(feature = "avx512") { "on where the CPU has them" } else { "off (--no-default-features)" },
+        nrw_gemm::isa().name(),
     );
     md.push_str(
         "| N | method | time | recall@20 nearest | recall@20 furthest |\n|---|---|---|---|---|\n",

@@ -33,7 +33,7 @@ fn matmul(a: &[f32], b: &[f32], m: usize, k: usize, n: usize, tb: bool) -> Vec<f
     let (b_rs, b_cs) = if tb { (1, k as isize) } else { (n as isize, 1) };
     // SAFETY: c is m × n row-major, a is m × k row-major, b is k × n with the strides given.
     unsafe {
-        gemm::gemm(
+        nrw_gemm::gemm(
             m,
             n,
             k,
@@ -49,10 +49,7 @@ fn matmul(a: &[f32], b: &[f32], m: usize, k: usize, n: usize, tb: bool) -> Vec<f
             b_rs,
             0.0,
             1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::Rayon(0),
+            nrw_gemm::Parallelism::Rayon(0),
         );
     }
     c

@@ -4,7 +4,7 @@
 //! lists are ranked (phase 3). Memory: the N × N dot products while they fit `max_bytes`
 //! (else BLOCK × N), one chunk of every row (N × KCHUNK), and the candidates.
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 use rayon::prelude::*;
 
 use crate::spill::{From32, PairDistances, Spilled, KCHUNK};
@@ -35,7 +35,7 @@ fn gemm_abt<T: Dot>(
     // SAFETY: dst is m × w row-major inside `out`; lhs element (i, k) is a[i·a_rs + k] and
     // rhs element (k, j) is b[j·b_rs + k], all inside the slices by the asserts above.
     unsafe {
-        gemm::gemm(
+        nrw_gemm::gemm(
             m,
             w,
             kc,
@@ -51,16 +51,13 @@ fn gemm_abt<T: Dot>(
             1,
             T::ZERO,
             T::ONE,
-            false,
-            false,
-            false,
             Parallelism::Rayon(0),
         );
     }
 }
 
 /// A GEMM element type: f32 (fast) or f64 (narrow error bound).
-pub(crate) trait Dot: From32 + Into<f64> + 'static {
+pub(crate) trait Dot: From32 + Into<f64> + nrw_gemm::Element {
     const ZERO: Self;
     const ONE: Self;
     /// Unit roundoff u = ε/2.

@@ -13,7 +13,7 @@ pub mod segment;
 
 pub use config::{SegformerConfig, ADE_CLASSES};
 pub use error::{Result, SegmentError};
-pub use gemm::Parallelism;
 pub use model::{model_files, Segformer};
+pub use nrw_gemm::Parallelism;
 pub use ops::Map;
 pub use segment::{segment, Mode, ModeKind};

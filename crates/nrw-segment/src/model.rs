@@ -10,7 +10,7 @@
 
 use std::path::{Path, PathBuf};
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 use rayon::prelude::*;
 
 use crate::config::{SegformerConfig, ADE_CLASSES};

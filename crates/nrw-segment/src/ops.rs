@@ -2,7 +2,7 @@
 //! `gemm` crate), convolutions as one matrix product over gathered patches, layer norm, exact
 //! GELU, softmax, depthwise 3 × 3 convolution and bilinear resampling as PyTorch defines it.
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 use rayon::prelude::*;
 
 /// A channels-last map: pixel (y, x) holds `c` contiguous values.
@@ -98,7 +98,7 @@ pub fn matmul(
     // SAFETY: every element gemm touches lies inside the slices (asserted above), and `dst`
     // is borrowed mutably, so it aliases neither operand.
     unsafe {
-        gemm::gemm(
+        nrw_gemm::gemm(
             m,
             n,
             k,
@@ -114,9 +114,6 @@ pub fn matmul(
             b.rs as isize,
             alpha,
             beta,
-            false,
-            false,
-            false,
             par,
         );
     }

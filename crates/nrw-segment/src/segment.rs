@@ -1,7 +1,7 @@
 //! A photo → its ADE20K label map, in one of four documented modes.
 
-use gemm::Parallelism;
 use image::{GrayImage, RgbImage};
+use nrw_gemm::Parallelism;
 
 use crate::error::{Result, SegmentError};
 use crate::model::Segformer;

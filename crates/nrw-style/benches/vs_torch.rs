@@ -1,4 +1,4 @@
-//! `cargo bench -p nrw-style --bench vs_torch [--no-default-features] [-- --quick]`
+//! `[NRW_ISA=avx2+fma] cargo bench -p nrw-style --bench vs_torch [-- --quick]`
 //!
 //! Our VGG16 style forward pass (relu1_2 … relu5_2 plus the five Gram matrices), by both
 //! convolution algorithms, against PyTorch and onnxruntime on the CPU in the same run, same
@@ -8,8 +8,8 @@
 //! float64 fixture in ../shared/fixtures. The peers run from `NRW_TORCH_PYTHON` (default
 //! `python3`) with torch, onnx and onnxruntime installed; they are never dependencies.
 //!
-//! Writes docs/bench/vgg_speed.md; with `--no-default-features` (our AVX-512 kernels off, and
-//! PyTorch held to AVX2 by `ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2`), what an
+//! Writes docs/bench/vgg_speed.md; with `NRW_ISA=avx2+fma` (our kernels capped at AVX2 at run
+//! time, and PyTorch held to AVX2 by `ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2`), what an
 //! AVX2-only machine runs, into docs/bench/vgg_speed_avx2.md. onnxruntime has no switch to
 //! hold it to AVX2, so there it keeps its AVX-512 kernels (a peer with an advantage).
 
@@ -171,7 +171,7 @@ fn run_peers(
         .arg(threads.to_string())
         .arg(reps.to_string())
         .arg(g);
-    if !cfg!(feature = "avx512") {
+    if isa() != nrw_style::isa::Isa::Avx512 {
         cmd.env("ATEN_CPU_CAPABILITY", "avx2")
             .env("ONEDNN_MAX_CPU_ISA", "AVX2");
     }
@@ -218,7 +218,7 @@ fn main() {
     // A machine without AVX-512 runs AVX2 kernels whatever the build: its figures are the
     // AVX2 table's, measured without emulation.
     let real_avx2 = !cpu_has_avx512();
-    let avx2_only = !cfg!(feature = "avx512") || real_avx2;
+    let avx2_only = isa() != nrw_style::isa::Isa::Avx512;
     let (out_name, title) = if avx2_only {
         ("vgg_speed_avx2.md", " (AVX2 kernels only)")
     } else {
@@ -226,20 +226,19 @@ fn main() {
     };
     let mut md = format!(
         "# VGG16 style forward pass{title}: ours against PyTorch and onnxruntime\n\n\
-         Regenerate: `NRW_TORCH_PYTHON=/path/to/python cargo bench -p nrw-style --bench vs_torch{}` \
+         Regenerate: `{}NRW_TORCH_PYTHON=/path/to/python cargo bench -p nrw-style --bench vs_torch` \
          (the peers need torch, onnx and onnxruntime; never dependencies).\n\n\
-         CPU: {}. Our transforms' instruction set: {}; the `gemm` crate's AVX-512 kernels: {}. Threads: \
+         CPU: {}. Our kernels' instruction set (transforms and GEMMs): {}. Threads: \
          {threads} on every side.\n\n",
-        if cfg!(feature = "avx512") { "" } else { " --no-default-features" },
+        if avx2_only && !real_avx2 { "NRW_ISA=avx2+fma " } else { "" },
         cpu::describe(),
         isa().name(),
-        if cfg!(feature = "avx512") { "on where the CPU has them" } else { "off" },
     );
     if real_avx2 {
         md += "This machine has no AVX-512, so every side runs its AVX2 kernels: no emulation, \
                onnxruntime included.\n\n";
     } else if avx2_only {
-        md += "AVX2 emulation on this machine: our kernels are built without AVX-512 and PyTorch runs \
+        md += "AVX2 emulation on this machine: our kernels are capped at AVX2 (`NRW_ISA`) and PyTorch runs \
                with `ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2`. onnxruntime cannot be held to \
                AVX2 at run time, so it keeps its AVX-512 kernels here: the onnxruntime ratios of this \
                table are against a peer with wider vectors than ours.\n\n";

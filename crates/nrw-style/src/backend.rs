@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use crate::error::{Result, StyleError};
 use crate::vgg::{Arch, Vgg};
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 
 /// One preprocessed image for a network: CHW f32, `3 × height × width` values.
 #[derive(Debug, Clone)]

@@ -1,7 +1,7 @@
 //! The layers: 3×3 convolutions with ReLU (direct as one GEMM per row band, or Winograd
 //! F(4×4, 3×3)) and 2×2 max pooling, on [`Activation`]s.
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 use rayon::prelude::*;
 
 use crate::matmul::dst_plus_lhs_rhs;

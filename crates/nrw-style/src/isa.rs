@@ -1,49 +1,8 @@
-//! The vector instructions the style kernels are compiled for, chosen once at run time, and
-//! `multiversion!`, which compiles a function body for each (AVX-512, AVX2 + FMA, baseline).
+//! The vector instructions the style kernels run with (nrw-gemm's choice, made once at run
+//! time, so the transforms and the GEMMs agree), and `multiversion!`, which compiles a
+//! function body for each (AVX-512, AVX2 + FMA, baseline).
 
-/// The vector instructions the transforms are compiled for, chosen once at run time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Isa {
-    Avx512,
-    Avx2,
-    Baseline,
-}
-
-impl Isa {
-    /// The name reported with benchmark figures.
-    pub fn name(self) -> &'static str {
-        match self {
-            Isa::Avx512 => "avx512f",
-            Isa::Avx2 => "avx2+fma",
-            Isa::Baseline => "baseline",
-        }
-    }
-}
-
-/// The widest instruction set this machine and build allow: AVX-512 only with the crate's
-/// `avx512` feature (on by default; off, the `gemm` crate's AVX-512 kernels are off too, which
-/// is how a benchmark measures an AVX2-only machine on an AVX-512 one).
-pub fn isa() -> Isa {
-    static ISA: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
-    *ISA.get_or_init(|| {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if cfg!(feature = "avx512")
-                && std::arch::is_x86_feature_detected!("avx512f")
-                && std::arch::is_x86_feature_detected!("avx512vl")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                return Isa::Avx512;
-            }
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
-    })
-}
+pub use nrw_gemm::{isa, Isa};
 
 #[cfg(test)]
 thread_local! {

@@ -21,8 +21,8 @@ pub use descriptor::{
     central_crop, color_stats, describe, distance2, from_grams, network_input, Tier,
 };
 pub use error::{Result, StyleError};
-pub use gemm::Parallelism;
 pub use matmul::gram;
+pub use nrw_gemm::Parallelism;
 pub use preprocess::{load_rgb01, to_input, to_input_01, Preprocess, MAX_EXACT_PIXELS, MIN_SIDE};
 pub use tensor::Activation;
 pub use vgg::{Arch, Convention, Vgg, STYLE_LAYERS};

@@ -1,7 +1,7 @@
 //! The GEMM products of the trunk: a strided matrix product on the `gemm` crate (what the
 //! direct and the Winograd convolutions reduce to) and the Gram matrices of a layer.
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 use rayon::prelude::*;
 
 /// dst (m × n, row-major) = [dst +] lhs · rhs, where lhs holds m rows of k values `lhs_rs`
@@ -27,7 +27,7 @@ pub(crate) fn dst_plus_lhs_rhs(
     // SAFETY: dst element (i, j) is dst[i·n + j], lhs element (i, t) is lhs[i·lhs_rs + t],
     // rhs element (t, j) is rhs[t·n + j]: all inside the slices by the asserts above.
     unsafe {
-        gemm::gemm(
+        nrw_gemm::gemm(
             m,
             n,
             k,
@@ -43,9 +43,6 @@ pub(crate) fn dst_plus_lhs_rhs(
             n as isize,
             1.0,
             1.0,
-            false,
-            false,
-            false,
             par,
         );
     }
@@ -90,7 +87,7 @@ pub(crate) fn gemm_strided(g: GemmOperands) {
     // (t, j) is rhs[t·n + j]: all inside by the asserts above; the caller guarantees that no
     // other thread writes the elements this GEMM writes.
     unsafe {
-        gemm::gemm(
+        nrw_gemm::gemm(
             m,
             n,
             k,
@@ -106,9 +103,6 @@ pub(crate) fn gemm_strided(g: GemmOperands) {
             n as isize,
             0.0,
             1.0,
-            false,
-            false,
-            false,
             Parallelism::None,
         );
     }
@@ -145,7 +139,7 @@ pub fn gram(c: usize, n: usize, f: &[f32], par: Parallelism) -> Vec<f64> {
             // SAFETY: part is c × c row-major; lhs is Bᵀ (c × m): element (i, k) at k·c + i,
             // row stride 1, column stride c; rhs is B (m × c) row-major.
             unsafe {
-                gemm::gemm(
+                nrw_gemm::gemm(
                     c,
                     c,
                     p1 - p0,
@@ -161,9 +155,6 @@ pub fn gram(c: usize, n: usize, f: &[f32], par: Parallelism) -> Vec<f64> {
                     c as isize,
                     0.0,
                     1.0,
-                    false,
-                    false,
-                    false,
                     inner,
                 );
             }

@@ -1,7 +1,7 @@
 //! Activations: channels-last f32 tensors with a zero border, the one layout every layer of
 //! the VGG trunk reads and writes.
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 
 use crate::matmul::gram;
 

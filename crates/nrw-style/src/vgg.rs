@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 
 use crate::conv::{maxpool2, Conv, ConvAlgo};
 use crate::error::{Result, StyleError};

@@ -15,7 +15,7 @@
 //! chosen at run time. Rust never contracts a·b + c into an FMA by itself, so all three give
 //! bit-identical results: a descriptor does not depend on the machine's vector width.
 
-use gemm::Parallelism;
+use nrw_gemm::Parallelism;
 use rayon::prelude::*;
 
 #[cfg(test)]

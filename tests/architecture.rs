@@ -528,6 +528,11 @@ fn circle_in(src: &Path) -> Option<Vec<String>> {
         .find_map(|(_, c)| cycle(&c.graph()))
 }
 
+/// Whether a crate's `src` is its root file alone (nothing to draw a graph of).
+fn one_file(src: &Path) -> bool {
+    std::fs::read_dir(src).map_or(false, |d| d.count() == 1)
+}
+
 #[test]
 fn no_file_of_a_crate_imports_one_that_imports_it_back() {
     let (mut checked, mut circles) = (Vec::new(), Vec::new());
@@ -536,7 +541,7 @@ fn no_file_of_a_crate_imports_one_that_imports_it_back() {
         for (root, facts) in CrateFacts::roots(&src) {
             let g = facts.graph();
             assert!(
-                g.len() > 1 || name == "nrw-knn" || root == "main.rs",
+                g.len() > 1 || name == "nrw-knn" || root == "main.rs" || one_file(&src),
                 "{}/{root}: no modules found",
                 src.display()
             );

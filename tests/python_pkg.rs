@@ -122,6 +122,35 @@ fn the_python_package_reads_what_pyarrow_pillow_openexr_and_the_rust_loader_read
     eprintln!("{stdout}{}", String::from_utf8_lossy(&o.stderr));
     assert!(o.status.success(), "pytest failed:\n{stdout}");
     assert!(stdout.contains(" passed"), "{stdout}");
+    torch_tests(&demo_ds, &tmp.path().join("rust-draws"), tmp.path());
+}
+
+/// The suite's files that need torch (nrw.torch under a real DataLoader, docs/python.md's
+/// training loop), run by the Python `NRW_TORCH_PYTHON` names when it imports torch, nrw and
+/// pytest: none may skip there. Under NRW_REQUIRE_TORCH=1 (CI) that Python is required.
+fn torch_tests(demo: &Path, rust_draws: &Path, cwd: &Path) {
+    let Some(py) =
+        super::python::torch_python("nrw, pytest", "the nrw package's torch tests", true)
+    else {
+        return;
+    };
+    let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../python/tests");
+    let o = Command::new(py)
+        .args(["-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider"])
+        .arg(tests.join("test_torch.py"))
+        .arg(tests.join("test_docs.py"))
+        .current_dir(cwd)
+        .env("NRW_TEST_DEMO", demo)
+        .env("NRW_TEST_RUST_DRAWS", rust_draws)
+        .output()
+        .expect("NRW_TORCH_PYTHON runs");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    eprintln!("{stdout}{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "pytest (torch) failed:\n{stdout}");
+    assert!(
+        stdout.contains(" passed") && !stdout.contains("skipped"),
+        "with torch installed, no torch test may skip:\n{stdout}"
+    );
 }
 
 /// Each package with its enabled features, one line each, as `cargo tree` resolves `scope`.

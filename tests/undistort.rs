@@ -201,54 +201,24 @@ pub(crate) fn lens_scene(
     scene
 }
 
-/// A scene of COLMAP 4's SIMPLE_DIVISION cameras: `ingest` renders it with its own lens and
-/// `--undistort` stores PINHOLE views that gsplat's layout exports; without `--undistort` that
-/// export is refused naming its reader and the command that fixes it. A 360° model
-/// (EQUIRECTANGULAR) is inspected, and refused by ingest naming the file, camera and model.
+/// Scenes of each camera model COLMAP 4 added (SIMPLE_DIVISION, DIVISION, EUCM; their
+/// projections are pycolmap's, crates/nrw-synth/tests/pycolmap_oracle.rs): `inspect` names
+/// the model, `ingest` renders each scene with its own lens and `export --layout files` takes
+/// it as it is; `--undistort` stores PINHOLE views that gsplat's layout exports, and without
+/// it that export is refused naming the model, its reader and the command that fixes it. A
+/// 360° model (EQUIRECTANGULAR) is inspected, and refused by ingest naming the file, camera
+/// and model.
 #[test]
 fn colmap_4_cameras_go_through_ingest_and_export_and_a_panorama_is_refused_by_name() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = lens_scene(tmp.path(), 5, "SIMPLE_DIVISION", 3.0, false);
-    let s = scene.to_str().unwrap();
-    for (name, undistort) in [("pinhole", true), ("division", false)] {
-        let ds = tmp.path().join(name);
-        let d = ds.to_str().unwrap();
-        let mut args = vec!["ingest", s, "--out", d];
-        args.extend(SMALL_VIEWS);
-        if undistort {
-            args.push("--undistort");
-        }
-        let o = nrw(&args);
-        let line = String::from_utf8_lossy(&o.stderr);
-        assert!(
-            o.status.success() && line.contains("5 registered, 5 kept"),
-            "{line}"
-        );
-        ok(&["split", d, "--val", "1"]);
-        let out = tmp.path().join(format!("{name}_gsplat"));
-        let export = [
-            "export",
-            d,
-            "--layout",
-            "gsplat",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        if undistort {
-            ok(&export);
-            let model = nrw_colmap::read_model(&out.join("sparse/0"), None).unwrap();
-            assert!(model.cameras.values().all(|c| c.model.name() == "PINHOLE"));
-        } else {
-            let err = fails(&export);
-            assert!(
-                err.contains("SIMPLE_DIVISION")
-                    && err.contains("graphdeco")
-                    && err.contains("nrw-etl ingest SCENE --out DATASET --undistort"),
-                "{err}"
-            );
-        }
+    for model in ["SIMPLE_DIVISION", "DIVISION", "EUCM"] {
+        let dir = tmp.path().join(model);
+        let scene = lens_scene(&dir, 5, model, 3.0, false);
+        let text = ok(&["inspect", scene.to_str().unwrap()]);
+        assert!(text.contains(model), "{model}: {text}");
+        ingest_and_export_a_lens(&dir, &scene, model);
     }
-
+    let scene = tmp.path().join("SIMPLE_DIVISION/scene");
     let mut rec = nrw_colmap::read_model(&scene.join("sparse/0"), None).unwrap();
     for c in rec.cameras.values_mut() {
         c.model = nrw_colmap::CameraModel::Equirectangular;
@@ -272,6 +242,58 @@ fn colmap_4_cameras_go_through_ingest_and_export_and_a_panorama_is_refused_by_na
             && err.contains("camera 1: model EQUIRECTANGULAR is a 360° panorama"),
         "{err}"
     );
+}
+
+/// `scene` (cameras of `model`) ingested as it is and undistorted, each split and exported.
+fn ingest_and_export_a_lens(tmp: &Path, scene: &Path, model: &str) {
+    let s = scene.to_str().unwrap();
+    for (name, undistort) in [("pinhole", true), ("lens", false)] {
+        let ds = tmp.join(name);
+        let d = ds.to_str().unwrap();
+        let mut args = vec!["ingest", s, "--out", d];
+        args.extend(SMALL_VIEWS);
+        if undistort {
+            args.push("--undistort");
+        }
+        let o = nrw(&args);
+        let line = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            o.status.success() && line.contains("5 registered, 5 kept"),
+            "{line}"
+        );
+        ok(&["split", d, "--val", "1"]);
+        let files = tmp.join(format!("{name}_files"));
+        ok(&[
+            "export",
+            d,
+            "--layout",
+            "files",
+            "--out",
+            files.to_str().unwrap(),
+        ]);
+        let out = tmp.join(format!("{name}_gsplat"));
+        let export = [
+            "export",
+            d,
+            "--layout",
+            "gsplat",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if undistort {
+            ok(&export);
+            let model = nrw_colmap::read_model(&out.join("sparse/0"), None).unwrap();
+            assert!(model.cameras.values().all(|c| c.model.name() == "PINHOLE"));
+        } else {
+            let err = fails(&export);
+            assert!(
+                err.contains(model)
+                    && err.contains("graphdeco")
+                    && err.contains("nrw-etl ingest SCENE --out DATASET --undistort"),
+                "{model}: {err}"
+            );
+        }
+    }
 }
 
 /// `ingest --undistort --semantics`: each label map is resampled with its photo, nearest class.

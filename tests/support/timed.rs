@@ -4,9 +4,15 @@
 
 /// Wall seconds and peak resident MB of `nrw-etl ARGS` (`exe` is the binary).
 pub fn timed(exe: &str, args: &[&str]) -> (f64, f64) {
+    timed_with(exe, args, &[])
+}
+
+/// [`timed`] with environment variables set for that process alone.
+pub fn timed_with(exe: &str, args: &[&str], vars: &[(&str, &str)]) -> (f64, f64) {
     let o = std::process::Command::new("/usr/bin/time")
         .args(["-f", "%e %M", exe])
         .args(args)
+        .envs(vars.iter().copied())
         .output()
         .expect("/usr/bin/time runs");
     let err = String::from_utf8_lossy(&o.stderr);

@@ -530,7 +530,7 @@ fn circle_in(src: &Path) -> Option<Vec<String>> {
 
 /// Whether a crate's `src` is its root file alone (nothing to draw a graph of).
 fn one_file(src: &Path) -> bool {
-    std::fs::read_dir(src).map_or(false, |d| d.count() == 1)
+    std::fs::read_dir(src).is_ok_and(|d| d.count() == 1)
 }
 
 #[test]

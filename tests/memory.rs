@@ -46,11 +46,6 @@ const KNOWN_GROWTH: &[(&str, &str)] = &[
         "its PCA multiplies blocks of 65 to 129 whole descriptors: between 130 and 260 photos \
          the block grows, bounded at 129",
     ),
-    (
-        "export megadepth",
-        "DUSt3R's all_metadata.npz lists every pair of views that share points, and the export \
-         holds that list and the file's bytes before writing them: N² by the file's format",
-    ),
 ];
 /// Bytes of peak memory each added point may cost ingest (f32 positions, colours, normals
 /// and the Morton sort's keys; docs/scale-out.md has the formula).

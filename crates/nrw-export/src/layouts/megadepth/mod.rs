@@ -112,19 +112,13 @@ impl LayoutWriter for Megadepth {
         }
         write_sparse_txt(&views, rec, name, staged)?;
         let info = SceneInfo::of(&views, rec);
-        let path = staged.claim(&format!("scene_info/{name}.npz"))?;
-        let dir = path.parent().expect("a file under the export");
-        std::fs::create_dir_all(dir).map_err(|e| ExportError::io(dir, e))?;
-        let file = std::fs::File::create(&path).map_err(|e| ExportError::io(&path, e))?;
-        let file = info
-            .write_npz(std::io::BufWriter::with_capacity(1 << 20, file))
-            .map_err(|e| ExportError::io(&path, e))?;
-        let file = file
-            .into_inner()
-            .map_err(|e| ExportError::io(&path, e.into_error()))?;
-        file.sync_all().map_err(|e| ExportError::io(&path, e))?;
-        let meta = dust3r_metadata(name, &views, &info);
-        staged.write("dust3r/all_metadata.npz", &meta)?;
+        write_seekable(staged, &format!("scene_info/{name}.npz"), |w| {
+            info.write_npz(w)
+        })?;
+        let stems: Vec<String> = views.values().map(|v| v.stem.clone()).collect();
+        write_seekable(staged, "dust3r/all_metadata.npz", |w| {
+            info.write_dust3r(name, &stems, w)
+        })?;
         write_pair_indices(name, &info, staged)?;
         let imc: Vec<ImcView> = views
             .values()
@@ -243,33 +237,25 @@ fn write_dust3r_view(
     Ok(format!("{dir}.jpg"))
 }
 
-/// DUSt3R's `all_metadata.npz`: `scenes` ("NAME 0"), `images` (the views' stems, in
-/// scene_info's order) and `pairs` (scene_id, im1_id, im2_id, score) for every pair of views
-/// that share SfM points, scored by the smaller of their two overlaps (our choice: DUSt3R
-/// publishes its pairs, not how they were scored).
-fn dust3r_metadata(name: &str, views: &BTreeMap<u32, View>, info: &SceneInfo) -> Vec<u8> {
-    let stems: Vec<String> = views.values().map(|v| v.stem.clone()).collect();
-    let pairs = info.scored_pairs();
-    let mut body = Vec::with_capacity(pairs.len() * 16);
-    for (i, j, score) in &pairs {
-        body.extend_from_slice(&0i32.to_le_bytes());
-        body.extend_from_slice(&(*i as i32).to_le_bytes());
-        body.extend_from_slice(&(*j as i32).to_le_bytes());
-        // Precision given up here: DUSt3R's pairs hold float32 scores.
-        body.extend_from_slice(&(*score as f32).to_le_bytes());
-    }
-    let rows = pairs.len();
-    let fields = [
-        ("scene_id", "<i4"),
-        ("im1_id", "<i4"),
-        ("im2_id", "<i4"),
-        ("score", "<f4"),
-    ];
-    npz::npz(&[
-        ("scenes", Array::unicode(&[format!("{name} 0")]).npy()),
-        ("images", Array::unicode(&stems).npy()),
-        ("pairs", Array::records(&fields, rows, body).npy()),
-    ])
+/// Writes `rel` into the staging folder through `write` (an `.npz` writer, which seeks back
+/// to patch each member's CRC), synced: the file is streamed, never held whole in memory.
+fn write_seekable(
+    staged: &Staged,
+    rel: &str,
+    write: impl FnOnce(
+        std::io::BufWriter<std::fs::File>,
+    ) -> std::io::Result<std::io::BufWriter<std::fs::File>>,
+) -> Result<()> {
+    let path = staged.claim(rel)?;
+    let dir = path.parent().expect("a file under the export");
+    std::fs::create_dir_all(dir).map_err(|e| ExportError::io(dir, e))?;
+    let file = std::fs::File::create(&path).map_err(|e| ExportError::io(&path, e))?;
+    let file = write(std::io::BufWriter::with_capacity(1 << 20, file))
+        .map_err(|e| ExportError::io(&path, e))?;
+    let file = file
+        .into_inner()
+        .map_err(|e| ExportError::io(&path, e.into_error()))?;
+    file.sync_all().map_err(|e| ExportError::io(&path, e))
 }
 
 /// `sparse-txt`: the views' PINHOLE cameras and images with their observations, and the

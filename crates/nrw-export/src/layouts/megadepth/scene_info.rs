@@ -276,12 +276,50 @@ impl SceneInfo {
         }
     }
 
-    /// Every pair (i < j) of views sharing points, scored by the smaller of their overlaps.
-    pub(super) fn scored_pairs(&self) -> Vec<(usize, usize, f64)> {
-        (0..self.len())
-            .flat_map(|i| self.pairs_of(i))
-            .map(|p| (p.i, p.j, p.score))
-            .collect()
+    /// How many pairs (i < j) of views share points: one pass over the views.
+    fn pair_count(&self) -> usize {
+        (0..self.len()).map(|i| self.pairs_of(i).len()).sum()
+    }
+
+    /// DUSt3R's `all_metadata.npz` into `w`: `scenes` ("NAME 0"), `images` (the views' stems,
+    /// in this scene info's order) and `pairs` (scene_id, im1_id, im2_id, score) for every
+    /// pair of views that share SfM points, scored by the smaller of their two overlaps (our
+    /// choice: DUSt3R publishes its pairs, not how they were scored). The pairs are streamed a
+    /// view at a time (one pass counts them), so memory does not grow with their N².
+    pub fn write_dust3r<W: std::io::Write + std::io::Seek>(
+        &self,
+        scene: &str,
+        stems: &[String],
+        w: W,
+    ) -> std::io::Result<W> {
+        let rows = self.pair_count();
+        let fields = [
+            ("scene_id", "<i4"),
+            ("im1_id", "<i4"),
+            ("im2_id", "<i4"),
+            ("score", "<f4"),
+        ];
+        let header = Array::records(&fields, rows, Vec::new()).npy();
+        let mut z = npz::NpzWriter::new(w);
+        z.member("scenes", &Array::unicode(&[format!("{scene} 0")]).npy())?;
+        z.member("images", &Array::unicode(stems).npy())?;
+        let len = header.len() as u64 + rows as u64 * 16;
+        z.streamed("pairs", len, |put| {
+            put(&header)?;
+            for i in 0..self.len() {
+                let mut body = Vec::new();
+                for p in self.pairs_of(i) {
+                    body.extend_from_slice(&0i32.to_le_bytes());
+                    body.extend_from_slice(&(p.i as i32).to_le_bytes());
+                    body.extend_from_slice(&(p.j as i32).to_le_bytes());
+                    // Precision given up here: DUSt3R's pairs hold float32 scores.
+                    body.extend_from_slice(&(p.score as f32).to_le_bytes());
+                }
+                put(&body)?;
+            }
+            Ok(())
+        })?;
+        z.finish()
     }
 
     /// View i's pairs with the views after it that share points, in view order: the smaller
@@ -386,7 +424,7 @@ impl SceneInfo {
     /// (P float64) of every pair sharing points, streamed (one pass counts P).
     pub fn write_roma(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
         let n = self.len();
-        let count: usize = (0..n).map(|i| self.pairs_of(i).len()).sum();
+        let count = self.pair_count();
         w.write_all(&npz::npy_header("'|O'", &[]))?;
         let mut p = Pickler::new(w)?;
         p.object_scalar_begin()?;

@@ -40,13 +40,11 @@ const PHOTO_CONTENT: [&str; 3] = ["export official", "export tfrecord", "export 
 /// See [`PHOTO_CONTENT`].
 const HEAP_PER_PAIR_ENCODING: f64 = 40.0;
 /// Steps whose heap grows faster than N at these sizes, and why (each must still do so).
-const KNOWN_GROWTH: &[(&str, &str)] = &[
-    (
-        "qa",
-        "its PCA multiplies blocks of 65 to 129 whole descriptors: between 130 and 260 photos \
+const KNOWN_GROWTH: &[(&str, &str)] = &[(
+    "qa",
+    "its PCA multiplies blocks of 65 to 129 whole descriptors: between 130 and 260 photos \
          the block grows, bounded at 129",
-    ),
-];
+)];
 /// Bytes of peak memory each added point may cost ingest (f32 positions, colours, normals
 /// and the Morton sort's keys; docs/scale-out.md has the formula).
 const INGEST_BYTES_PER_POINT: f64 = 48.0;

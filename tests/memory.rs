@@ -34,7 +34,7 @@ const RATIO: f64 = 1.5;
 /// seen.
 const HEAP_PER_PAIR: f64 = 2.0;
 /// The layouts whose heap peaks follow the photos' content from run to run (measured −23 to
-/// +16 bytes a pair over six runs), and their bound: only a term of more than 40 bytes a pair
+/// +16 bytes a pair over four runs), and their bound: only a term of more than 40 bytes a pair
 /// (a matrix of five f64 values a pair) shows there.
 const PHOTO_CONTENT: [&str; 3] = ["export official", "export tfrecord", "export files"];
 /// See [`PHOTO_CONTENT`].

@@ -807,3 +807,168 @@ fn a_crate_importing_one_above_it_fails_the_layer_check() {
         .collect();
     assert_eq!(cycle(&g).unwrap(), vec!["a", "b", "a"]);
 }
+
+/// Lines a function of `src/` may run to (issue 61: small functions with one job).
+const FUNCTION_LINES: usize = 80;
+
+/// The functions of `src/` that ran past [`FUNCTION_LINES`] when this check came (crate, file
+/// from `src/`, name, lines): each may shrink, none may grow, and no other may join them.
+const LONG_FUNCTIONS: &[(&str, &str, &str, usize)] = &[
+    ("nrw-colmap", "load.rs", "validate", 174),
+    ("nrw-colmap", "ply.rs", "read_ply_into", 131),
+    ("nrw-colmap", "txt.rs", "read_images", 87),
+    ("nrw-colmap", "write.rs", "binary", 81),
+    ("nrw-colmap", "write.rs", "text", 105),
+    ("nrw-dataset", "scene.rs", "images_batch", 110),
+    ("nrw-dataset", "split/mod.rs", "assign_grouped", 81),
+    ("nrw-export", "layouts/nerfstudio.rs", "camera_keys", 81),
+    ("nrw-npy", "read/pickle.rs", "run", 182),
+    ("nrw-pipeline", "densify/mod.rs", "prepare", 86),
+    ("nrw-pipeline", "ingest/merge.rs", "finalize_ingest", 128),
+    ("nrw-pipeline", "ingest/view.rs", "process", 107),
+    ("nrw-pipeline", "runner/mod.rs", "run", 81),
+    ("nrw-pipeline", "style/mod.rs", "style_unit_on", 91),
+    ("nrw-qa", "html/mod.rs", "render", 108),
+    ("nrw-qa", "html/mod.rs", "triplets", 81),
+    ("nrw-qa", "lib.rs", "build", 124),
+    ("nrw-qa", "plots.rs", "histogram", 85),
+    ("nrw-render", "simd.rs", "draw", 95),
+    ("nrw-render", "splat.rs", "render_with", 84),
+    ("nrw-stereo", "ncc.rs", "sums", 93),
+    ("nrw-stereo", "patchmatch/sweep.rs", "update", 104),
+    ("nrw-style", "conv.rs", "conv3x3_relu", 82),
+    ("nrw-synth", "geometry.rs", "new", 91),
+    ("nrw-synth", "lib.rs", "generate", 256),
+    ("nrw-synth", "render.rs", "render", 142),
+    ("nrw-synth", "spec.rs", "validate", 97),
+    ("nrw-trainer", "train.rs", "train", 113),
+];
+
+/// Functions (free, in impls and with bodies in traits) outside test code, with their lines
+/// from `fn` to the closing brace.
+struct FunctionLengths {
+    found: Vec<(String, usize)>,
+}
+
+impl<'ast> Visit<'ast> for FunctionLengths {
+    fn visit_item_mod(&mut self, m: &'ast syn::ItemMod) {
+        if !is_test(&m.attrs) {
+            syn::visit::visit_item_mod(self, m);
+        }
+    }
+    fn visit_item_fn(&mut self, f: &'ast syn::ItemFn) {
+        if !is_test(&f.attrs) && !f.attrs.iter().any(|a| a.path().is_ident("test")) {
+            self.add(&f.sig, &f.block);
+            syn::visit::visit_item_fn(self, f);
+        }
+    }
+    fn visit_impl_item_fn(&mut self, f: &'ast syn::ImplItemFn) {
+        if !is_test(&f.attrs) {
+            self.add(&f.sig, &f.block);
+            syn::visit::visit_impl_item_fn(self, f);
+        }
+    }
+    fn visit_trait_item_fn(&mut self, f: &'ast syn::TraitItemFn) {
+        if let Some(block) = &f.default {
+            self.add(&f.sig, block);
+        }
+        syn::visit::visit_trait_item_fn(self, f);
+    }
+}
+
+impl FunctionLengths {
+    fn add(&mut self, sig: &syn::Signature, block: &syn::Block) {
+        let lines = block.brace_token.span.close().end().line + 1 - sig.fn_token.span.start().line;
+        self.found.push((sig.ident.to_string(), lines));
+    }
+}
+
+/// Every function of the workspace's `src/` folders longer than [`FUNCTION_LINES`], as
+/// (crate, file from `src/`, name, lines); files that are test modules (`tests.rs`) skipped.
+fn long_functions() -> Vec<(String, String, String, usize)> {
+    let mut out = Vec::new();
+    for (name, dir) in workspace_crates() {
+        let src = dir.join("src");
+        for file in rs_files(&src) {
+            let rel = file
+                .strip_prefix(&src)
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            if rel.ends_with("tests.rs") || rel.contains("tests/") {
+                continue;
+            }
+            let text = std::fs::read_to_string(&file).unwrap();
+            let ast = syn::parse_file(&text).unwrap_or_else(|e| panic!("{rel}: {e}"));
+            let mut v = FunctionLengths { found: Vec::new() };
+            v.visit_file(&ast);
+            out.extend(
+                v.found
+                    .into_iter()
+                    .filter(|(_, n)| *n > FUNCTION_LINES)
+                    .map(|(f, n)| (name.clone(), rel.clone(), f, n)),
+            );
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The `.rs` files under `dir`, recursively.
+fn rs_files(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(rs_files(&p));
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[test]
+fn no_function_grows_past_80_lines() {
+    let found = long_functions();
+    let mut problems = Vec::new();
+    for (krate, file, f, n) in &found {
+        let known = LONG_FUNCTIONS
+            .iter()
+            .find(|(k, fl, name, _)| k == krate && fl == file && name == f);
+        match known {
+            None => problems.push(format!(
+                "{krate} {file}: {f} runs {n} lines (at most {FUNCTION_LINES})"
+            )),
+            Some((.., ceiling)) if n > ceiling => problems.push(format!(
+                "{krate} {file}: {f} grew to {n} lines (was {ceiling})"
+            )),
+            _ => {}
+        }
+    }
+    let listing: String = found
+        .iter()
+        .map(|(k, fl, f, n)| format!("    (\"{k}\", \"{fl}\", \"{f}\", {n}),\n"))
+        .collect();
+    eprintln!(
+        "{} functions over {FUNCTION_LINES} lines:\n{listing}",
+        found.len()
+    );
+    assert!(
+        problems.is_empty(),
+        "{}\n(all of them now:\n{listing})",
+        problems.join("\n")
+    );
+}
+
+#[test]
+fn a_planted_long_function_is_measured_from_fn_to_its_closing_brace() {
+    let body: String = (0..90).map(|i| format!("    let _x{i} = {i};\n")).collect();
+    let text = format!("fn short() {{}}\n\n/// Doc.\nfn long() {{\n{body}}}\n#[cfg(test)]\nmod tests {{ fn hidden() {{\n{body}}} }}\n");
+    let mut v = FunctionLengths { found: Vec::new() };
+    v.visit_file(&syn::parse_file(&text).unwrap());
+    assert_eq!(
+        v.found,
+        vec![("short".to_string(), 1), ("long".to_string(), 92)]
+    );
+}

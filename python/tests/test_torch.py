@@ -1,5 +1,6 @@
-"""nrw.torch under a real DataLoader and a real process group (needs PyTorch: CI has none, as a
-CPU wheel is not on PyPI; the same split over readers is checked without torch in test_loader.py)."""
+"""nrw.torch under a real DataLoader and a real process group (needs PyTorch: tests/python_pkg.rs
+runs this file with NRW_TORCH_PYTHON, as CI does, where no test may skip; the same split over
+readers is checked without torch in test_loader.py)."""
 
 import os
 

@@ -103,6 +103,29 @@ impl Staged {
         write_file(&self.claim(rel)?, bytes)
     }
 
+    /// Write a claimed `rel` through `write`, given a buffered file it may seek in (an `.npz`
+    /// writer patches each member's CRC), creating its folders and syncing the file: for
+    /// files streamed, never held whole in memory.
+    pub fn write_seekable(
+        &self,
+        rel: &str,
+        write: impl FnOnce(
+            std::io::BufWriter<std::fs::File>,
+        ) -> std::io::Result<std::io::BufWriter<std::fs::File>>,
+    ) -> Result<()> {
+        let path = self.claim(rel)?;
+        if let Some(d) = path.parent() {
+            std::fs::create_dir_all(d).map_err(|e| ExportError::io(d, e))?;
+        }
+        let file = std::fs::File::create(&path).map_err(|e| ExportError::io(&path, e))?;
+        let file = write(std::io::BufWriter::with_capacity(1 << 20, file))
+            .map_err(|e| ExportError::io(&path, e))?;
+        let file = file
+            .into_inner()
+            .map_err(|e| ExportError::io(&path, e.into_error()))?;
+        file.sync_all().map_err(|e| ExportError::io(&path, e))
+    }
+
     /// Write a claimed `rel` through a buffered writer, creating its folders.
     pub fn write_with(
         &self,

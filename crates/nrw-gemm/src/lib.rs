@@ -135,6 +135,49 @@ pub struct Operands<T> {
     beta: T,
 }
 
+/// gemm-common's generic driver over normalised operands `$p` with the SIMD value `$simd`,
+/// `$n` lanes a register and the microkernel module `$k` (its `UKR`, `H_UKR` and sizes): what
+/// gemm's own `gemm_basic` of that kernel family runs.
+macro_rules! drive {
+    ($ty:ident, $simd:expr, $n:expr, $k:ident, $p:ident, $par:ident) => {
+        gemm_common::gemm::gemm_basic_generic::<
+            _,
+            $ty,
+            { $n },
+            { $k::MR_DIV_N * $n },
+            { $k::NR },
+            { $k::MR_DIV_N },
+            { $k::H_M },
+            { $k::H_N },
+        >(
+            $simd,
+            $p.m,
+            $p.n,
+            $p.k,
+            $p.dst,
+            $p.dst_cs,
+            $p.dst_rs,
+            $p.read_dst,
+            $p.lhs,
+            $p.lhs_cs,
+            $p.lhs_rs,
+            $p.rhs,
+            $p.rhs_cs,
+            $p.rhs_rs,
+            $p.alpha,
+            $p.beta,
+            false,
+            false,
+            false,
+            |a, b, c| a * b + c,
+            &$k::UKR,
+            &$k::H_UKR,
+            false,
+            $par,
+        )
+    };
+}
+
 /// Implements [`Element`] for one type from gemm's microkernels of that type: `$n` is the
 /// lanes of one AVX2 register (what gemm's `gemm_def!` passes as `4 × multiplier`).
 macro_rules! element {
@@ -144,7 +187,6 @@ macro_rules! element {
                 #[cfg(target_arch = "x86_64")]
                 {
                     use $kernels::microkernel::fma::$ty as k;
-                    const N: usize = $n;
                     let simd = <gemm_common::simd::V3 as gemm_common::simd::MixedSimd<
                         $ty,
                         $ty,
@@ -152,41 +194,7 @@ macro_rules! element {
                         $ty,
                     >>::try_new()
                     .expect("the AVX2 + FMA kernels run only where isa() found them");
-                    gemm_common::gemm::gemm_basic_generic::<
-                        _,
-                        $ty,
-                        N,
-                        { k::MR_DIV_N * N },
-                        { k::NR },
-                        { k::MR_DIV_N },
-                        { k::H_M },
-                        { k::H_N },
-                    >(
-                        simd,
-                        p.m,
-                        p.n,
-                        p.k,
-                        p.dst,
-                        p.dst_cs,
-                        p.dst_rs,
-                        p.read_dst,
-                        p.lhs,
-                        p.lhs_cs,
-                        p.lhs_rs,
-                        p.rhs,
-                        p.rhs_cs,
-                        p.rhs_rs,
-                        p.alpha,
-                        p.beta,
-                        false,
-                        false,
-                        false,
-                        |a, b, c| a * b + c,
-                        &k::UKR,
-                        &k::H_UKR,
-                        false,
-                        par,
-                    );
+                    drive!($ty, simd, $n, k, p, par);
                 }
                 #[cfg(not(target_arch = "x86_64"))]
                 Self::scalar(p, par)
@@ -194,41 +202,7 @@ macro_rules! element {
 
             unsafe fn scalar(p: Operands<$ty>, par: Parallelism) {
                 use $kernels::microkernel::scalar::$ty as k;
-                gemm_common::gemm::gemm_basic_generic::<
-                    _,
-                    $ty,
-                    1,
-                    { k::MR_DIV_N },
-                    { k::NR },
-                    { k::MR_DIV_N },
-                    { k::H_M },
-                    { k::H_N },
-                >(
-                    gemm_common::simd::Scalar,
-                    p.m,
-                    p.n,
-                    p.k,
-                    p.dst,
-                    p.dst_cs,
-                    p.dst_rs,
-                    p.read_dst,
-                    p.lhs,
-                    p.lhs_cs,
-                    p.lhs_rs,
-                    p.rhs,
-                    p.rhs_cs,
-                    p.rhs_rs,
-                    p.alpha,
-                    p.beta,
-                    false,
-                    false,
-                    false,
-                    |a, b, c| a * b + c,
-                    &k::UKR,
-                    &k::H_UKR,
-                    false,
-                    par,
-                );
+                drive!($ty, gemm_common::simd::Scalar, 1, k, p, par);
             }
         }
     };

@@ -112,11 +112,9 @@ impl LayoutWriter for Megadepth {
         }
         write_sparse_txt(&views, rec, name, staged)?;
         let info = SceneInfo::of(&views, rec);
-        write_seekable(staged, &format!("scene_info/{name}.npz"), |w| {
-            info.write_npz(w)
-        })?;
+        staged.write_seekable(&format!("scene_info/{name}.npz"), |w| info.write_npz(w))?;
         let stems: Vec<String> = views.values().map(|v| v.stem.clone()).collect();
-        write_seekable(staged, "dust3r/all_metadata.npz", |w| {
+        staged.write_seekable("dust3r/all_metadata.npz", |w| {
             info.write_dust3r(name, &stems, w)
         })?;
         write_pair_indices(name, &info, staged)?;
@@ -235,27 +233,6 @@ fn write_dust3r_view(
     ]);
     staged.write(&format!("{dir}.npz"), &npz)?;
     Ok(format!("{dir}.jpg"))
-}
-
-/// Writes `rel` into the staging folder through `write` (an `.npz` writer, which seeks back
-/// to patch each member's CRC), synced: the file is streamed, never held whole in memory.
-fn write_seekable(
-    staged: &Staged,
-    rel: &str,
-    write: impl FnOnce(
-        std::io::BufWriter<std::fs::File>,
-    ) -> std::io::Result<std::io::BufWriter<std::fs::File>>,
-) -> Result<()> {
-    let path = staged.claim(rel)?;
-    let dir = path.parent().expect("a file under the export");
-    std::fs::create_dir_all(dir).map_err(|e| ExportError::io(dir, e))?;
-    let file = std::fs::File::create(&path).map_err(|e| ExportError::io(&path, e))?;
-    let file = write(std::io::BufWriter::with_capacity(1 << 20, file))
-        .map_err(|e| ExportError::io(&path, e))?;
-    let file = file
-        .into_inner()
-        .map_err(|e| ExportError::io(&path, e.into_error()))?;
-    file.sync_all().map_err(|e| ExportError::io(&path, e))
 }
 
 /// `sparse-txt`: the views' PINHOLE cameras and images with their observations, and the

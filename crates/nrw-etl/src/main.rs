@@ -32,10 +32,10 @@ struct Cli {
     /// kill tests interrupt any stage at a known point
     #[arg(long, global = true, hide = true, value_name = "MS")]
     pause_before_commit_ms: Option<u64>,
-    /// Write the most heap bytes the run held at once to this file when it ends (the memory
-    /// tests' measure of what a step allocates itself)
+    /// Write the most heap bytes the run held at once, and the bytes it allocated in all, to
+    /// this file when it ends (the memory tests' measure of what a step allocates itself)
     #[arg(long, global = true, hide = true, value_name = "FILE")]
-    heap_peak_file: Option<std::path::PathBuf>,
+    heap_file: Option<std::path::PathBuf>,
 }
 
 fn main() -> std::process::ExitCode {
@@ -63,9 +63,9 @@ fn main() -> std::process::ExitCode {
         return std::process::ExitCode::FAILURE;
     }
     let result = commands::run(&cli.command);
-    if let Some(file) = &cli.heap_peak_file {
-        if let Err(e) = std::fs::write(file, heap::peak().to_string()) {
-            eprintln!("error: --heap-peak-file {}: {e}", file.display());
+    if let Some(file) = &cli.heap_file {
+        if let Err(e) = std::fs::write(file, heap::report()) {
+            eprintln!("error: --heap-file {}: {e}", file.display());
             return std::process::ExitCode::FAILURE;
         }
     }

@@ -121,19 +121,24 @@ fn same_place(a: &Photo, b: &Photo, o: &DuplicateOptions) -> bool {
     d <= o.centre_fraction * a.depth.min(b.depth) && cos.acos().to_degrees() <= o.max_degrees
 }
 
-/// Pairs worth a look: hashes within twice the accepting distance, or one place.
-fn candidates(photos: &[Photo], o: &DuplicateOptions) -> Vec<(usize, usize, u32, bool)> {
-    (0..photos.len())
-        .into_par_iter()
-        .flat_map_iter(|i| {
-            (i + 1..photos.len()).filter_map(move |j| {
-                let (a, b) = (&photos[i], &photos[j]);
-                let bits = (a.signals.phash ^ b.signals.phash).count_ones();
-                let place = same_place(a, b, o);
-                (bits <= 2 * o.phash_bits || place).then_some((i, j, bits, place))
-            })
-        })
-        .collect()
+/// A candidate pair: indices `i < j` into the photos, their hashes' distance in bits and
+/// whether the cameras are at one place.
+type Candidate = (usize, usize, u32, bool);
+
+/// Pairs of photo `i` with a later photo worth a look: hashes within twice the accepting
+/// distance, or one place. Made as they are needed, never held: candidates can be a share of
+/// all N² pairs.
+fn candidates_of<'p>(
+    photos: &'p [Photo],
+    i: usize,
+    o: &'p DuplicateOptions,
+) -> impl Iterator<Item = Candidate> + 'p {
+    (i + 1..photos.len()).filter_map(move |j| {
+        let (a, b) = (&photos[i], &photos[j]);
+        let bits = (a.signals.phash ^ b.signals.phash).count_ones();
+        let place = same_place(a, b, o);
+        (bits <= 2 * o.phash_bits || place).then_some((i, j, bits, place))
+    })
 }
 
 /// A grey image averaged down so its longest side is at most `side`.
@@ -176,9 +181,19 @@ impl Working<'_> {
 
 /// Correlation of `from`'s pixels with where they land in `to` (a rotation between the two
 /// cameras, the centres taken as one), and the fraction of `from`'s pixels that land in it.
+/// The pixel pairs are made twice (means, then co-moments) rather than held: a group of m
+/// copies compares m² pairs, and nothing a comparison makes outlives it.
 fn aligned_ncc(from: &Working, to: &Working) -> (f64, f64) {
+    let mut n = 0usize;
+    aligned_pairs(from, to, &mut |_, _| n += 1);
+    let overlap = n as f64 / (from.w * from.h) as f64;
+    (pearson(n, &|f| aligned_pairs(from, to, f)), overlap)
+}
+
+/// Calls `f` with each of `from`'s grey levels and the level where it lands in `to`, in
+/// `from`'s row order.
+fn aligned_pairs(from: &Working, to: &Working, f: &mut dyn FnMut(f64, f64)) {
     let rel = to.photo.pose.rotation * from.photo.pose.rotation.inverse();
-    let mut pairs = Vec::with_capacity(from.w * from.h);
     for v in 0..from.h {
         for u in 0..from.w {
             let full = glam::DVec2::new(
@@ -192,29 +207,30 @@ fn aligned_ncc(from: &Working, to: &Working) -> (f64, f64) {
                 .and_then(|ray| to.photo.camera.img_from_cam(rel * ray))
                 .and_then(|p| to.sample(p));
             if let Some(t) = hit {
-                pairs.push((from.grey[v * from.w + u] as f64, t));
+                f(from.grey[v * from.w + u] as f64, t);
             }
         }
     }
-    let overlap = pairs.len() as f64 / (from.w * from.h) as f64;
-    (pearson(&pairs), overlap)
 }
 
-/// Pearson correlation of the pairs; 0 when either side is flat or there are too few.
-fn pearson(pairs: &[(f64, f64)]) -> f64 {
-    if pairs.len() < 16 {
+/// Pearson correlation of the `n` pairs that `pairs` makes (each call makes them again, in
+/// one order); 0 when either side is flat or there are too few.
+fn pearson(n: usize, pairs: &dyn Fn(&mut dyn FnMut(f64, f64))) -> f64 {
+    if n < 16 {
         return 0.0;
     }
-    let n = pairs.len() as f64;
-    let (ma, mb) = pairs
-        .iter()
-        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let n = n as f64;
+    let (mut ma, mut mb) = (0.0, 0.0);
+    pairs(&mut |a, b| {
+        ma += a / n;
+        mb += b / n;
+    });
     let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (a, b) in pairs {
+    pairs(&mut |a, b| {
         sab += (a - ma) * (b - mb);
         saa += (a - ma) * (a - ma);
         sbb += (b - mb) * (b - mb);
-    }
+    });
     if saa <= 1e-9 || sbb <= 1e-9 {
         return 0.0;
     }
@@ -228,15 +244,54 @@ pub fn score_pairs(
     photos_dir: &Path,
     o: &DuplicateOptions,
 ) -> Result<Vec<PairScore>> {
-    let pairs = candidates(photos, o);
-    let mut needed: Vec<usize> = pairs
-        .iter()
-        .filter(|p| p.3)
-        .flat_map(|p| [p.0, p.1])
+    scored(photos, photos_dir, o, &|_| true)
+}
+
+/// The candidate pairs that are one picture ([`PairScore::is_duplicate`]): what
+/// [`groups`] joins, kept without holding the other candidates.
+pub fn duplicate_pairs(
+    photos: &[Photo],
+    photos_dir: &Path,
+    o: &DuplicateOptions,
+) -> Result<Vec<PairScore>> {
+    scored(photos, photos_dir, o, &|s| s.is_duplicate(o))
+}
+
+/// The candidate pairs' scores that `keep` keeps, each pair scored as it is made.
+fn scored(
+    photos: &[Photo],
+    photos_dir: &Path,
+    o: &DuplicateOptions,
+    keep: &(dyn Fn(&PairScore) -> bool + Sync),
+) -> Result<Vec<PairScore>> {
+    let working = working_photos(photos, photos_dir, o)?;
+    Ok((0..photos.len())
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            candidates_of(photos, i, o)
+                .map(|c| score(photos, &working, c))
+                .filter(|s| keep(s))
+        })
+        .collect())
+}
+
+/// The photos some pair at one place compares pixel by pixel, at working size.
+fn working_photos<'a>(
+    photos: &'a [Photo],
+    photos_dir: &Path,
+    o: &DuplicateOptions,
+) -> Result<BTreeMap<usize, Working<'a>>> {
+    let mut needed: Vec<usize> = (0..photos.len())
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            candidates_of(photos, i, o)
+                .filter(|p| p.3)
+                .flat_map(|p| [p.0, p.1])
+        })
         .collect();
     needed.sort_unstable();
     needed.dedup();
-    let working: BTreeMap<usize, Working> = needed
+    needed
         .par_iter()
         .map(|&i| -> Result<(usize, Working)> {
             let path = nrw_colmap::names::photo_path(photos_dir, photos[i].name, false)
@@ -253,28 +308,28 @@ pub fn score_pairs(
                 },
             ))
         })
-        .collect::<Result<_>>()?;
-    Ok(pairs
-        .par_iter()
-        .map(|&(i, j, bits, place)| {
-            let ncc = place.then(|| {
-                let (a, b) = (&working[&i], &working[&j]);
-                let (ab, ba) = (aligned_ncc(a, b), aligned_ncc(b, a));
-                if ab.1 >= ba.1 {
-                    ab
-                } else {
-                    ba
-                }
-            });
-            PairScore {
-                a: photos[i].image_id,
-                b: photos[j].image_id,
-                phash_distance: bits,
-                same_place: place,
-                ncc,
-            }
-        })
-        .collect())
+        .collect()
+}
+
+/// One candidate's score: its hash distance, and at one place the aligned correlation.
+fn score(photos: &[Photo], working: &BTreeMap<usize, Working>, c: Candidate) -> PairScore {
+    let (i, j, bits, place) = c;
+    let ncc = place.then(|| {
+        let (a, b) = (&working[&i], &working[&j]);
+        let (ab, ba) = (aligned_ncc(a, b), aligned_ncc(b, a));
+        if ab.1 >= ba.1 {
+            ab
+        } else {
+            ba
+        }
+    });
+    PairScore {
+        a: photos[i].image_id,
+        b: photos[j].image_id,
+        phash_distance: bits,
+        same_place: place,
+        ncc,
+    }
 }
 
 /// Groups of photos joined by duplicate pairs, each member with the pair that joined it.

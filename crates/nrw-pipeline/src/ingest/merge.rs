@@ -91,7 +91,7 @@ fn near_duplicates(
         options.centre_fraction = -1.0;
     }
     let dir = Path::new(scene.images_dir.as_deref().unwrap_or(""));
-    let scores = d::score_pairs(&photos, dir, &options)?;
+    let scores = d::duplicate_pairs(&photos, dir, &options)?;
     Ok(d::groups(&photos, &scores, &options))
 }
 

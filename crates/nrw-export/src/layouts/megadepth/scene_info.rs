@@ -67,6 +67,13 @@ struct PairInfo {
     boxes: [Bbox; 2],
 }
 
+/// What view i shares with one later view so far: points, the central match, the boxes.
+struct Shared {
+    common: u64,
+    central: Candidate,
+    boxes: [Bbox; 2],
+}
+
 /// An axis-aligned box of image positions, grown a point at a time.
 #[derive(Clone, Copy)]
 struct Bbox {
@@ -326,11 +333,10 @@ impl SceneInfo {
     /// of the two overlaps, and the central match (the shared point nearest view i's
     /// principal point; the smaller point id on a tie). Costs the track lengths of i's points.
     fn pairs_of(&self, i: usize) -> Vec<PairInfo> {
-        let n = self.len();
         let (cx, cy) = (self.intrinsics[i][0][2], self.intrinsics[i][1][2]);
-        let mut common = vec![0u64; n];
-        let mut central: Vec<Option<Candidate>> = vec![None; n];
-        let mut boxes = vec![[Bbox::EMPTY; 2]; n];
+        // Only the views that share a point with i: a view's pairs, not the whole collection,
+        // so the pairs of every view cost the covisible pairs and not N².
+        let mut shared: BTreeMap<usize, Shared> = BTreeMap::new();
         for (id, v) in &self.points3d_id_to_2d[i] {
             let DictValue::Pair(p) = *v else {
                 unreachable!("positions are pairs")
@@ -340,26 +346,32 @@ impl SceneInfo {
                 if j <= i {
                     continue;
                 }
-                common[j] += 1;
-                boxes[j][0].add(p);
-                boxes[j][1].add(q);
-                let nearer = central[j].is_none_or(|b| d2 < b.0 || (d2 == b.0 && *id < b.1));
-                if nearer {
-                    central[j] = Some((d2, *id, p, q));
+                let s = shared.entry(j).or_insert(Shared {
+                    common: 0,
+                    central: (d2, *id, p, q),
+                    boxes: [Bbox::EMPTY; 2],
+                });
+                s.common += 1;
+                s.boxes[0].add(p);
+                s.boxes[1].add(q);
+                let b = s.central;
+                if d2 < b.0 || (d2 == b.0 && *id < b.1) {
+                    s.central = (d2, *id, p, q);
                 }
             }
         }
-        (i + 1..n)
-            .filter_map(|j| {
-                let (_, _, p, q) = central[j]?;
-                let share = |k: usize| common[j] as f64 / self.n_points3d[k] as f64;
-                Some(PairInfo {
+        shared
+            .into_iter()
+            .map(|(j, s)| {
+                let (_, _, p, q) = s.central;
+                let share = |k: usize| s.common as f64 / self.n_points3d[k] as f64;
+                PairInfo {
                     i,
                     j,
                     score: share(i).min(share(j)),
                     central: [p[1], p[0], q[1], q[0]],
-                    boxes: boxes[j],
-                })
+                    boxes: s.boxes,
+                }
             })
             .collect()
     }

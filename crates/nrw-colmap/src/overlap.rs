@@ -43,50 +43,91 @@ fn percentile(values: &mut [f64], p: f64) -> f64 {
 
 /// For every registered image (by id), up to `max` other images that share the most sparse
 /// points with it, among those whose 75th-percentile triangulation angle over the shared
-/// points is at least `min_angle_deg`; most shared points first, ties by image id.
+/// points is at least `min_angle_deg`; most shared points first, ties by image id. One image
+/// at a time: the angles of every pair at once would be Σ track length² values.
 pub fn source_images(
     rec: &Reconstruction,
     max: usize,
     min_angle_deg: f64,
 ) -> BTreeMap<u32, Vec<u32>> {
-    let centres: BTreeMap<u32, DVec3> = rec
+    let ids: Vec<u32> = rec.images.keys().copied().collect();
+    let centres: Vec<DVec3> = rec
         .images
-        .iter()
-        .map(|(&id, im)| (id, im.cam_from_world.centre()))
+        .values()
+        .map(|im| im.cam_from_world.centre())
         .collect();
-    // (image, other image) → the triangulation angle of every point they share.
-    let mut angles: BTreeMap<(u32, u32), Vec<f64>> = BTreeMap::new();
+    let mut seen: Vec<Vec<u64>> = vec![Vec::new(); ids.len()];
     for p in rec.points.values() {
-        for (i, e1) in p.track.iter().enumerate() {
-            for e2 in &p.track[..i] {
-                let (a, b) = (e1.image_id, e2.image_id);
-                let (Some(&c1), Some(&c2)) = (centres.get(&a), centres.get(&b)) else {
-                    continue;
-                };
-                if a == b {
-                    continue;
-                }
-                let angle = triangulation_angle(c1, c2, p.xyz);
-                angles.entry((a, b)).or_default().push(angle);
-                angles.entry((b, a)).or_default().push(angle);
+        for e in &p.track {
+            if let Ok(i) = ids.binary_search(&e.image_id) {
+                seen[i].push(p.id);
             }
         }
     }
+    let mut pairs = PairAngles::new(ids.len());
     let min_angle = min_angle_deg.to_radians();
-    let mut out: BTreeMap<u32, Vec<(u32, usize)>> =
-        rec.images.keys().map(|&id| (id, Vec::new())).collect();
-    for ((a, b), mut list) in angles {
-        let shared = list.len();
-        if percentile(&mut list, ANGLE_PERCENTILE) >= min_angle {
-            out.entry(a).or_default().push((b, shared));
-        }
-    }
-    out.into_iter()
-        .map(|(id, mut ranked)| {
-            ranked.sort_by(|x, y| y.1.cmp(&x.1).then(x.0.cmp(&y.0)));
-            (id, ranked.into_iter().take(max).map(|(b, _)| b).collect())
+    (0..ids.len())
+        .map(|a| {
+            seen[a].sort_unstable();
+            seen[a].dedup();
+            for id in &seen[a] {
+                pairs.add_point(&ids, &centres, a, &rec.points[id]);
+            }
+            (ids[a], pairs.drain_ranked(&ids, max, min_angle))
         })
         .collect()
+}
+
+/// The triangulation angles of one image's points with each other image, by image index:
+/// lists kept between images so that their memory is reused, not made again.
+struct PairAngles {
+    lists: Vec<Vec<f64>>,
+    touched: Vec<usize>,
+}
+
+impl PairAngles {
+    fn new(images: usize) -> PairAngles {
+        PairAngles {
+            lists: vec![Vec::new(); images],
+            touched: Vec::new(),
+        }
+    }
+
+    /// Adds point `p`'s angle with image `a` to each other image of its track, once for each
+    /// pair of observations (an image that sees a point twice counts twice, as in COLMAP).
+    fn add_point(&mut self, ids: &[u32], centres: &[DVec3], a: usize, p: &crate::model::Point3D) {
+        let times = p.track.iter().filter(|e| e.image_id == ids[a]).count();
+        for e in &p.track {
+            let Ok(b) = ids.binary_search(&e.image_id) else {
+                continue;
+            };
+            if b == a {
+                continue;
+            }
+            let angle = triangulation_angle(centres[a], centres[b], p.xyz);
+            if self.lists[b].is_empty() {
+                self.touched.push(b);
+            }
+            self.lists[b].extend(std::iter::repeat_n(angle, times));
+        }
+    }
+
+    /// The other images that pass the angle test, most shared points first (ties by id), at
+    /// most `max`; the lists are emptied for the next image.
+    fn drain_ranked(&mut self, ids: &[u32], max: usize, min_angle: f64) -> Vec<u32> {
+        let mut ranked: Vec<(u32, usize)> = Vec::with_capacity(self.touched.len());
+        for &b in &self.touched {
+            let list = &mut self.lists[b];
+            let shared = list.len();
+            if percentile(list, ANGLE_PERCENTILE) >= min_angle {
+                ranked.push((ids[b], shared));
+            }
+            list.clear();
+        }
+        self.touched.clear();
+        ranked.sort_by(|x, y| y.1.cmp(&x.1).then(x.0.cmp(&y.0)));
+        ranked.into_iter().take(max).map(|(b, _)| b).collect()
+    }
 }
 
 /// For every registered image (by id), the depth range its stereo search covers: COLMAP's

@@ -213,9 +213,12 @@ fn aligned_pairs(from: &Working, to: &Working, f: &mut dyn FnMut(f64, f64)) {
     }
 }
 
-/// Pearson correlation of the `n` pairs that `pairs` makes (each call makes them again, in
-/// one order); 0 when either side is flat or there are too few.
-fn pearson(n: usize, pairs: &dyn Fn(&mut dyn FnMut(f64, f64))) -> f64 {
+/// Makes a sequence of pairs again, in one order, for each call: the sink is called per pair.
+type Pairs<'a> = dyn Fn(&mut dyn FnMut(f64, f64)) + 'a;
+
+/// Pearson correlation of the `n` pairs that `pairs` makes; 0 when either side is flat or
+/// there are too few.
+fn pearson(n: usize, pairs: &Pairs) -> f64 {
     if n < 16 {
         return 0.0;
     }

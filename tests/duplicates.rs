@@ -223,3 +223,67 @@ fn images_table(ds: &Path) -> BTreeMap<String, (Option<f64>, Option<f64>, String
         })
         .collect()
 }
+
+/// A real scene (../shared/data/NAME) copied into `dir` with one copy of every second photo
+/// planted (each kind in turn: the same upload, resized, re-encoded, cropped, recoloured,
+/// each with the original's lens scaled or shifted as its pixels were), and what was planted.
+fn real_with_copies(name: &str, dir: &Path) -> Option<(PathBuf, Vec<nrw_synth::copies::Planted>)> {
+    let src = super::shared::shared(&format!("data/{name}"))?;
+    let scene = dir.join(name);
+    let sparse = scene.join("sparse/0");
+    std::fs::create_dir_all(&sparse).unwrap();
+    let rec = nrw_colmap::read_model(&src.join("sparse/0"), None).unwrap();
+    nrw_colmap::write_model(&rec, &sparse, nrw_colmap::Format::Binary).unwrap();
+    super::copy_photos(&src.join("images"), &scene.join("images"));
+    // The dense cloud where the scene has one (sceaux_castle); sacre_coeur renders its SfM
+    // points.
+    if src.join("dense/fused.ply").is_file() {
+        std::fs::create_dir_all(scene.join("dense")).unwrap();
+        std::fs::copy(src.join("dense/fused.ply"), scene.join("dense/fused.ply")).unwrap();
+    }
+    let planted = nrw_synth::copies::plant_copies(&scene, 2, viewing_distance(&rec), 7).unwrap();
+    Some((scene, planted))
+}
+
+/// The median distance from a photo's centre to the points it observes: the scale of the
+/// registration noise a planted copy gets.
+fn viewing_distance(rec: &nrw_colmap::Reconstruction) -> f64 {
+    let mut d: Vec<f64> = rec
+        .points
+        .values()
+        .flat_map(|p| {
+            p.track
+                .iter()
+                .map(move |e| (rec.images[&e.image_id].cam_from_world.centre() - p.xyz).length())
+        })
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
+
+#[test]
+fn copies_of_real_photos_are_found_on_both_real_scenes_and_nothing_else_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut table = String::new();
+    for name in ["sceaux_castle", "sacre_coeur"] {
+        let Some((scene, planted)) = real_with_copies(name, dir.path()) else {
+            return;
+        };
+        let ds = dir.path().join(format!("{name}-ds"));
+        let err = ingest(&scene, &ds, &[]);
+        let want: BTreeSet<BTreeSet<String>> = planted
+            .iter()
+            .map(|p| [p.original.clone(), p.copy.clone()].into())
+            .collect();
+        let got = found(&ds);
+        let hits = want.intersection(&got).count();
+        table += &format!(
+            "{name}: {hits} of {} planted groups found, {} groups found in all ({:?})\n",
+            want.len(),
+            got.len(),
+            planted.iter().map(|p| p.kind).collect::<Vec<_>>()
+        );
+        assert_eq!(got, want, "{name}\n{table}{err}");
+    }
+    eprintln!("{table}");
+}

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use glam::{DQuat, DVec3};
 use image::RgbImage;
-use nrw_colmap::{Camera, CameraModel, Format, Image, Reconstruction};
+use nrw_colmap::{Camera, Format, Image, Reconstruction};
 use rand::{Rng, SeedableRng};
 
 use crate::error::{Result, SynthError};
@@ -46,32 +46,32 @@ pub struct Planted {
     pub kind: CopyKind,
 }
 
-/// The copy's pixels and the camera they imply (a PINHOLE original's camera, scaled or
-/// shifted as the pixels were).
+/// The copy's pixels and the camera they imply: the original's lens, scaled or shifted as
+/// the pixels were (distortion, in normalised coordinates, unchanged), so a copy of a real
+/// photo with a distorting lens is planted as faithfully as a synthetic PINHOLE one.
 fn make(photo: &RgbImage, cam: &Camera, kind: CopyKind) -> (RgbImage, Camera) {
     let (w, h) = (photo.width(), photo.height());
-    let (f, c) = (cam.focal(), cam.principal_point());
-    let pinhole = |w: u32, h: u32, f: glam::DVec2, c: glam::DVec2| Camera {
-        id: 0,
-        model: CameraModel::Pinhole,
-        width: w as u64,
-        height: h as u64,
-        params: vec![f.x, f.y, c.x, c.y],
+    let same = |img: RgbImage| {
+        let c = cam.scaled(1.0, 1.0, w as u64, h as u64);
+        (img, c)
     };
     match kind {
-        CopyKind::Identical | CopyKind::Reencoded(_) => (photo.clone(), pinhole(w, h, f, c)),
+        CopyKind::Identical | CopyKind::Reencoded(_) => same(photo.clone()),
         CopyKind::Resized(p) => {
             let (nw, nh) = (w * p / 100, h * p / 100);
-            let s = glam::DVec2::new(nw as f64 / w as f64, nh as f64 / h as f64);
+            let (sx, sy) = (nw as f64 / w as f64, nh as f64 / h as f64);
             let img = image::imageops::resize(photo, nw, nh, image::imageops::FilterType::Triangle);
-            (img, pinhole(nw, nh, f * s, c * s))
+            (img, cam.scaled(sx, sy, nw as u64, nh as u64))
         }
         CopyKind::Cropped(p) => {
             let (nw, nh) = (w * p / 100, h * p / 100);
             let (x0, y0) = ((w - nw) / 4, (h - nh) * 3 / 4);
             let img = image::imageops::crop_imm(photo, x0, y0, nw, nh).to_image();
-            let shift = glam::DVec2::new(x0 as f64, y0 as f64);
-            (img, pinhole(nw, nh, f, c - shift))
+            let mut c = cam.scaled(1.0, 1.0, nw as u64, nh as u64);
+            let at = if cam.model.single_focal() { 1 } else { 2 };
+            c.params[at] -= x0 as f64;
+            c.params[at + 1] -= y0 as f64;
+            (img, c)
         }
         CopyKind::Recoloured => {
             let gains = [1.15, 1.0, 0.8];
@@ -81,7 +81,7 @@ fn make(photo: &RgbImage, cam: &Camera, kind: CopyKind) -> (RgbImage, Camera) {
                     (255.0 * (p[k] as f64 / 255.0).powf(0.8) * gains[k]).clamp(0.0, 255.0) as u8
                 }))
             });
-            (img, pinhole(w, h, f, c))
+            same(img)
         }
     }
 }
@@ -194,7 +194,7 @@ fn write(rec: &Reconstruction, sparse: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Plant one copy of every `every`-th image of the PINHOLE scene at `scene` (its
+/// Plant one copy of every `every`-th image of the scene at `scene` (its
 /// `sparse/0` and `images/`), kinds in [`KINDS`] order; `depth` is the scene's typical
 /// viewing distance (the scale of the pose noise). Returns what was planted.
 pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result<Vec<Planted>> {

@@ -261,14 +261,48 @@ pub fn images_batch(
     };
     let outs: Vec<&ImageOutcome> = rec.images.values().map(outcome).collect::<Result<_>>()?;
     let imgs: Vec<_> = rec.images.values().collect();
+    let mut columns = pose_columns(&imgs);
+    columns.extend(photo_columns(rec, &imgs, photos)?);
+    columns.extend(outcome_columns(&outs));
+    batch(IMAGES_TABLE, images_schema(), columns)
+}
+
+/// The images table's columns from the model's images: ids, names, cameras and poses.
+fn pose_columns(imgs: &[&nrw_colmap::Image]) -> Vec<ArrayRef> {
     let col = |f: &dyn Fn(&nrw_colmap::Image) -> f64| -> ArrayRef {
         Arc::new(Float64Array::from_iter_values(imgs.iter().map(|i| f(i))))
     };
-    let signal = |f: &dyn Fn(&PhotoSignals) -> f64| -> ArrayRef {
-        Arc::new(Float64Array::from_iter(
-            outs.iter().map(|o| o.signals.as_ref().map(f)),
-        ))
-    };
+    vec![
+        Arc::new(UInt32Array::from_iter_values(imgs.iter().map(|i| i.id))),
+        Arc::new(StringArray::from_iter_values(
+            imgs.iter().map(|i| i.name.as_str()),
+        )),
+        Arc::new(UInt32Array::from_iter_values(
+            imgs.iter().map(|i| i.camera_id),
+        )),
+        col(&|i| i.cam_from_world.qvec()[0]),
+        col(&|i| i.cam_from_world.qvec()[1]),
+        col(&|i| i.cam_from_world.qvec()[2]),
+        col(&|i| i.cam_from_world.qvec()[3]),
+        col(&|i| i.cam_from_world.translation.x),
+        col(&|i| i.cam_from_world.translation.y),
+        col(&|i| i.cam_from_world.translation.z),
+        col(&|i| i.cam_from_world.centre().x),
+        col(&|i| i.cam_from_world.centre().y),
+        col(&|i| i.cam_from_world.centre().z),
+        Arc::new(BooleanArray::from_iter(imgs.iter().map(|i| {
+            Some((i.stored_quat_norm - 1.0).abs() > QUAT_NORM_TOLERANCE)
+        }))),
+    ]
+}
+
+/// The images table's columns of each photo's size (and whether its camera's agrees) and
+/// keypoint counts.
+fn photo_columns(
+    rec: &Reconstruction,
+    imgs: &[&nrw_colmap::Image],
+    photos: &BTreeMap<u32, Option<(u32, u32)>>,
+) -> Result<Vec<ArrayRef>> {
     let size = |i: &nrw_colmap::Image| photos.get(&i.id).copied().flatten();
     let matches = |i: &nrw_colmap::Image| {
         size(i).map(|(w, h)| {
@@ -278,7 +312,7 @@ pub fn images_batch(
     };
     let mut np = Vec::with_capacity(imgs.len());
     let mut no = Vec::with_capacity(imgs.len());
-    for i in &imgs {
+    for i in imgs {
         np.push(to_u32(
             i.points2d.len() as u64,
             IMAGES_TABLE,
@@ -287,74 +321,62 @@ pub fn images_batch(
         )?);
         no.push(i.num_observations() as u32);
     }
-    batch(
-        IMAGES_TABLE,
-        images_schema(),
-        vec![
-            Arc::new(UInt32Array::from_iter_values(imgs.iter().map(|i| i.id))),
-            Arc::new(StringArray::from_iter_values(
-                imgs.iter().map(|i| i.name.as_str()),
-            )),
-            Arc::new(UInt32Array::from_iter_values(
-                imgs.iter().map(|i| i.camera_id),
-            )),
-            col(&|i| i.cam_from_world.qvec()[0]),
-            col(&|i| i.cam_from_world.qvec()[1]),
-            col(&|i| i.cam_from_world.qvec()[2]),
-            col(&|i| i.cam_from_world.qvec()[3]),
-            col(&|i| i.cam_from_world.translation.x),
-            col(&|i| i.cam_from_world.translation.y),
-            col(&|i| i.cam_from_world.translation.z),
-            col(&|i| i.cam_from_world.centre().x),
-            col(&|i| i.cam_from_world.centre().y),
-            col(&|i| i.cam_from_world.centre().z),
-            Arc::new(BooleanArray::from_iter(imgs.iter().map(|i| {
-                Some((i.stored_quat_norm - 1.0).abs() > QUAT_NORM_TOLERANCE)
-            }))),
-            Arc::new(UInt32Array::from_iter(
-                imgs.iter().map(|i| size(i).map(|s| s.0)),
-            )),
-            Arc::new(UInt32Array::from_iter(
-                imgs.iter().map(|i| size(i).map(|s| s.1)),
-            )),
-            Arc::new(BooleanArray::from_iter(imgs.iter().map(|i| matches(i)))),
-            Arc::new(UInt32Array::from(np)),
-            Arc::new(UInt32Array::from(no)),
-            Arc::new(StringArray::from_iter_values(
-                outs.iter().map(|o| o.verdict.as_str()),
-            )),
-            Arc::new(Float64Array::from_iter_values(
-                outs.iter().map(|o| o.verdict_value),
-            )),
-            Arc::new(StringArray::from_iter(
-                outs.iter().map(|o| o.detail.as_deref()),
-            )),
-            Arc::new(Float64Array::from_iter(outs.iter().map(|o| o.empty_ratio))),
-            Arc::new(UInt32Array::from_iter(
-                outs.iter().map(|o| o.render_size.map(|s| s.0)),
-            )),
-            Arc::new(UInt32Array::from_iter(
-                outs.iter().map(|o| o.render_size.map(|s| s.1)),
-            )),
-            Arc::new(StringArray::from_iter(
-                outs.iter().map(|o| o.shard.as_deref()),
-            )),
-            Arc::new(Float64Array::from_iter(
-                outs.iter().map(|o| o.depth_range.map(|r| r.0)),
-            )),
-            Arc::new(Float64Array::from_iter(
-                outs.iter().map(|o| o.depth_range.map(|r| r.1)),
-            )),
-            signal(&|s| s.sharpness),
-            signal(&|s| s.luma_mean),
-            signal(&|s| s.luma_std),
-            signal(&|s| s.dark_fraction),
-            signal(&|s| s.bright_fraction),
-            Arc::new(StringArray::from_iter(
-                outs.iter().map(|o| o.signals.map(|s| phash_hex(s.phash))),
-            )),
-        ],
-    )
+    Ok(vec![
+        Arc::new(UInt32Array::from_iter(
+            imgs.iter().map(|i| size(i).map(|s| s.0)),
+        )),
+        Arc::new(UInt32Array::from_iter(
+            imgs.iter().map(|i| size(i).map(|s| s.1)),
+        )),
+        Arc::new(BooleanArray::from_iter(imgs.iter().map(|i| matches(i)))),
+        Arc::new(UInt32Array::from(np)),
+        Arc::new(UInt32Array::from(no)),
+    ])
+}
+
+/// The images table's columns of what ingest decided for each image and the photo signals
+/// it measured.
+fn outcome_columns(outs: &[&ImageOutcome]) -> Vec<ArrayRef> {
+    let signal = |f: &dyn Fn(&PhotoSignals) -> f64| -> ArrayRef {
+        Arc::new(Float64Array::from_iter(
+            outs.iter().map(|o| o.signals.as_ref().map(f)),
+        ))
+    };
+    vec![
+        Arc::new(StringArray::from_iter_values(
+            outs.iter().map(|o| o.verdict.as_str()),
+        )),
+        Arc::new(Float64Array::from_iter_values(
+            outs.iter().map(|o| o.verdict_value),
+        )),
+        Arc::new(StringArray::from_iter(
+            outs.iter().map(|o| o.detail.as_deref()),
+        )),
+        Arc::new(Float64Array::from_iter(outs.iter().map(|o| o.empty_ratio))),
+        Arc::new(UInt32Array::from_iter(
+            outs.iter().map(|o| o.render_size.map(|s| s.0)),
+        )),
+        Arc::new(UInt32Array::from_iter(
+            outs.iter().map(|o| o.render_size.map(|s| s.1)),
+        )),
+        Arc::new(StringArray::from_iter(
+            outs.iter().map(|o| o.shard.as_deref()),
+        )),
+        Arc::new(Float64Array::from_iter(
+            outs.iter().map(|o| o.depth_range.map(|r| r.0)),
+        )),
+        Arc::new(Float64Array::from_iter(
+            outs.iter().map(|o| o.depth_range.map(|r| r.1)),
+        )),
+        signal(&|s| s.sharpness),
+        signal(&|s| s.luma_mean),
+        signal(&|s| s.luma_std),
+        signal(&|s| s.dark_fraction),
+        signal(&|s| s.bright_fraction),
+        Arc::new(StringArray::from_iter(
+            outs.iter().map(|o| o.signals.map(|s| phash_hex(s.phash))),
+        )),
+    ]
 }
 
 /// Write both scene tables into `dir`; returns their manifest entries.

@@ -122,34 +122,7 @@ pub fn assign_grouped(
     seed: u64,
     groups: &BTreeMap<String, u32>,
 ) -> std::result::Result<(Vec<Assignment>, SplitChange), String> {
-    let by_name: BTreeMap<&str, &Assignment> =
-        previous.iter().map(|a| (a.name.as_str(), a)).collect();
-    let mut out = Vec::with_capacity(eligible.len());
-    let mut change = SplitChange::default();
-    let mut fresh: Vec<(u64, &str, u32)> = Vec::new();
-    for (id, name) in eligible {
-        match by_name.get(name.as_str()) {
-            Some(a) => {
-                if a.split == VAL {
-                    change.kept_val += 1;
-                } else {
-                    change.kept_train += 1;
-                }
-                out.push(Assignment {
-                    image_id: *id,
-                    ..(*a).clone()
-                });
-            }
-            None => fresh.push((rank(seed, name), name.as_str(), *id)),
-        }
-    }
-    let still: std::collections::BTreeSet<&str> =
-        eligible.iter().map(|(_, n)| n.as_str()).collect();
-    change.gone = previous
-        .iter()
-        .filter(|a| !still.contains(a.name.as_str()))
-        .map(|a| a.name.clone())
-        .collect();
+    let (mut out, mut fresh, mut change) = carried_over(eligible, previous, seed);
     if val < change.kept_val {
         return Err(format!(
             "`split.val` {val} is below the {} validation photos already assigned; assignments are never undone (remove {SPLITS_TABLE} to start over)",
@@ -195,6 +168,45 @@ pub fn assign_grouped(
     }
     out.sort_by_key(|a| a.image_id);
     Ok((out, change))
+}
+
+/// The eligible photos an earlier split assigned, kept where they were; the others with
+/// their seeded rank (unsorted), to be assigned; and what changed so far (the photos the
+/// earlier split had that are no longer eligible).
+fn carried_over<'a>(
+    eligible: &'a [(u32, String)],
+    previous: &[Assignment],
+    seed: u64,
+) -> (Vec<Assignment>, Vec<(u64, &'a str, u32)>, SplitChange) {
+    let by_name: BTreeMap<&str, &Assignment> =
+        previous.iter().map(|a| (a.name.as_str(), a)).collect();
+    let mut out = Vec::with_capacity(eligible.len());
+    let mut change = SplitChange::default();
+    let mut fresh: Vec<(u64, &str, u32)> = Vec::new();
+    for (id, name) in eligible {
+        match by_name.get(name.as_str()) {
+            Some(a) => {
+                if a.split == VAL {
+                    change.kept_val += 1;
+                } else {
+                    change.kept_train += 1;
+                }
+                out.push(Assignment {
+                    image_id: *id,
+                    ..(*a).clone()
+                });
+            }
+            None => fresh.push((rank(seed, name), name.as_str(), *id)),
+        }
+    }
+    let still: std::collections::BTreeSet<&str> =
+        eligible.iter().map(|(_, n)| n.as_str()).collect();
+    change.gone = previous
+        .iter()
+        .filter(|a| !still.contains(a.name.as_str()))
+        .map(|a| a.name.clone())
+        .collect();
+    (out, fresh, change)
 }
 
 /// Near-duplicate groups with members on both sides of a split: (group, its members'

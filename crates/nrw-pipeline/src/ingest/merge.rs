@@ -7,7 +7,7 @@ use std::path::Path;
 
 use nrw_dataset::photo_info::PhotoRecord;
 use nrw_dataset::scene::VerdictKind;
-use nrw_dataset::units::{self, GroupRecord};
+use nrw_dataset::units::{self, GroupRecord, UnitRecord};
 use nrw_dataset::{
     FileEntry, ImageOutcome, Manifest, Store, Tool, SCHEMA_VERSION, VERDICT_UNREADABLE,
 };
@@ -99,9 +99,78 @@ fn near_duplicates(
 /// (of runs with other parameters) removed.
 pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
     let unit = check_units(dataset, units::INGEST)?;
-    let mut outcomes = BTreeMap::new();
-    let mut photos = BTreeMap::new();
-    let mut shards: Vec<FileEntry> = Vec::new();
+    let groups = read_groups(dataset, &unit)?;
+    let scene = unit
+        .scene
+        .clone()
+        .ok_or_else(|| units_error(dataset, "ingest unit record names no scene".into()))?;
+    let mut rec = unchanged_model(dataset, &scene, &unit)?;
+    // Near-duplicates are found on the photos as they are on disk, with their own cameras
+    // (before any undistortion).
+    let members = near_duplicates(&rec, &groups.outcomes, &scene)?;
+    // `ingest --undistort` stored the undistorted PINHOLE cameras: the scene tables list those.
+    let recorded: IngestParameters = from_parameters(
+        &dataset.name(&format!(
+            "{}/ (ingest unit record)",
+            nrw_dataset::units::stage_dir(nrw_dataset::units::INGEST)
+        )),
+        &unit.parameters,
+    )?;
+    if let Some(u) = &recorded.undistort {
+        let options = crate::model::undistort_options(u);
+        crate::model::undistort_model(&mut rec, &options, Path::new(&scene.model_dir))?;
+    }
+    // Shards of an earlier run with other parameters must not linger next to these.
+    for stale in nrw_dataset::views::stale_shards(dataset, &groups.shards)? {
+        dataset.delete(&stale)?;
+    }
+    let mut tables =
+        nrw_dataset::write_scene_tables(dataset, &rec, &groups.photos, &groups.outcomes)?;
+    let records = photo_records(&rec, &scene, &recorded, &unit.inputs, dataset)?;
+    tables.extend(nrw_dataset::photo_info::write_photos_table(
+        dataset, &records,
+    )?);
+    tables.push(nrw_dataset::duplicates::write_duplicates(
+        dataset, &members,
+    )?);
+    tables.extend(groups.shards.iter().cloned());
+    // A split from an earlier run stays (split assigns only new photos when run again).
+    if dataset.exists(nrw_dataset::split::SPLITS_TABLE)? {
+        tables.push(FileEntry::of(dataset, nrw_dataset::split::SPLITS_TABLE)?);
+    }
+    let warnings = merge_warnings(dataset, &unit, &rec, &groups.outcomes)?;
+    let manifest = Manifest {
+        schema_version: SCHEMA_VERSION,
+        tool: Tool {
+            name: "nrw-etl".into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+        },
+        scene,
+        inputs: unit.inputs.clone(),
+        parameters: unit.parameters.clone(),
+        tables,
+        warnings: warnings.clone(),
+    };
+    manifest.write(dataset)?;
+    close_stage(dataset, units::INGEST)?;
+    Ok(summary(unit.count, &groups, &members, warnings))
+}
+
+/// What the units' group records say together: each registered image's photo size and
+/// outcome, and the shards written.
+struct Groups {
+    photos: BTreeMap<u32, Option<(u32, u32)>>,
+    outcomes: BTreeMap<u32, ImageOutcome>,
+    shards: Vec<FileEntry>,
+}
+
+/// Every group record of this run (a group without one is an error naming its unit).
+fn read_groups(dataset: &Store, unit: &UnitRecord) -> Result<Groups> {
+    let mut groups = Groups {
+        photos: BTreeMap::new(),
+        outcomes: BTreeMap::new(),
+        shards: Vec::new(),
+    };
     for g in 0..unit.groups {
         let rel = units::group_record_path(units::INGEST, g);
         let r: Option<GroupRecord> = units::read_record(dataset, &rel)?;
@@ -117,58 +186,42 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
             ),
                 )
             })?;
-        shards.extend(r.shard);
+        groups.shards.extend(r.shard);
         for i in r.images {
-            photos.insert(i.image_id, i.photo_size);
-            outcomes.insert(i.image_id, i.outcome);
+            groups.photos.insert(i.image_id, i.photo_size);
+            groups.outcomes.insert(i.image_id, i.outcome);
         }
     }
-    let scene = unit
-        .scene
-        .clone()
-        .ok_or_else(|| units_error(dataset, "ingest unit record names no scene".into()))?;
-    let (mut rec, changed) = crate::model::reread_model(&scene, &unit.inputs)?;
-    if let Some(f) = changed {
-        return Err(units_error(
+    Ok(groups)
+}
+
+/// The scene's model, read again; an error if a model file changed since the units read it.
+fn unchanged_model(
+    dataset: &Store,
+    scene: &nrw_dataset::SceneSource,
+    unit: &UnitRecord,
+) -> Result<nrw_colmap::Reconstruction> {
+    let (rec, changed) = crate::model::reread_model(scene, &unit.inputs)?;
+    match changed {
+        Some(f) => Err(units_error(
             dataset,
             format!(
                 "{} changed since the ingest units read it: run the units again",
                 f.display()
             ),
-        ));
-    }
-    // Near-duplicates are found on the photos as they are on disk, with their own cameras
-    // (before any undistortion).
-    let members = near_duplicates(&rec, &outcomes, &scene)?;
-    // `ingest --undistort` stored the undistorted PINHOLE cameras: the scene tables list those.
-    let recorded: IngestParameters = from_parameters(
-        &dataset.name(&format!(
-            "{}/ (ingest unit record)",
-            nrw_dataset::units::stage_dir(nrw_dataset::units::INGEST)
         )),
-        &unit.parameters,
-    )?;
-    if let Some(u) = &recorded.undistort {
-        let options = crate::model::undistort_options(u);
-        crate::model::undistort_model(&mut rec, &options, Path::new(&scene.model_dir))?;
+        None => Ok(rec),
     }
-    // Shards of an earlier run with other parameters must not linger next to these.
-    for stale in nrw_dataset::views::stale_shards(dataset, &shards)? {
-        dataset.delete(&stale)?;
-    }
-    let mut tables = nrw_dataset::write_scene_tables(dataset, &rec, &photos, &outcomes)?;
-    let records = photo_records(&rec, &scene, &recorded, &unit.inputs, dataset)?;
-    tables.extend(nrw_dataset::photo_info::write_photos_table(
-        dataset, &records,
-    )?);
-    tables.push(nrw_dataset::duplicates::write_duplicates(
-        dataset, &members,
-    )?);
-    tables.extend(shards.iter().cloned());
-    // A split from an earlier run stays (split assigns only new photos when run again).
-    if dataset.exists(nrw_dataset::split::SPLITS_TABLE)? {
-        tables.push(FileEntry::of(dataset, nrw_dataset::split::SPLITS_TABLE)?);
-    }
+}
+
+/// The units' warnings, one for each unreadable photo, and one for the triplets a new ingest
+/// makes stale (which it removes).
+fn merge_warnings(
+    dataset: &Store,
+    unit: &UnitRecord,
+    rec: &nrw_colmap::Reconstruction,
+    outcomes: &BTreeMap<u32, ImageOutcome>,
+) -> Result<Vec<String>> {
     let mut warnings = unit.warnings.clone();
     for (id, o) in outcomes
         .iter()
@@ -189,41 +242,38 @@ pub fn finalize_ingest(dataset: &Store) -> Result<IngestMerge> {
             dataset.name(stale)
         ));
     }
-    let manifest = Manifest {
-        schema_version: SCHEMA_VERSION,
-        tool: Tool {
-            name: "nrw-etl".into(),
-            version: env!("CARGO_PKG_VERSION").into(),
-        },
-        scene,
-        inputs: unit.inputs.clone(),
-        parameters: unit.parameters.clone(),
-        tables,
-        warnings: warnings.clone(),
-    };
-    manifest.write(dataset)?;
-    close_stage(dataset, units::INGEST)?;
-    Ok(IngestMerge {
-        units: unit.count,
+    Ok(warnings)
+}
+
+/// The merge's counts, for the summary line.
+fn summary(
+    units: usize,
+    groups: &Groups,
+    members: &[nrw_dataset::duplicates::Member],
+    warnings: Vec<String>,
+) -> IngestMerge {
+    let outcomes = &groups.outcomes;
+    IngestMerge {
+        units,
         registered: outcomes.len(),
-        kept: count(&outcomes, nrw_dataset::scene::VERDICT_KEPT),
-        too_small: count(&outcomes, VerdictKind::TooSmall.name()),
-        too_sparse: count(&outcomes, VerdictKind::TooSparse.name()),
-        too_blurry: count(&outcomes, VerdictKind::TooBlurry.name()),
-        unreadable: count(&outcomes, VERDICT_UNREADABLE),
+        kept: count(outcomes, nrw_dataset::scene::VERDICT_KEPT),
+        too_small: count(outcomes, VerdictKind::TooSmall.name()),
+        too_sparse: count(outcomes, VerdictKind::TooSparse.name()),
+        too_blurry: count(outcomes, VerdictKind::TooBlurry.name()),
+        unreadable: count(outcomes, VERDICT_UNREADABLE),
         duplicate_groups: members
             .iter()
             .map(|m| m.group)
             .collect::<std::collections::BTreeSet<_>>()
             .len(),
         duplicate_photos: members.len(),
-        shards: shards.len(),
+        shards: groups.shards.len(),
         least_empty: outcomes
             .values()
             .filter_map(|o| o.empty_ratio)
             .reduce(f64::min),
         warnings,
-    })
+    }
 }
 
 #[cfg(test)]

@@ -170,6 +170,9 @@ pub fn assign_grouped(
     Ok((out, change))
 }
 
+/// A photo no split has assigned yet: its seeded rank, name and image id.
+type Fresh<'a> = (u64, &'a str, u32);
+
 /// The eligible photos an earlier split assigned, kept where they were; the others with
 /// their seeded rank (unsorted), to be assigned; and what changed so far (the photos the
 /// earlier split had that are no longer eligible).
@@ -177,12 +180,12 @@ fn carried_over<'a>(
     eligible: &'a [(u32, String)],
     previous: &[Assignment],
     seed: u64,
-) -> (Vec<Assignment>, Vec<(u64, &'a str, u32)>, SplitChange) {
+) -> (Vec<Assignment>, Vec<Fresh<'a>>, SplitChange) {
     let by_name: BTreeMap<&str, &Assignment> =
         previous.iter().map(|a| (a.name.as_str(), a)).collect();
     let mut out = Vec::with_capacity(eligible.len());
     let mut change = SplitChange::default();
-    let mut fresh: Vec<(u64, &str, u32)> = Vec::new();
+    let mut fresh: Vec<Fresh> = Vec::new();
     for (id, name) in eligible {
         match by_name.get(name.as_str()) {
             Some(a) => {

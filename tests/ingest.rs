@@ -174,8 +174,8 @@ fn interrupted_ingest_resumes_to_the_same_bytes_on_any_thread_count() {
 
 #[test]
 fn the_renderers_kept_verdict_is_the_word_readers_look_for() {
-    // Ingest writes Verdict::name(); QA, split and the trainer compare with VERDICT_KEPT.
-    let kept = nrw_render::Verdict::Kept { empty_ratio: 0.5 };
+    // Ingest writes FilterVerdict::name(); QA, split and the trainer compare with VERDICT_KEPT.
+    let kept = nrw_render::FilterVerdict::Kept { empty_ratio: 0.5 };
     assert_eq!(kept.name(), nrw_dataset::scene::VERDICT_KEPT);
 }
 

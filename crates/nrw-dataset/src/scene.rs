@@ -18,10 +18,10 @@ pub const CAMERAS_TABLE: &str = "scene/cameras.parquet";
 pub const IMAGES_TABLE: &str = "scene/images.parquet";
 
 /// An image's `verdict` in `scene/images.parquet`, typed: counts and branches name a variant,
-/// so none can misspell a verdict; the table holds [`VerdictKind::name`].
+/// so none can misspell a verdict; the table holds [`ImageVerdict::name`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum VerdictKind {
-    /// The view entered the dataset (the renderer's `Verdict::Kept`).
+pub enum ImageVerdict {
+    /// The view entered the dataset (the renderer's `FilterVerdict::Kept`).
     Kept,
     /// The photo's shorter side is under the filter's minimum.
     TooSmall,
@@ -34,39 +34,39 @@ pub enum VerdictKind {
     TooBlurry,
 }
 
-impl VerdictKind {
+impl ImageVerdict {
     /// Every verdict.
-    pub const ALL: [VerdictKind; 5] = [
-        VerdictKind::Kept,
-        VerdictKind::TooSmall,
-        VerdictKind::TooSparse,
-        VerdictKind::Unreadable,
-        VerdictKind::TooBlurry,
+    pub const ALL: [ImageVerdict; 5] = [
+        ImageVerdict::Kept,
+        ImageVerdict::TooSmall,
+        ImageVerdict::TooSparse,
+        ImageVerdict::Unreadable,
+        ImageVerdict::TooBlurry,
     ];
 
     /// The word the images table holds.
     pub const fn name(self) -> &'static str {
         match self {
-            VerdictKind::Kept => "kept",
-            VerdictKind::TooSmall => "too_small",
-            VerdictKind::TooSparse => "too_sparse",
-            VerdictKind::Unreadable => "unreadable",
-            VerdictKind::TooBlurry => "too_blurry",
+            ImageVerdict::Kept => "kept",
+            ImageVerdict::TooSmall => "too_small",
+            ImageVerdict::TooSparse => "too_sparse",
+            ImageVerdict::Unreadable => "unreadable",
+            ImageVerdict::TooBlurry => "too_blurry",
         }
     }
 
     /// The verdict a table's word names, if any.
-    pub fn of(name: &str) -> Option<VerdictKind> {
-        VerdictKind::ALL.into_iter().find(|v| v.name() == name)
+    pub fn of(name: &str) -> Option<ImageVerdict> {
+        ImageVerdict::ALL.into_iter().find(|v| v.name() == name)
     }
 }
 
 /// The `verdict` of a view that entered the dataset; every other verdict names why a photo
 /// was dropped.
-pub const VERDICT_KEPT: &str = VerdictKind::Kept.name();
+pub const VERDICT_KEPT: &str = ImageVerdict::Kept.name();
 
 /// The `verdict` of a view whose photo or label map cannot be decoded whole.
-pub const VERDICT_UNREADABLE: &str = VerdictKind::Unreadable.name();
+pub const VERDICT_UNREADABLE: &str = ImageVerdict::Unreadable.name();
 
 fn list_of(item: DataType) -> DataType {
     DataType::List(Arc::new(Field::new("item", item, false)))

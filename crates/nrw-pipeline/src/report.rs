@@ -340,22 +340,22 @@ pub fn synth(s: &nrw_synth::SynthReport) -> Report {
 
 /// What densify made: views with depth, the verdicts of the others, the cloud, the time.
 pub fn densify(d: &crate::densify::DensifyReport) -> Report {
-    use crate::densify::ViewVerdict;
+    use crate::densify::DensifyVerdict;
     let mut r = Report::default();
     let (mut no_source, mut no_range, mut unreadable) = (0, 0, Vec::new());
     for v in &d.views {
         match &v.verdict {
-            ViewVerdict::Densified { .. } => {}
-            ViewVerdict::NoSourceView => no_source += 1,
-            ViewVerdict::NoDepthRange => no_range += 1,
-            ViewVerdict::Unreadable(why) => unreadable.push(format!("  {}: {why}", v.name)),
+            DensifyVerdict::Densified { .. } => {}
+            DensifyVerdict::NoSourceView => no_source += 1,
+            DensifyVerdict::NoDepthRange => no_range += 1,
+            DensifyVerdict::Unreadable(why) => unreadable.push(format!("  {}: {why}", v.name)),
         }
     }
     let pixels: usize = d
         .views
         .iter()
         .map(|v| match v.verdict {
-            ViewVerdict::Densified { pixels } => pixels,
+            DensifyVerdict::Densified { pixels } => pixels,
             _ => 0,
         })
         .sum();

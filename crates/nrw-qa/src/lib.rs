@@ -213,7 +213,7 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
         registered: images.len(),
         rendered: images
             .iter()
-            .filter(|r| r.verdict != nrw_dataset::scene::VerdictKind::TooSmall.name())
+            .filter(|r| r.verdict != nrw_dataset::scene::ImageVerdict::TooSmall.name())
             .count(),
         kept: kept.len(),
         dropped: images.len() - kept.len(),

@@ -17,5 +17,5 @@ mod zbuffer;
 pub use cloud::{Chunk, RenderCloud, CHUNK_POINTS};
 pub use splat::{render, render_with, DeepBuffer, Kernel};
 pub use undistort::{undistort_labels, undistort_photo, Rgb8};
-pub use verdict::{Filters, Verdict};
+pub use verdict::{FilterVerdict, Filters};
 pub use view::{render_size, View};

@@ -25,51 +25,53 @@ impl Default for Filters {
 /// What happened to a photo, with the measured value behind a drop.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "verdict", rename_all = "snake_case")]
-pub enum Verdict {
+pub enum FilterVerdict {
     Kept { empty_ratio: f64 },
     TooSmall { shorter_side_px: u32 },
     TooSparse { empty_ratio: f64 },
 }
 
-impl Verdict {
+impl FilterVerdict {
     /// `kept`, `too_small`, `too_sparse`.
     pub fn name(&self) -> &'static str {
         match self {
-            Verdict::Kept { .. } => "kept",
-            Verdict::TooSmall { .. } => "too_small",
-            Verdict::TooSparse { .. } => "too_sparse",
+            FilterVerdict::Kept { .. } => "kept",
+            FilterVerdict::TooSmall { .. } => "too_small",
+            FilterVerdict::TooSparse { .. } => "too_sparse",
         }
     }
 
     /// The number the verdict rests on (empty ratio, or shorter side in pixels).
     pub fn value(&self) -> f64 {
         match *self {
-            Verdict::Kept { empty_ratio } | Verdict::TooSparse { empty_ratio } => empty_ratio,
-            Verdict::TooSmall { shorter_side_px } => shorter_side_px as f64,
+            FilterVerdict::Kept { empty_ratio } | FilterVerdict::TooSparse { empty_ratio } => {
+                empty_ratio
+            }
+            FilterVerdict::TooSmall { shorter_side_px } => shorter_side_px as f64,
         }
     }
 
     /// Whether the photo stays in the dataset.
     pub fn is_kept(&self) -> bool {
-        matches!(self, Verdict::Kept { .. })
+        matches!(self, FilterVerdict::Kept { .. })
     }
 }
 
 impl Filters {
     /// The size check, done before rendering (a too-small photo costs no render).
-    pub fn check_size(&self, width: u64, height: u64) -> Option<Verdict> {
+    pub fn check_size(&self, width: u64, height: u64) -> Option<FilterVerdict> {
         let side = width.min(height);
-        (side < self.min_photo_side as u64).then_some(Verdict::TooSmall {
+        (side < self.min_photo_side as u64).then_some(FilterVerdict::TooSmall {
             shorter_side_px: side as u32,
         })
     }
 
     /// The sparsity check on a render.
-    pub fn check_render(&self, empty_ratio: f64) -> Verdict {
+    pub fn check_render(&self, empty_ratio: f64) -> FilterVerdict {
         if empty_ratio > self.max_empty_ratio {
-            Verdict::TooSparse { empty_ratio }
+            FilterVerdict::TooSparse { empty_ratio }
         } else {
-            Verdict::Kept { empty_ratio }
+            FilterVerdict::Kept { empty_ratio }
         }
     }
 }

@@ -8,7 +8,7 @@ use nrw_stereo::FusionOptions;
 
 use super::config::DensifyConfig;
 use super::maps::{map_path, read_map, write_cfgs};
-use super::outcome::{DensifyReport, ViewOutcome, ViewVerdict};
+use super::outcome::{DensifyReport, DensifyVerdict, ViewOutcome};
 use super::plan::{last_map, pass_done, Prepared};
 use super::record::publish;
 use super::views::{load_rgb, Entry, Plan};
@@ -64,7 +64,7 @@ pub(super) fn finish(
     }
     let mut verdicts = prep.verdicts.clone();
     for (p, pixels) in prep.plan.iter().zip(pixels) {
-        verdicts[p.0] = Some(ViewVerdict::Densified { pixels });
+        verdicts[p.0] = Some(DensifyVerdict::Densified { pixels });
     }
     Ok(DensifyReport {
         out: prep.out.clone(),

@@ -42,7 +42,7 @@ use views::{entries, undistort_views};
 pub use config::{
     DensifyConfig, DEFAULT_FUSION_CACHE_MB, DEFAULT_MAX_IMAGE_SIZE, DEFAULT_MAX_SOURCES,
 };
-pub use outcome::{DensifyReport, UnitReport, ViewOutcome, ViewVerdict};
+pub use outcome::{DensifyReport, DensifyVerdict, UnitReport, ViewOutcome};
 
 /// Which part of densify an invocation does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

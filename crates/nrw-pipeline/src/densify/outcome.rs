@@ -6,7 +6,7 @@ use crate::Unit;
 
 /// Why a view has (or has no) depth map.
 #[derive(Debug, Clone, PartialEq)]
-pub enum ViewVerdict {
+pub enum DensifyVerdict {
     /// Depth kept at `pixels` pixels of the final map.
     Densified { pixels: usize },
     /// No other view shares enough points at a wide enough angle.
@@ -24,7 +24,7 @@ pub struct ViewOutcome {
     pub name: String,
     pub width: u64,
     pub height: u64,
-    pub verdict: ViewVerdict,
+    pub verdict: DensifyVerdict,
 }
 
 /// What densify did (the whole stage, or `finalize` after its work units).
@@ -42,7 +42,7 @@ impl DensifyReport {
     pub fn densified(&self) -> usize {
         self.views
             .iter()
-            .filter(|v| matches!(v.verdict, ViewVerdict::Densified { .. }))
+            .filter(|v| matches!(v.verdict, DensifyVerdict::Densified { .. }))
             .count()
     }
 }

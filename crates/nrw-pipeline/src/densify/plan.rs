@@ -13,7 +13,7 @@ use super::maps::{
     map_path, photometric_map, photometric_unfinished, read_hypotheses, write_hypotheses,
     write_maps,
 };
-use super::outcome::ViewVerdict;
+use super::outcome::DensifyVerdict;
 use super::remote::Remote;
 use super::views::{load_view, Entry, Plan};
 use crate::error::{PipelineError, Result};
@@ -27,7 +27,7 @@ pub(super) fn plan(
     rec: &Reconstruction,
     entries: &[Entry],
     unreadable: &BTreeMap<String, String>,
-) -> (Vec<Plan>, Vec<Option<ViewVerdict>>) {
+) -> (Vec<Plan>, Vec<Option<DensifyVerdict>>) {
     let sources = nrw_colmap::overlap::source_images(
         rec,
         cfg.max_sources,
@@ -48,7 +48,7 @@ pub(super) fn plan(
     let mut verdicts = Vec::with_capacity(entries.len());
     for (i, e) in entries.iter().enumerate() {
         if let Some(why) = unreadable.get(&e.name) {
-            verdicts.push(Some(ViewVerdict::Unreadable(why.clone())));
+            verdicts.push(Some(DensifyVerdict::Unreadable(why.clone())));
             continue;
         }
         let srcs: Vec<usize> = sources[&e.image_id]
@@ -57,8 +57,8 @@ pub(super) fn plan(
             .map(|id| index[id])
             .collect();
         verdicts.push(match ranges[&e.image_id] {
-            _ if srcs.is_empty() => Some(ViewVerdict::NoSourceView),
-            None => Some(ViewVerdict::NoDepthRange),
+            _ if srcs.is_empty() => Some(DensifyVerdict::NoSourceView),
+            None => Some(DensifyVerdict::NoDepthRange),
             Some(range) => {
                 plan.push((i, srcs, range));
                 None
@@ -282,6 +282,6 @@ pub(super) struct Prepared {
     pub(super) entries: Vec<Entry>,
     pub(super) plan: Vec<Plan>,
     /// The verdict of each view stereo does not run on (`None` for planned views).
-    pub(super) verdicts: Vec<Option<ViewVerdict>>,
+    pub(super) verdicts: Vec<Option<DensifyVerdict>>,
     pub(super) undistort_seconds: Option<f64>,
 }

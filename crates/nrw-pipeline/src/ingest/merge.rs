@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use nrw_dataset::photo_info::PhotoRecord;
-use nrw_dataset::scene::VerdictKind;
+use nrw_dataset::scene::ImageVerdict;
 use nrw_dataset::units::{self, GroupRecord, UnitRecord};
 use nrw_dataset::{
     FileEntry, ImageOutcome, Manifest, Store, Tool, SCHEMA_VERSION, VERDICT_UNREADABLE,
@@ -257,9 +257,9 @@ fn summary(
         units,
         registered: outcomes.len(),
         kept: count(outcomes, nrw_dataset::scene::VERDICT_KEPT),
-        too_small: count(outcomes, VerdictKind::TooSmall.name()),
-        too_sparse: count(outcomes, VerdictKind::TooSparse.name()),
-        too_blurry: count(outcomes, VerdictKind::TooBlurry.name()),
+        too_small: count(outcomes, ImageVerdict::TooSmall.name()),
+        too_sparse: count(outcomes, ImageVerdict::TooSparse.name()),
+        too_blurry: count(outcomes, ImageVerdict::TooBlurry.name()),
         unreadable: count(outcomes, VERDICT_UNREADABLE),
         duplicate_groups: members
             .iter()
@@ -282,22 +282,22 @@ mod tests {
 
     #[test]
     fn the_renderers_verdicts_are_words_of_the_images_table() {
-        use nrw_render::verdict::Verdict;
+        use nrw_render::verdict::FilterVerdict;
         for (v, kind) in [
-            (Verdict::Kept { empty_ratio: 0.1 }, VerdictKind::Kept),
+            (FilterVerdict::Kept { empty_ratio: 0.1 }, ImageVerdict::Kept),
             (
-                Verdict::TooSmall { shorter_side_px: 9 },
-                VerdictKind::TooSmall,
+                FilterVerdict::TooSmall { shorter_side_px: 9 },
+                ImageVerdict::TooSmall,
             ),
             (
-                Verdict::TooSparse { empty_ratio: 0.9 },
-                VerdictKind::TooSparse,
+                FilterVerdict::TooSparse { empty_ratio: 0.9 },
+                ImageVerdict::TooSparse,
             ),
         ] {
-            assert_eq!(VerdictKind::of(v.name()), Some(kind));
+            assert_eq!(ImageVerdict::of(v.name()), Some(kind));
         }
-        for k in VerdictKind::ALL {
-            assert_eq!(VerdictKind::of(k.name()), Some(k));
+        for k in ImageVerdict::ALL {
+            assert_eq!(ImageVerdict::of(k.name()), Some(k));
         }
     }
 }

@@ -5,10 +5,10 @@ use image::RgbImage;
 use nrw_dataset::codec::{
     encode_color_render, encode_normals, encode_rgb, load_photo, resize_photo,
 };
-use nrw_dataset::scene::VerdictKind;
+use nrw_dataset::scene::ImageVerdict;
 use nrw_dataset::units::{self, GroupImage, GroupRecord};
 use nrw_dataset::{FileEntry, ImageOutcome, PhotoSignals, Store, ViewRow};
-use nrw_render::{render, render_size, Verdict, View};
+use nrw_render::{render, render_size, FilterVerdict, View};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result};
@@ -28,7 +28,7 @@ pub(super) fn done_group(out: &Store, g: usize, fingerprint: &str) -> Option<Gro
 }
 
 pub(super) fn outcome(
-    verdict: &Verdict,
+    verdict: &FilterVerdict,
     empty: Option<f64>,
     size: Option<(u32, u32)>,
 ) -> ImageOutcome {
@@ -48,7 +48,7 @@ pub(super) fn outcome(
 /// stays measured (empty ratio, size), the verdict's value is the sharpness.
 fn too_blurry(rendered: ImageOutcome, signals: PhotoSignals, min: f64) -> ImageOutcome {
     ImageOutcome {
-        verdict: VerdictKind::TooBlurry.name().into(),
+        verdict: ImageVerdict::TooBlurry.name().into(),
         verdict_value: signals.sharpness,
         detail: Some(format!(
             "sharpness {:.1} is under --min-sharpness {min}",
@@ -151,7 +151,7 @@ pub(super) fn process(
     let empty = buf.empty_ratio();
     let verdict = cfg.filters.check_render(empty);
     let o = outcome(&verdict, Some(empty), Some((w, h)));
-    if !matches!(verdict, Verdict::Kept { .. }) {
+    if !matches!(verdict, FilterVerdict::Kept { .. }) {
         return Ok((o, None));
     }
     // Kept: record its depth range (export's depth scale and QA's depth plots read it).

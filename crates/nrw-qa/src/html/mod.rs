@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use nrw_dataset::reader::Dataset;
-use nrw_dataset::scene::VerdictKind;
+use nrw_dataset::scene::ImageVerdict;
 
 use crate::error::Result;
 use crate::plots;
@@ -152,20 +152,20 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
         h.push_str("<p class=\"ok\">No photo was dropped.</p>");
         return Ok(());
     }
-    let reason = |r: &str| match VerdictKind::of(r) {
-        Some(VerdictKind::TooSmall) => {
+    let reason = |r: &str| match ImageVerdict::of(r) {
+        Some(ImageVerdict::TooSmall) => {
             format!("photo shorter side under {:.0} px", inp.min_side)
         }
-        Some(VerdictKind::TooSparse) => {
+        Some(ImageVerdict::TooSparse) => {
             format!("render more than {:.0}% empty", inp.max_empty * 100.0)
         }
-        Some(VerdictKind::Unreadable) => {
+        Some(ImageVerdict::Unreadable) => {
             "photo or label map cannot be decoded whole: empty, truncated or corrupt".into()
         }
-        Some(VerdictKind::TooBlurry) => {
+        Some(ImageVerdict::TooBlurry) => {
             "sharpness (variance of the Laplacian) under --min-sharpness".into()
         }
-        Some(VerdictKind::Kept) | None => r.to_string(),
+        Some(ImageVerdict::Kept) | None => r.to_string(),
     };
     h.push_str("<div class=\"charts\"><table><tr><th>reason</th><th>photos</th></tr>");
     for (r, n) in &f.drops {
@@ -194,12 +194,12 @@ fn drops(h: &mut String, inp: &Inputs) -> Result<()> {
         .filter(|r| r.verdict != nrw_dataset::scene::VERDICT_KEPT)
         .take(6)
     {
-        let measured = match VerdictKind::of(&r.verdict) {
-            Some(VerdictKind::TooSparse) => format!("{:.1}% empty", r.verdict_value * 100.0),
-            Some(VerdictKind::TooSmall) => format!("{:.0} px shorter side", r.verdict_value),
-            Some(VerdictKind::Unreadable) => r.verdict_detail.clone().unwrap_or_default(),
-            Some(VerdictKind::TooBlurry) => format!("sharpness {:.1}", r.verdict_value),
-            Some(VerdictKind::Kept) | None => format!("{}", r.verdict_value),
+        let measured = match ImageVerdict::of(&r.verdict) {
+            Some(ImageVerdict::TooSparse) => format!("{:.1}% empty", r.verdict_value * 100.0),
+            Some(ImageVerdict::TooSmall) => format!("{:.0} px shorter side", r.verdict_value),
+            Some(ImageVerdict::Unreadable) => r.verdict_detail.clone().unwrap_or_default(),
+            Some(ImageVerdict::TooBlurry) => format!("sharpness {:.1}", r.verdict_value),
+            Some(ImageVerdict::Kept) | None => format!("{}", r.verdict_value),
         };
         let caption = format!("{} — {} ({measured})", r.name, r.verdict);
         strip.push_str(&photo_figure(inp, &r.name, &caption));

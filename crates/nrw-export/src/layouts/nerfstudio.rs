@@ -105,6 +105,12 @@ pub fn camera_keys(v: &ViewRow) -> Result<Map<String, Value>> {
             ))
         }
     };
+    Ok(opencv_keys(v, f, rest, fisheye))
+}
+
+/// nerfstudio's keys of an OPENCV (or, `fisheye`, OPENCV_FISHEYE) camera: size, focal
+/// lengths and principal point `f`, and the four distortion coefficients `rest`.
+fn opencv_keys(v: &ViewRow, f: [f64; 4], rest: [f64; 4], fisheye: bool) -> Map<String, Value> {
     let mut m = Map::new();
     m.insert("w".into(), v.width.into());
     m.insert("h".into(), v.height.into());
@@ -123,7 +129,7 @@ pub fn camera_keys(v: &ViewRow) -> Result<Map<String, Value>> {
         "camera_model".into(),
         if fisheye { "OPENCV_FISHEYE" } else { "OPENCV" }.into(),
     );
-    Ok(m)
+    m
 }
 
 /// The frame's `transform_matrix`: camera-to-world, OpenGL axes, nerfstudio's world frame.

@@ -421,32 +421,7 @@ fn triplets(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<()> {
             "style descriptors (PCA) by split",
             &by_split.into_iter().collect::<Vec<_>>(),
         )?);
-        // Synthetic scenes know each photo's true appearance.
-        let truth = Path::new(&inp.manifest.scene.scene_dir).join(nrw_synth::truth::APPEARANCE);
-        if let Some(labels) = std::fs::read_to_string(&truth)
-            .ok()
-            .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
-        {
-            let label_of = |name: &str| {
-                labels.as_array().and_then(|a| {
-                    a.iter()
-                        .find(|t| t["name"].as_str() == Some(name))
-                        .and_then(|t| t["label"].as_str().map(str::to_string))
-                })
-            };
-            let mut by_class: std::collections::BTreeMap<String, Vec<(f64, f64)>> =
-                Default::default();
-            for (r, p) in desc.iter().zip(&xy) {
-                by_class
-                    .entry(label_of(&r.name).unwrap_or_else(|| "unknown".into()))
-                    .or_default()
-                    .push(*p);
-            }
-            h.push_str(&plots::scatter(
-                "style descriptors (PCA) by true appearance",
-                &by_class.into_iter().collect::<Vec<_>>(),
-            )?);
-        }
+        true_appearance(h, inp, desc, &xy)?;
         h.push_str("</div>");
     } else {
         h.push_str("<p>No style descriptors yet (run <code>nrw-etl style</code>).</p>");
@@ -478,6 +453,40 @@ fn triplets(h: &mut String, inp: &Inputs, ds: Option<&Dataset>) -> Result<()> {
             }
         }
         h.push_str("</div>");
+    }
+    Ok(())
+}
+
+/// Synthetic scenes know each photo's true appearance: the descriptors' PCA plotted by it.
+fn true_appearance(
+    h: &mut String,
+    inp: &Inputs,
+    desc: &[nrw_dataset::descriptors::Entry],
+    xy: &[(f64, f64)],
+) -> Result<()> {
+    let truth = Path::new(&inp.manifest.scene.scene_dir).join(nrw_synth::truth::APPEARANCE);
+    if let Some(labels) = std::fs::read_to_string(&truth)
+        .ok()
+        .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
+    {
+        let label_of = |name: &str| {
+            labels.as_array().and_then(|a| {
+                a.iter()
+                    .find(|t| t["name"].as_str() == Some(name))
+                    .and_then(|t| t["label"].as_str().map(str::to_string))
+            })
+        };
+        let mut by_class: std::collections::BTreeMap<String, Vec<(f64, f64)>> = Default::default();
+        for (r, p) in desc.iter().zip(xy) {
+            by_class
+                .entry(label_of(&r.name).unwrap_or_else(|| "unknown".into()))
+                .or_default()
+                .push(*p);
+        }
+        h.push_str(&plots::scatter(
+            "style descriptors (PCA) by true appearance",
+            &by_class.into_iter().collect::<Vec<_>>(),
+        )?);
     }
     Ok(())
 }

@@ -68,10 +68,48 @@ struct PairInfo {
 }
 
 /// What view i shares with one later view so far: points, the central match, the boxes.
+#[derive(Clone, Copy)]
 struct Shared {
     common: u64,
     central: Candidate,
     boxes: [Bbox; 2],
+}
+
+impl Shared {
+    const NONE: Shared = Shared {
+        common: 0,
+        central: (0.0, 0, [0.0; 2], [0.0; 2]),
+        boxes: [Bbox::EMPTY; 2],
+    };
+}
+
+/// One tally per view, kept between views (a thread's own): a view's pairs cost the views
+/// it shares points with, not a fresh array of N.
+#[derive(Default)]
+struct PairScratch {
+    shared: Vec<Shared>,
+    touched: Vec<usize>,
+}
+
+impl PairScratch {
+    /// Room for `n` views.
+    fn fit(&mut self, n: usize) {
+        if self.shared.len() < n {
+            self.shared.resize(n, Shared::NONE);
+        }
+    }
+
+    /// Every tally back to none.
+    fn clear(&mut self) {
+        for &j in &self.touched {
+            self.shared[j] = Shared::NONE;
+        }
+        self.touched.clear();
+    }
+}
+
+thread_local! {
+    static PAIR_SCRATCH: std::cell::RefCell<PairScratch> = std::cell::RefCell::default();
 }
 
 /// An axis-aligned box of image positions, grown a point at a time.
@@ -333,10 +371,13 @@ impl SceneInfo {
     /// of the two overlaps, and the central match (the shared point nearest view i's
     /// principal point; the smaller point id on a tie). Costs the track lengths of i's points.
     fn pairs_of(&self, i: usize) -> Vec<PairInfo> {
+        PAIR_SCRATCH.with_borrow_mut(|scratch| self.pairs_with(i, scratch))
+    }
+
+    /// [`Self::pairs_of`] with the per-view tallies of `scratch`, which are left empty.
+    fn pairs_with(&self, i: usize, scratch: &mut PairScratch) -> Vec<PairInfo> {
         let (cx, cy) = (self.intrinsics[i][0][2], self.intrinsics[i][1][2]);
-        // Only the views that share a point with i: a view's pairs, not the whole collection,
-        // so the pairs of every view cost the covisible pairs and not N².
-        let mut shared: BTreeMap<usize, Shared> = BTreeMap::new();
+        scratch.fit(self.len());
         for (id, v) in &self.points3d_id_to_2d[i] {
             let DictValue::Pair(p) = *v else {
                 unreachable!("positions are pairs")
@@ -346,11 +387,11 @@ impl SceneInfo {
                 if j <= i {
                     continue;
                 }
-                let s = shared.entry(j).or_insert(Shared {
-                    common: 0,
-                    central: (d2, *id, p, q),
-                    boxes: [Bbox::EMPTY; 2],
-                });
+                let s = &mut scratch.shared[j];
+                if s.common == 0 {
+                    scratch.touched.push(j);
+                    s.central = (d2, *id, p, q);
+                }
                 s.common += 1;
                 s.boxes[0].add(p);
                 s.boxes[1].add(q);
@@ -360,9 +401,12 @@ impl SceneInfo {
                 }
             }
         }
-        shared
-            .into_iter()
-            .map(|(j, s)| {
+        scratch.touched.sort_unstable();
+        let pairs = scratch
+            .touched
+            .iter()
+            .map(|&j| {
+                let s = &scratch.shared[j];
                 let (_, _, p, q) = s.central;
                 let share = |k: usize| s.common as f64 / self.n_points3d[k] as f64;
                 PairInfo {
@@ -373,7 +417,9 @@ impl SceneInfo {
                     boxes: s.boxes,
                 }
             })
-            .collect()
+            .collect();
+        scratch.clear();
+        pairs
     }
 
     /// The keys LoFTR's and RoMa's files share with scene_info: image and depth paths (lists

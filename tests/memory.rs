@@ -430,13 +430,9 @@ fn a_square_term_below_the_peak_is_seen_and_a_linear_one_is_not() {
 
 /// Bytes of the files under `dir`.
 fn folder_bytes(dir: &Path) -> f64 {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .map(|e| match e.file_type().unwrap().is_dir() {
-            true => folder_bytes(&e.path()),
-            false => e.metadata().unwrap().len() as f64,
-        })
+    super::walk(dir)
+        .iter()
+        .map(|p| std::fs::metadata(p).unwrap().len() as f64)
         .sum()
 }
 

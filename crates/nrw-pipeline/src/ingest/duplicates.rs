@@ -181,13 +181,27 @@ impl Working<'_> {
 
 /// Correlation of `from`'s pixels with where they land in `to` (a rotation between the two
 /// cameras, the centres taken as one), and the fraction of `from`'s pixels that land in it.
-/// The pixel pairs are made twice (means, then co-moments) rather than held: a group of m
-/// copies compares m² pairs, and nothing a comparison makes outlives it.
+/// The pixel pairs are made twice (count and sums, then co-moments) rather than held: a
+/// group of m copies compares m² pairs, and nothing a comparison makes outlives it.
 fn aligned_ncc(from: &Working, to: &Working) -> (f64, f64) {
-    let mut n = 0usize;
-    aligned_pairs(from, to, &mut |_, _| n += 1);
+    let (mut n, mut sum_a, mut sum_b) = (0usize, 0.0, 0.0);
+    aligned_pairs(from, to, &mut |a, b| {
+        n += 1;
+        sum_a += a;
+        sum_b += b;
+    });
     let overlap = n as f64 / (from.w * from.h) as f64;
-    (pearson(n, &|f| aligned_pairs(from, to, f)), overlap)
+    if n < 16 {
+        return (0.0, overlap);
+    }
+    let (ma, mb) = (sum_a / n as f64, sum_b / n as f64);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    aligned_pairs(from, to, &mut |a, b| {
+        sab += (a - ma) * (b - mb);
+        saa += (a - ma) * (a - ma);
+        sbb += (b - mb) * (b - mb);
+    });
+    (pearson(sab, saa, sbb), overlap)
 }
 
 /// Calls `f` with each of `from`'s grey levels and the level where it lands in `to`, in
@@ -213,27 +227,8 @@ fn aligned_pairs(from: &Working, to: &Working, f: &mut dyn FnMut(f64, f64)) {
     }
 }
 
-/// Makes a sequence of pairs again, in one order, for each call: the sink is called per pair.
-type Pairs<'a> = dyn Fn(&mut dyn FnMut(f64, f64)) + 'a;
-
-/// Pearson correlation of the `n` pairs that `pairs` makes; 0 when either side is flat or
-/// there are too few.
-fn pearson(n: usize, pairs: &Pairs) -> f64 {
-    if n < 16 {
-        return 0.0;
-    }
-    let n = n as f64;
-    let (mut ma, mut mb) = (0.0, 0.0);
-    pairs(&mut |a, b| {
-        ma += a / n;
-        mb += b / n;
-    });
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    pairs(&mut |a, b| {
-        sab += (a - ma) * (b - mb);
-        saa += (a - ma) * (a - ma);
-        sbb += (b - mb) * (b - mb);
-    });
+/// Pearson correlation from the co-moments about the means; 0 when either side is flat.
+fn pearson(sab: f64, saa: f64, sbb: f64) -> f64 {
     if saa <= 1e-9 || sbb <= 1e-9 {
         return 0.0;
     }

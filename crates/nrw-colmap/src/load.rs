@@ -220,6 +220,26 @@ pub fn model_from_bytes(format: Format, files: &ModelFiles) -> Result<Reconstruc
 
 /// Cross-reference checks: every id a record names must exist, and tracks must match keypoints.
 fn validate(rec: &mut Reconstruction, imgs: &Path, pts: &Path, frames: &Path) -> Result<()> {
+    let keypoint_links = check_images(rec, imgs)?;
+    let track_links = check_tracks(rec, pts)?;
+    if track_links != keypoint_links {
+        return Err(ColmapError::invalid(
+            imgs,
+            Record::File,
+            "points2D.point3D_id",
+            format!(
+                "{keypoint_links} keypoints name a 3D point but the tracks list {track_links} observations"
+            ),
+        ));
+    }
+    let warnings = check_frames(rec, frames)?;
+    rec.warnings.extend(warnings);
+    Ok(())
+}
+
+/// Each image's camera, name and keypoints' 3D points exist and its name is unique; returns
+/// how many keypoints name a 3D point.
+fn check_images(rec: &Reconstruction, imgs: &Path) -> Result<usize> {
     let mut names: HashMap<&str, u32> = HashMap::with_capacity(rec.images.len());
     let mut keypoint_links = 0usize;
     for img in rec.images.values() {
@@ -266,6 +286,12 @@ fn validate(rec: &mut Reconstruction, imgs: &Path, pts: &Path, frames: &Path) ->
             }
         }
     }
+    Ok(keypoint_links)
+}
+
+/// Each track element names an existing image and keypoint, and that keypoint names the
+/// point back; returns how many elements the tracks hold.
+fn check_tracks(rec: &Reconstruction, pts: &Path) -> Result<usize> {
     let mut track_links = 0usize;
     for p in rec.points.values() {
         let r = Record::Id {
@@ -317,16 +343,12 @@ fn validate(rec: &mut Reconstruction, imgs: &Path, pts: &Path, frames: &Path) ->
             track_links += 1;
         }
     }
-    if track_links != keypoint_links {
-        return Err(ColmapError::invalid(
-            imgs,
-            Record::File,
-            "points2D.point3D_id",
-            format!(
-                "{keypoint_links} keypoints name a 3D point but the tracks list {track_links} observations"
-            ),
-        ));
-    }
+    Ok(track_links)
+}
+
+/// Each frame's rig and images exist; a warning for each image whose stored pose differs
+/// from the one its frame and rig compose (COLMAP 4 derives it from them).
+fn check_frames(rec: &Reconstruction, frames: &Path) -> Result<Vec<Warning>> {
     let mut warnings: Vec<Warning> = Vec::new();
     let rig_sensors: BTreeMap<u32, _> = rec.rigs.iter().map(|(id, r)| (*id, r)).collect();
     for f in rec.frames.values() {
@@ -390,6 +412,5 @@ fn validate(rec: &mut Reconstruction, imgs: &Path, pts: &Path, frames: &Path) ->
             }
         }
     }
-    rec.warnings.extend(warnings);
-    Ok(())
+    Ok(warnings)
 }

@@ -289,67 +289,11 @@ pub fn read_ply_into<R: std::io::BufRead>(
     let header = reader.header().clone();
     for (index, elem) in header.elem_defs.iter().enumerate() {
         if elem.name != "vertex" {
-            let bad = |problem: String| {
-                ColmapError::invalid(
-                    path,
-                    Record::Nth {
-                        kind: "element",
-                        index: index as u64,
-                        id: None,
-                    },
-                    elem.name.clone(),
-                    problem,
-                )
-            };
-            // Every row takes at least a byte unless the element has no property; then its
-            // rows take none and a count in the billions would spin (found by fuzzing).
-            if elem.properties.is_empty() && elem.count as u64 > file_len {
-                return Err(bad(format!(
-                    "{} rows without properties in a {file_len}-byte file",
-                    elem.count
-                )));
-            }
-            reader
-                .next_element::<SkipRows>()
-                .map_err(|e| bad(format!("cannot skip element: {e}")))?;
+            skip_element(&mut reader, elem, index, path, file_len)?;
             continue;
         }
+        check_vertex_properties(elem, path)?;
         let has = |n: &str| elem.properties.iter().any(|p| p.name == n);
-        for p in &elem.properties {
-            if matches!(p.property_type, PropertyType::List { .. })
-                && ["x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"]
-                    .contains(&p.name.as_str())
-            {
-                return Err(ColmapError::invalid(
-                    path,
-                    Record::File,
-                    p.name.clone(),
-                    "is a list property; a scalar is expected",
-                ));
-            }
-        }
-        for n in ["x", "y", "z"] {
-            if !has(n) {
-                return Err(ColmapError::invalid(
-                    path,
-                    Record::File,
-                    n,
-                    "vertex element has no such property",
-                ));
-            }
-        }
-        for group in [["nx", "ny", "nz"], ["red", "green", "blue"]] {
-            let present = group.iter().filter(|n| has(n)).count();
-            if present != 0 && present != 3 {
-                let missing: Vec<_> = group.iter().filter(|n| !has(n)).copied().collect();
-                return Err(ColmapError::invalid(
-                    path,
-                    Record::File,
-                    missing.join(", "),
-                    format!("vertex has only part of {{{}}}", group.join(", ")),
-                ));
-            }
-        }
         // Never trust the header's count for allocation: a row takes at least one byte a property.
         let min_row = elem.properties.len().max(1) as u64;
         let capacity = (elem.count as u64).min(file_len / min_row) as usize;
@@ -407,6 +351,82 @@ pub fn read_ply_into<R: std::io::BufRead>(
         "element vertex",
         "the file has no vertex element",
     ))
+}
+
+/// Read past an element that is not the vertices, refusing a count of property-less rows
+/// larger than the file (its rows take no bytes, so such a count would spin).
+fn skip_element<R: std::io::BufRead>(
+    reader: &mut PlyReader<R>,
+    elem: &serde_ply::ElementDef,
+    index: usize,
+    path: &Path,
+    file_len: u64,
+) -> Result<()> {
+    let bad = |problem: String| {
+        ColmapError::invalid(
+            path,
+            Record::Nth {
+                kind: "element",
+                index: index as u64,
+                id: None,
+            },
+            elem.name.clone(),
+            problem,
+        )
+    };
+    // Every row takes at least a byte unless the element has no property; then its rows
+    // take none and a count in the billions would spin (found by fuzzing).
+    if elem.properties.is_empty() && elem.count as u64 > file_len {
+        return Err(bad(format!(
+            "{} rows without properties in a {file_len}-byte file",
+            elem.count
+        )));
+    }
+    reader
+        .next_element::<SkipRows>()
+        .map_err(|e| bad(format!("cannot skip element: {e}")))?;
+    Ok(())
+}
+
+/// The vertex element's properties a cloud is read from: x, y and z present, normals and
+/// colours all three or none, and none of them a list.
+fn check_vertex_properties(elem: &serde_ply::ElementDef, path: &Path) -> Result<()> {
+    let has = |n: &str| elem.properties.iter().any(|p| p.name == n);
+    for p in &elem.properties {
+        if matches!(p.property_type, PropertyType::List { .. })
+            && ["x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"].contains(&p.name.as_str())
+        {
+            return Err(ColmapError::invalid(
+                path,
+                Record::File,
+                p.name.clone(),
+                "is a list property; a scalar is expected",
+            ));
+        }
+    }
+    for n in ["x", "y", "z"] {
+        if !has(n) {
+            return Err(ColmapError::invalid(
+                path,
+                Record::File,
+                n,
+                "vertex element has no such property",
+            ));
+        }
+    }
+    for group in [["nx", "ny", "nz"], ["red", "green", "blue"]] {
+        let present = group.iter().filter(|n| has(n)).count();
+        if present != 0 && present != 3 {
+            let missing: Vec<_> = group.iter().filter(|n| !has(n)).copied().collect();
+            return Err(ColmapError::invalid(
+                path,
+                Record::File,
+                missing.join(", "),
+                format!("vertex has only part of {{{}}}", group.join(", ")),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Write a cloud as binary little-endian PLY in COLMAP's fused.ply layout (float x y z,

@@ -209,32 +209,7 @@ pub(crate) fn read_images(
             line: pline,
             id: Some(id as u64),
         };
-        let mut pt = Tokens::new(path, prec, pl);
-        let mut points2d = Vec::new();
-        let mut k = 0usize;
-        while let Some(xs) = pt.it.next() {
-            let field = |f: &str| format!("POINTS2D[{k}].{f}");
-            let x = Tokens::new(path, prec, xs).finite(&field("X"))?;
-            let y = pt.finite(&field("Y"))?;
-            let pid: i64 = pt.num(&field("POINT3D_ID"))?;
-            let point3d_id = match pid {
-                -1 => NO_POINT3D,
-                p if p >= 0 => p as u64,
-                p => {
-                    return Err(ColmapError::invalid(
-                        path,
-                        prec,
-                        field("POINT3D_ID"),
-                        format!("must be -1 or a point id, found {p}"),
-                    ))
-                }
-            };
-            points2d.push(Point2D {
-                xy: DVec2::new(x, y),
-                point3d_id,
-            });
-            k += 1;
-        }
+        let points2d = read_points2d(path, prec, pl)?;
         let img = Image {
             id,
             name,
@@ -249,6 +224,37 @@ pub(crate) fn read_images(
         }
     }
     Ok(out)
+}
+
+/// An image's keypoint line: (X, Y, POINT3D_ID) triples, −1 for a keypoint without a point.
+fn read_points2d(path: &Path, prec: Record, pl: &str) -> Result<Vec<Point2D>> {
+    let mut pt = Tokens::new(path, prec, pl);
+    let mut points2d = Vec::new();
+    let mut k = 0usize;
+    while let Some(xs) = pt.it.next() {
+        let field = |f: &str| format!("POINTS2D[{k}].{f}");
+        let x = Tokens::new(path, prec, xs).finite(&field("X"))?;
+        let y = pt.finite(&field("Y"))?;
+        let pid: i64 = pt.num(&field("POINT3D_ID"))?;
+        let point3d_id = match pid {
+            -1 => NO_POINT3D,
+            p if p >= 0 => p as u64,
+            p => {
+                return Err(ColmapError::invalid(
+                    path,
+                    prec,
+                    field("POINT3D_ID"),
+                    format!("must be -1 or a point id, found {p}"),
+                ))
+            }
+        };
+        points2d.push(Point2D {
+            xy: DVec2::new(x, y),
+            point3d_id,
+        });
+        k += 1;
+    }
+    Ok(points2d)
 }
 
 /// points3D.txt

@@ -55,6 +55,29 @@ pub fn write_model(rec: &Reconstruction, dir: &Path, format: Format) -> std::io:
 }
 
 fn binary(rec: &Reconstruction) -> Vec<(&'static str, Vec<u8>)> {
+    files(
+        rec,
+        [cameras_bin, images_bin, points_bin, rigs_bin, frames_bin],
+    )
+}
+
+/// A model's files by stem, each made by its encoder: cameras, images and points3D, then
+/// rigs and frames for a COLMAP 4 model.
+fn files<T>(
+    rec: &Reconstruction,
+    encoders: [fn(&Reconstruction) -> T; 5],
+) -> Vec<(&'static str, T)> {
+    let count = if rec.is_colmap4() { 5 } else { 3 };
+    ["cameras", "images", "points3D", "rigs", "frames"]
+        .into_iter()
+        .zip(encoders)
+        .take(count)
+        .map(|(stem, encode)| (stem, encode(rec)))
+        .collect()
+}
+
+/// cameras.bin.
+fn cameras_bin(rec: &Reconstruction) -> Vec<u8> {
     let mut cams = Vec::new();
     cams.extend_from_slice(&(rec.cameras.len() as u64).to_le_bytes());
     for c in rec.cameras.values() {
@@ -66,6 +89,11 @@ fn binary(rec: &Reconstruction) -> Vec<(&'static str, Vec<u8>)> {
             cams.extend_from_slice(&p.to_le_bytes());
         }
     }
+    cams
+}
+
+/// images.bin.
+fn images_bin(rec: &Reconstruction) -> Vec<u8> {
     let mut imgs = Vec::new();
     imgs.extend_from_slice(&(rec.images.len() as u64).to_le_bytes());
     for i in rec.images.values() {
@@ -81,6 +109,11 @@ fn binary(rec: &Reconstruction) -> Vec<(&'static str, Vec<u8>)> {
             imgs.extend_from_slice(&p.point3d_id.to_le_bytes());
         }
     }
+    imgs
+}
+
+/// points3D.bin.
+fn points_bin(rec: &Reconstruction) -> Vec<u8> {
     let mut pts = Vec::new();
     pts.extend_from_slice(&(rec.points.len() as u64).to_le_bytes());
     for p in rec.points.values() {
@@ -96,47 +129,60 @@ fn binary(rec: &Reconstruction) -> Vec<(&'static str, Vec<u8>)> {
             pts.extend_from_slice(&el.point2d_idx.to_le_bytes());
         }
     }
-    let mut out = vec![("cameras", cams), ("images", imgs), ("points3D", pts)];
-    if rec.is_colmap4() {
-        let mut rigs = Vec::new();
-        rigs.extend_from_slice(&(rec.rigs.len() as u64).to_le_bytes());
-        for r in rec.rigs.values() {
-            rigs.extend_from_slice(&r.id.to_le_bytes());
-            let n = r.ref_sensor.map_or(0, |_| 1 + r.sensors.len()) as u32;
-            rigs.extend_from_slice(&n.to_le_bytes());
-            if let Some(s) = r.ref_sensor {
+    pts
+}
+
+/// rigs.bin (COLMAP 4).
+fn rigs_bin(rec: &Reconstruction) -> Vec<u8> {
+    let mut rigs = Vec::new();
+    rigs.extend_from_slice(&(rec.rigs.len() as u64).to_le_bytes());
+    for r in rec.rigs.values() {
+        rigs.extend_from_slice(&r.id.to_le_bytes());
+        let n = r.ref_sensor.map_or(0, |_| 1 + r.sensors.len()) as u32;
+        rigs.extend_from_slice(&n.to_le_bytes());
+        if let Some(s) = r.ref_sensor {
+            rigs.extend_from_slice(&s.kind.to_le_bytes());
+            rigs.extend_from_slice(&s.id.to_le_bytes());
+            for (s, pose) in &r.sensors {
                 rigs.extend_from_slice(&s.kind.to_le_bytes());
                 rigs.extend_from_slice(&s.id.to_le_bytes());
-                for (s, pose) in &r.sensors {
-                    rigs.extend_from_slice(&s.kind.to_le_bytes());
-                    rigs.extend_from_slice(&s.id.to_le_bytes());
-                    rigs.push(pose.is_some() as u8);
-                    if let Some(p) = pose {
-                        pose_le(&mut rigs, p);
-                    }
+                rigs.push(pose.is_some() as u8);
+                if let Some(p) = pose {
+                    pose_le(&mut rigs, p);
                 }
             }
         }
-        let mut frames = Vec::new();
-        frames.extend_from_slice(&(rec.frames.len() as u64).to_le_bytes());
-        for f in rec.frames.values() {
-            frames.extend_from_slice(&f.id.to_le_bytes());
-            frames.extend_from_slice(&f.rig_id.to_le_bytes());
-            pose_le(&mut frames, &f.rig_from_world);
-            frames.extend_from_slice(&(f.data.len() as u32).to_le_bytes());
-            for (s, d) in &f.data {
-                frames.extend_from_slice(&s.kind.to_le_bytes());
-                frames.extend_from_slice(&s.id.to_le_bytes());
-                frames.extend_from_slice(&d.to_le_bytes());
-            }
-        }
-        out.push(("rigs", rigs));
-        out.push(("frames", frames));
     }
-    out
+    rigs
+}
+
+/// frames.bin (COLMAP 4).
+fn frames_bin(rec: &Reconstruction) -> Vec<u8> {
+    let mut frames = Vec::new();
+    frames.extend_from_slice(&(rec.frames.len() as u64).to_le_bytes());
+    for f in rec.frames.values() {
+        frames.extend_from_slice(&f.id.to_le_bytes());
+        frames.extend_from_slice(&f.rig_id.to_le_bytes());
+        pose_le(&mut frames, &f.rig_from_world);
+        frames.extend_from_slice(&(f.data.len() as u32).to_le_bytes());
+        for (s, d) in &f.data {
+            frames.extend_from_slice(&s.kind.to_le_bytes());
+            frames.extend_from_slice(&s.id.to_le_bytes());
+            frames.extend_from_slice(&d.to_le_bytes());
+        }
+    }
+    frames
 }
 
 fn text(rec: &Reconstruction) -> Vec<(&'static str, String)> {
+    files(
+        rec,
+        [cameras_txt, images_txt, points_txt, rigs_txt, frames_txt],
+    )
+}
+
+/// cameras.txt.
+fn cameras_txt(rec: &Reconstruction) -> String {
     let mut cams = String::from(
         "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",
     );
@@ -148,6 +194,11 @@ fn text(rec: &Reconstruction) -> Vec<(&'static str, String)> {
         }
         cams.push('\n');
     }
+    cams
+}
+
+/// images.txt: a line of pose, camera and name, then a line of keypoints, per image.
+fn images_txt(rec: &Reconstruction) -> String {
     let mut imgs = String::from(
         "# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n",
     );
@@ -176,6 +227,11 @@ fn text(rec: &Reconstruction) -> Vec<(&'static str, String)> {
         }
         imgs.push('\n');
     }
+    imgs
+}
+
+/// points3D.txt.
+fn points_txt(rec: &Reconstruction) -> String {
     let mut pts = String::from(
         "# 3D point list with one line of data per point:\n#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n",
     );
@@ -191,53 +247,58 @@ fn text(rec: &Reconstruction) -> Vec<(&'static str, String)> {
         }
         pts.push('\n');
     }
-    let mut out = vec![("cameras", cams), ("images", imgs), ("points3D", pts)];
-    if rec.is_colmap4() {
-        let mut rigs = String::from("# Rig calib list with one line of data per calib:\n");
-        for r in rec.rigs.values() {
-            match r.ref_sensor {
-                None => {
-                    let _ = writeln!(rigs, "{} 0", r.id);
-                }
-                Some(s) => {
-                    let _ = write!(
-                        rigs,
-                        "{} {} {} {}",
-                        r.id,
-                        1 + r.sensors.len(),
-                        sensor_name(s.kind),
-                        s.id
-                    );
-                    for (s, pose) in &r.sensors {
-                        let _ = write!(rigs, " {} {}", sensor_name(s.kind), s.id);
-                        match pose {
-                            Some(p) => {
-                                let _ = write!(rigs, " 1 {}", pose_txt(p));
-                            }
-                            None => rigs.push_str(" 0"),
+    pts
+}
+
+/// rigs.txt (COLMAP 4).
+fn rigs_txt(rec: &Reconstruction) -> String {
+    let mut rigs = String::from("# Rig calib list with one line of data per calib:\n");
+    for r in rec.rigs.values() {
+        match r.ref_sensor {
+            None => {
+                let _ = writeln!(rigs, "{} 0", r.id);
+            }
+            Some(s) => {
+                let _ = write!(
+                    rigs,
+                    "{} {} {} {}",
+                    r.id,
+                    1 + r.sensors.len(),
+                    sensor_name(s.kind),
+                    s.id
+                );
+                for (s, pose) in &r.sensors {
+                    let _ = write!(rigs, " {} {}", sensor_name(s.kind), s.id);
+                    match pose {
+                        Some(p) => {
+                            let _ = write!(rigs, " 1 {}", pose_txt(p));
                         }
+                        None => rigs.push_str(" 0"),
                     }
-                    rigs.push('\n');
                 }
+                rigs.push('\n');
             }
         }
-        let mut frames = String::from("# Frame list with one line of data per frame:\n");
-        for f in rec.frames.values() {
-            let _ = write!(
-                frames,
-                "{} {} {} {}",
-                f.id,
-                f.rig_id,
-                pose_txt(&f.rig_from_world),
-                f.data.len()
-            );
-            for (s, d) in &f.data {
-                let _ = write!(frames, " {} {} {d}", sensor_name(s.kind), s.id);
-            }
-            frames.push('\n');
-        }
-        out.push(("rigs", rigs));
-        out.push(("frames", frames));
     }
-    out
+    rigs
+}
+
+/// frames.txt (COLMAP 4).
+fn frames_txt(rec: &Reconstruction) -> String {
+    let mut frames = String::from("# Frame list with one line of data per frame:\n");
+    for f in rec.frames.values() {
+        let _ = write!(
+            frames,
+            "{} {} {} {}",
+            f.id,
+            f.rig_id,
+            pose_txt(&f.rig_from_world),
+            f.data.len()
+        );
+        for (s, d) in &f.data {
+            let _ = write!(frames, " {} {} {d}", sensor_name(s.kind), s.id);
+        }
+        frames.push('\n');
+    }
+    frames
 }

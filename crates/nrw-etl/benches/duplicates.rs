@@ -1,14 +1,14 @@
 //! `cargo bench -p nrw-etl --bench duplicates`
 //!
 //! How well near-duplicate search finds copies, and what it costs (docs/bench/duplicates.md).
-//! A synthetic collection (60 photos) with 20 copies planted on purpose, 4 of each kind
+//! A synthetic collection (60 photos) with 20 copies planted on purpose, 3 or 4 of each kind
 //! (the same file, resized to 60%, re-encoded at JPEG quality 30, cropped to 70%,
-//! recoloured), and 15 twins taken from the very place of a photo at another moment (other
-//! light, other people): distinct pictures that share a pose. Every pair is scored once;
-//! the curves are the accept rules swept over those scores. The real scenes of
-//! ../shared/data have no known copy: every pair there counts as distinct. Then the cost:
-//! each photo's signals against colmap2nerf's sharpness + imagehash's phash in Python on
-//! the same files, and the search at four working sizes.
+//! recoloured, turned a quarter clockwise), and 15 twins taken from the very place of a
+//! photo at another moment (other light, other people): distinct pictures that share a pose.
+//! Every pair is scored once; the curves are the accept rules swept over those scores. The
+//! real scenes of ../shared/data have no known copy: every pair there counts as distinct.
+//! Then the cost: each photo's signals against colmap2nerf's sharpness + imagehash's phash
+//! in Python on the same files, and the search at four working sizes.
 
 #[path = "../../../tests/support/cpu.rs"]
 mod cpu;
@@ -240,7 +240,9 @@ fn main() {
     nrw_synth::generate(&nrw_synth::copies::other_moments(&spec), &twin, &|| {}).unwrap();
     let depth = spec.cameras.min_distance;
     let moments = nrw_synth::copies::plant_other_moments(&scene, &twin, 4, depth, 8).unwrap();
-    let planted = nrw_synth::copies::plant_copies(&scene, 3, depth, 7).unwrap();
+    let mut kinds = nrw_synth::copies::KINDS.to_vec();
+    kinds.push(nrw_synth::copies::CopyKind::Rotated);
+    let planted = nrw_synth::copies::plant_copies_of(&scene, 3, depth, 7, &kinds).unwrap();
     let synthetic = collection("synthetic, planted", &scene);
     let t = truth(&synthetic.rec, &planted, &moments);
     let shared = root.join("../shared/data");
@@ -263,7 +265,7 @@ fn main() {
     );
     let _ = writeln!(
         md,
-        "**Synthetic collection**: {} photos of the demo landmark (PINHOLE, shorter side 360–480 px), {} of them generated, {} planted copies (4 of each kind: identical file, resized 60%, re-encoded JPEG q30, cropped 70%, recoloured) and {} twins from a photo's very place at another moment (light rotated, twice the people). Denominators: recall counts the {} planted (original, copy) pairs; false pairs count among the {} pairs that are not a planted copy ({} of them twins). **Real scenes** ({}): no known copy, every pair distinct ({}). Nothing here was tuned on the real scenes.\n",
+        "**Synthetic collection**: {} photos of the demo landmark (PINHOLE, shorter side 360–480 px), {} of them generated, {} planted copies (each kind in turn: identical file, resized 60%, re-encoded JPEG q30, cropped 70%, recoloured, turned a quarter clockwise) and {} twins from a photo's very place at another moment (light rotated, twice the people). Denominators: recall counts the {} planted (original, copy) pairs; false pairs count among the {} pairs that are not a planted copy ({} of them twins). **Real scenes** ({}): no known copy, every pair distinct ({}). Nothing here was tuned on the real scenes.\n",
         n,
         n - planted.len() - moments.len(),
         planted.len(),

@@ -195,13 +195,94 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
     let manifest = nrw_dataset::Manifest::read(dir)?;
     let images = tables::images(dir)?;
     let triplets = tables::triplets(dir, 3)?;
-    let shard_rows = tables::shard_rows(&manifest);
     let descriptors = nrw_dataset::descriptors::Index::read(dir)?;
     let timings = nrw_dataset::timings::read(dir);
     let kept: Vec<&ImageRow> = images
         .iter()
         .filter(|r| r.verdict == nrw_dataset::scene::VERDICT_KEPT)
         .collect();
+    let counts = counts(&images, kept.len(), &manifest, descriptors.as_ref());
+    // Ingest always records its filters; their defaults live in nrw-render alone, so a
+    // missing one is an error, not a guess.
+    let ingest: nrw_dataset::provenance::IngestParameters =
+        nrw_dataset::provenance::from_parameters(
+            &dir.name(nrw_dataset::Manifest::FILE),
+            &manifest.parameters,
+        )?;
+    let max_empty = ingest.max_empty;
+    let mut warnings = warnings(&images, &counts, max_empty);
+    let attributions = nrw_dataset::photo_info::read_attributions(dir)?;
+    let licences = provenance_warnings(&images, &attributions, &mut warnings);
+    let members = nrw_dataset::duplicates::read_duplicates(dir)?;
+    let near_duplicates = nrw_dataset::duplicates::names_by_group(&members);
+    signal_warnings(&images, &members, &mut warnings);
+    let figures = Figures {
+        licences,
+        dataset: dir.root().to_string(),
+        scene_dir: manifest.scene.scene_dir.clone(),
+        tool: format!("{} {}", manifest.tool.name, manifest.tool.version),
+        counts,
+        drops: drops(&images),
+        parameters: manifest.parameters.clone(),
+        timings,
+        distributions: distributions(&images, &kept),
+        triplets: triplets.as_ref().map(|t| t.settings.clone()),
+        warnings,
+        near_duplicates,
+    };
+    let page = html::render(&html::Inputs {
+        dir,
+        manifest: &manifest,
+        figures: &figures,
+        images: &images,
+        triplets: triplets.as_ref(),
+        descriptors: descriptors.as_ref(),
+        max_empty,
+        min_side: ingest.min_photo_side as f64,
+        min_sharpness: ingest.min_sharpness,
+        duplicates: &members,
+    })?;
+    out.write(REPORT_FILE, page.into_bytes())?;
+    let mut text = serde_json::to_string_pretty(&figures).expect("figures serialise");
+    text.push('\n');
+    out.write(QA_JSON, text.into_bytes())?;
+    Ok(Written {
+        report: out.name(REPORT_FILE),
+        json: out.name(QA_JSON),
+        figures,
+    })
+}
+
+/// How many views each stage saw, kept and split, with the shards' rows and descriptors.
+fn counts(
+    images: &[ImageRow],
+    kept: usize,
+    manifest: &nrw_dataset::Manifest,
+    descriptors: Option<&nrw_dataset::descriptors::Index>,
+) -> Counts {
+    let split = |side: &str| {
+        images
+            .iter()
+            .filter(|r| r.split.as_deref() == Some(side))
+            .count()
+    };
+    Counts {
+        registered: images.len(),
+        rendered: images
+            .iter()
+            .filter(|r| r.verdict != nrw_dataset::scene::ImageVerdict::TooSmall.name())
+            .count(),
+        kept,
+        dropped: images.len() - kept,
+        shard_rows: tables::shard_rows(manifest),
+        train: split(TRAIN),
+        val: split(VAL),
+        descriptors: descriptors.map_or(0, |d| d.entries.len()),
+    }
+}
+
+/// The dropped views, counted by verdict.
+fn drops(images: &[ImageRow]) -> BTreeMap<String, usize> {
     let mut drops = BTreeMap::new();
     for r in images
         .iter()
@@ -209,36 +290,16 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
     {
         *drops.entry(r.verdict.clone()).or_insert(0) += 1;
     }
-    let counts = Counts {
-        registered: images.len(),
-        rendered: images
-            .iter()
-            .filter(|r| r.verdict != nrw_dataset::scene::ImageVerdict::TooSmall.name())
-            .count(),
-        kept: kept.len(),
-        dropped: images.len() - kept.len(),
-        shard_rows,
-        train: images
-            .iter()
-            .filter(|r| r.split.as_deref() == Some(TRAIN))
-            .count(),
-        val: images
-            .iter()
-            .filter(|r| r.split.as_deref() == Some(VAL))
-            .count(),
-        descriptors: descriptors.as_ref().map_or(0, |d| d.entries.len()),
-    };
-    let p = &manifest.parameters;
-    // Ingest always records its filters; their defaults live in nrw-render alone, so a
-    // missing one is an error, not a guess.
-    let ingest: nrw_dataset::provenance::IngestParameters =
-        nrw_dataset::provenance::from_parameters(&dir.name(nrw_dataset::Manifest::FILE), p)?;
-    let max_empty = ingest.max_empty;
+    drops
+}
+
+/// The summaries of each per-view figure QA plots (over the kept views, or every
+/// registered one where drops are what the figure explains).
+fn distributions(images: &[ImageRow], kept: &[&ImageRow]) -> BTreeMap<String, Summary> {
     let short = |r: &ImageRow| match (r.photo_width, r.photo_height) {
         (Some(w), Some(h)) => Some(w.min(h) as f64),
         _ => None,
     };
-    let mut distributions = BTreeMap::new();
     let signal = |f: fn(&nrw_dataset::PhotoSignals) -> f64| -> Vec<f64> {
         kept.iter()
             .filter_map(|r| r.signals.as_ref().map(f))
@@ -268,52 +329,10 @@ pub fn build(dir: &nrw_dataset::Store, out: &nrw_dataset::Store) -> Result<Writt
             images.iter().map(|r| r.num_observations as f64).collect(),
         ),
     ];
-    for (name, v) in &series {
-        if let Some(s) = Summary::of(v) {
-            distributions.insert(name.to_string(), s);
-        }
-    }
-    let mut warnings = warnings(&images, &counts, max_empty);
-    let attributions = nrw_dataset::photo_info::read_attributions(dir)?;
-    let licences = provenance_warnings(&images, &attributions, &mut warnings);
-    let members = nrw_dataset::duplicates::read_duplicates(dir)?;
-    let near_duplicates = nrw_dataset::duplicates::names_by_group(&members);
-    signal_warnings(&images, &members, &mut warnings);
-    let figures = Figures {
-        licences,
-        dataset: dir.root().to_string(),
-        scene_dir: manifest.scene.scene_dir.clone(),
-        tool: format!("{} {}", manifest.tool.name, manifest.tool.version),
-        counts,
-        drops,
-        parameters: manifest.parameters.clone(),
-        timings,
-        distributions,
-        triplets: triplets.as_ref().map(|t| t.settings.clone()),
-        warnings,
-        near_duplicates,
-    };
-    let page = html::render(&html::Inputs {
-        dir,
-        manifest: &manifest,
-        figures: &figures,
-        images: &images,
-        triplets: triplets.as_ref(),
-        descriptors: descriptors.as_ref(),
-        max_empty,
-        min_side: ingest.min_photo_side as f64,
-        min_sharpness: ingest.min_sharpness,
-        duplicates: &members,
-    })?;
-    out.write(REPORT_FILE, page.into_bytes())?;
-    let mut text = serde_json::to_string_pretty(&figures).expect("figures serialise");
-    text.push('\n');
-    out.write(QA_JSON, text.into_bytes())?;
-    Ok(Written {
-        report: out.name(REPORT_FILE),
-        json: out.name(QA_JSON),
-        figures,
-    })
+    series
+        .iter()
+        .filter_map(|(name, v)| Summary::of(v).map(|s| (name.to_string(), s)))
+        .collect()
 }
 
 /// Photos by licence, and warnings for photos without one and photos whose EXIF orientation

@@ -75,25 +75,7 @@ pub fn histogram(
     range: Option<(f64, f64)>,
     markers: &[(&str, f64)],
 ) -> Result<String> {
-    let all: Vec<f64> = series
-        .iter()
-        .flat_map(|s| s.1.iter().copied())
-        .filter(|v| v.is_finite())
-        .collect();
-    let (mut lo, mut hi) = range.unwrap_or_else(|| {
-        all.iter()
-            .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(*v), h.max(*v)))
-    });
-    for (_, m) in markers {
-        lo = lo.min(*m);
-        hi = hi.max(*m);
-    }
-    if !(lo.is_finite() && hi.is_finite()) {
-        (lo, hi) = (0.0, 1.0);
-    }
-    if hi <= lo {
-        hi = lo + 1.0;
-    }
+    let (lo, hi) = histogram_range(series, range, markers);
     let bins = 20;
     let counts: Vec<Vec<f64>> = series.iter().map(|s| bin(s.1, lo, hi, bins)).collect();
     let top = counts.iter().flatten().fold(1f64, |m, v| m.max(*v)) * 1.1;
@@ -152,6 +134,35 @@ pub fn histogram(
         root.present().map_err(|e| chart_err(title, e))?;
     }
     Ok(svg)
+}
+
+/// A histogram's x range: `range`, else the finite values' span, widened to show every
+/// marker; [0, 1] when nothing is finite, and never empty.
+fn histogram_range(
+    series: &[(&str, &[f64])],
+    range: Option<(f64, f64)>,
+    markers: &[(&str, f64)],
+) -> (f64, f64) {
+    let all: Vec<f64> = series
+        .iter()
+        .flat_map(|s| s.1.iter().copied())
+        .filter(|v| v.is_finite())
+        .collect();
+    let (mut lo, mut hi) = range.unwrap_or_else(|| {
+        all.iter()
+            .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(*v), h.max(*v)))
+    });
+    for (_, m) in markers {
+        lo = lo.min(*m);
+        hi = hi.max(*m);
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        (lo, hi) = (0.0, 1.0);
+    }
+    if hi <= lo {
+        hi = lo + 1.0;
+    }
+    (lo, hi)
 }
 
 /// Bars of counts by category (e.g. drop reasons).

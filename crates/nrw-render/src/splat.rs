@@ -429,48 +429,14 @@ pub fn render_with(view: &View, cloud: &RenderCloud, kernel: Kernel) -> DeepBuff
             }
         }));
     }
-    // The gathers run row by row over the z-buffer: a pixel's point index is its key's low
-    // bits. Empty rows are skipped; in rows at least 1/8 drawn colour is gathered for every
-    // pixel, empty ones from point 0 and then zeroed, so that the loads do not wait on a
-    // branch (the gather is bound by cache misses); sparser rows branch.
-    let width = view.width as usize;
-    let color = cloud.colors.as_deref().map(|src| {
-        let mut out = vec![[0u8; 3]; n];
-        // (An empty cloud drew nothing, and has no point 0 to read.)
-        let rows = out
-            .chunks_exact_mut(width)
-            .enumerate()
-            .filter(|(y, _)| hits[*y] > 0 && !src.is_empty());
-        for (y, orow) in rows {
-            let keys = zbuf.row(y as i64);
-            if hits[y] < width / 8 {
-                // A sparse row: the branch is mostly "empty", and predicted.
-                for (o, &k) in orow.iter_mut().zip(keys).filter(|(_, k)| **k != EMPTY) {
-                    *o = src[k.to_bits() as u32 as usize];
-                }
-                continue;
-            }
-            for (o, &k) in orow.iter_mut().zip(keys) {
-                let hit = k != EMPTY;
-                let c = src[(k.to_bits() as u32 as usize) * hit as usize];
-                let m = (hit as u8).wrapping_neg();
-                *o = [c[0] & m, c[1] & m, c[2] & m];
-            }
-        }
-        out
-    });
-    let normal = cloud.normals.as_deref().map(|src| {
-        let mut out = vec![[0f32; 3]; n];
-        let rows = out.chunks_exact_mut(width).enumerate();
-        for (y, orow) in rows.filter(|(y, _)| hits[*y] > 0) {
-            for (o, &k) in orow.iter_mut().zip(zbuf.row(y as i64)) {
-                if k != EMPTY {
-                    *o = (view.rotation * src[k.to_bits() as u32 as usize]).to_array();
-                }
-            }
-        }
-        out
-    });
+    let color = cloud
+        .colors
+        .as_deref()
+        .map(|src| gather_colors(&zbuf, &hits, src, view.width as usize));
+    let normal = cloud
+        .normals
+        .as_deref()
+        .map(|src| gather_normals(&zbuf, &hits, src, view));
     DeepBuffer {
         width: view.width,
         height: view.height,
@@ -482,4 +448,50 @@ pub fn render_with(view: &View, cloud: &RenderCloud, kernel: Kernel) -> DeepBuff
         points_tested,
         points_hidden,
     }
+}
+
+/// Each pixel's point colour, black where nothing was drawn. The gathers run row by row over
+/// the z-buffer: a pixel's point index is its key's low bits. Empty rows are skipped; in rows
+/// at least 1/8 drawn colour is gathered for every pixel, empty ones from point 0 and then
+/// zeroed, so that the loads do not wait on a branch (the gather is bound by cache misses);
+/// sparser rows branch.
+fn gather_colors(zbuf: &ZBuffer, hits: &[usize], src: &[[u8; 3]], width: usize) -> Vec<[u8; 3]> {
+    let mut out = vec![[0u8; 3]; hits.len() * width];
+    // (An empty cloud drew nothing, and has no point 0 to read.)
+    let rows = out
+        .chunks_exact_mut(width)
+        .enumerate()
+        .filter(|(y, _)| hits[*y] > 0 && !src.is_empty());
+    for (y, orow) in rows {
+        let keys = zbuf.row(y as i64);
+        if hits[y] < width / 8 {
+            // A sparse row: the branch is mostly "empty", and predicted.
+            for (o, &k) in orow.iter_mut().zip(keys).filter(|(_, k)| **k != EMPTY) {
+                *o = src[k.to_bits() as u32 as usize];
+            }
+            continue;
+        }
+        for (o, &k) in orow.iter_mut().zip(keys) {
+            let hit = k != EMPTY;
+            let c = src[(k.to_bits() as u32 as usize) * hit as usize];
+            let m = (hit as u8).wrapping_neg();
+            *o = [c[0] & m, c[1] & m, c[2] & m];
+        }
+    }
+    out
+}
+
+/// Each pixel's point normal in camera coordinates, zero where nothing was drawn.
+fn gather_normals(zbuf: &ZBuffer, hits: &[usize], src: &[Vec3], view: &View) -> Vec<[f32; 3]> {
+    let width = view.width as usize;
+    let mut out = vec![[0f32; 3]; hits.len() * width];
+    let rows = out.chunks_exact_mut(width).enumerate();
+    for (y, orow) in rows.filter(|(y, _)| hits[*y] > 0) {
+        for (o, &k) in orow.iter_mut().zip(zbuf.row(y as i64)) {
+            if k != EMPTY {
+                *o = (view.rotation * src[k.to_bits() as u32 as usize]).to_array();
+            }
+        }
+    }
+    out
 }

@@ -26,6 +26,8 @@ pub(crate) struct Samples<'a> {
     pub dy: &'a [f32],
     pub w: &'a [f32],
     pub wa: &'a [f32],
+    /// The real samples: those from here on are padding.
+    pub count: usize,
 }
 
 /// Per lane: Σ w·b, Σ w·b², Σ wa·b over the warped samples b.
@@ -140,12 +142,8 @@ mod x86 {
     pub(super) unsafe fn sums(warp: &Warp, s: &Samples, img: &GrayImage) -> Option<Sums> {
         let n = s.w.len();
         assert!(s.dx.len() >= n && s.dy.len() >= n && s.wa.len() >= n && n.is_multiple_of(LANES));
+        let h = Homography8::new(warp);
         let set = |v: f32| _mm256_set1_ps(v);
-        let (b, hx, hy) = (warp.base, warp.hx, warp.hy);
-        let (bx, by, bz) = (set(b.x), set(b.y), set(b.z));
-        let (hxx, hxy, hxz) = (set(hx.x), set(hx.y), set(hx.z));
-        let (hyx, hyy, hyz) = (set(hy.x), set(hy.y), set(hy.z));
-        let (zero, half, one) = (set(0.0), set(0.5), set(1.0));
         let last_x = set((img.width - 1) as f32);
         let last_y = set((img.height - 1) as f32);
         let int = |v: usize| _mm256_set1_epi32(v as i32);
@@ -153,6 +151,7 @@ mod x86 {
         let (max_y0, max_y1) = (int(img.height - 2), int(img.height - 1));
         let (stride, one_i) = (int(img.width), int(1));
         let data = img.data.as_ptr();
+        let zero = set(0.0);
         let (mut s_b, mut s_bb, mut s_ab) = (zero, zero, zero);
         for k in (0..n).step_by(LANES) {
             // SAFETY: k + 8 ≤ n ≤ each slice's length (asserted above).
@@ -162,21 +161,7 @@ mod x86 {
                     _mm256_loadu_ps(s.dy.as_ptr().add(k)),
                 )
             };
-            let pz = _mm256_add_ps(
-                _mm256_add_ps(bz, _mm256_mul_ps(hxz, dx)),
-                _mm256_mul_ps(hyz, dy),
-            );
-            let inv = _mm256_div_ps(one, pz);
-            let px = _mm256_add_ps(
-                _mm256_add_ps(bx, _mm256_mul_ps(hxx, dx)),
-                _mm256_mul_ps(hyx, dy),
-            );
-            let py = _mm256_add_ps(
-                _mm256_add_ps(by, _mm256_mul_ps(hxy, dx)),
-                _mm256_mul_ps(hyy, dy),
-            );
-            let sx = _mm256_sub_ps(_mm256_mul_ps(px, inv), half);
-            let sy = _mm256_sub_ps(_mm256_mul_ps(py, inv), half);
+            let (sx, sy, pz) = h.apply(dx, dy);
             // Ordered comparisons: NaN is outside, as in the portable kernel.
             let inside = _mm256_and_ps(
                 _mm256_and_ps(
@@ -204,12 +189,12 @@ mod x86 {
             // 8-byte read, four samples to a gather.
             let at0 = _mm256_add_epi32(_mm256_mullo_epi32(y0, stride), x0);
             let at1 = _mm256_add_epi32(_mm256_mullo_epi32(y1, stride), x0);
+            // A last run whose samples 4–7 are padding reads 0–3 only (see `pairs`).
+            let low = s.count <= k + 4;
             // SAFETY: every index and its right neighbour are pixels of the image (clamped
             // above, below width × height ≤ i32::MAX).
-            let ((d00, d01), (d10, d11)) = unsafe { (pairs(data, at0), pairs(data, at1)) };
-            let top = _mm256_add_ps(d00, _mm256_mul_ps(_mm256_sub_ps(d01, d00), fx));
-            let bottom = _mm256_add_ps(d10, _mm256_mul_ps(_mm256_sub_ps(d11, d10), fx));
-            let v = _mm256_add_ps(top, _mm256_mul_ps(_mm256_sub_ps(bottom, top), fy));
+            let (top, bottom) = unsafe { (pairs(data, at0, low), pairs(data, at1, low)) };
+            let v = bilinear(top, bottom, fx, fy);
             // SAFETY: as for dx, dy.
             let (w, wa) = unsafe {
                 (
@@ -231,19 +216,69 @@ mod x86 {
         Some([out(s_b), out(s_bb), out(s_ab)])
     }
 
+    /// A [`Warp`]'s nine coefficients, each in all eight lanes.
+    struct Homography8 {
+        base: [__m256; 3],
+        hx: [__m256; 3],
+        hy: [__m256; 3],
+    }
+
+    impl Homography8 {
+        #[target_feature(enable = "avx2")]
+        fn new(warp: &Warp) -> Homography8 {
+            let lanes = |v: glam::Vec3| v.to_array().map(|c| _mm256_set1_ps(c));
+            Homography8 {
+                base: lanes(warp.base),
+                hx: lanes(warp.hx),
+                hy: lanes(warp.hy),
+            }
+        }
+
+        /// Eight offsets' source coordinates (pixel centres at integers) and projective
+        /// depths: `Warp::samples`'s operations in its order.
+        #[target_feature(enable = "avx2")]
+        fn apply(&self, dx: __m256, dy: __m256) -> (__m256, __m256, __m256) {
+            let row = |c: usize| {
+                _mm256_add_ps(
+                    _mm256_add_ps(self.base[c], _mm256_mul_ps(self.hx[c], dx)),
+                    _mm256_mul_ps(self.hy[c], dy),
+                )
+            };
+            let (px, py, pz) = (row(0), row(1), row(2));
+            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), pz);
+            let half = _mm256_set1_ps(0.5);
+            let sx = _mm256_sub_ps(_mm256_mul_ps(px, inv), half);
+            let sy = _mm256_sub_ps(_mm256_mul_ps(py, inv), half);
+            (sx, sy, pz)
+        }
+    }
+
+    /// `GrayImage::bilinear_f32`'s three interpolations, from the (left, right) values of
+    /// the top and bottom rows.
+    #[target_feature(enable = "avx2")]
+    fn bilinear(top: (__m256, __m256), bottom: (__m256, __m256), fx: __m256, fy: __m256) -> __m256 {
+        let ((d00, d01), (d10, d11)) = (top, bottom);
+        let top = _mm256_add_ps(d00, _mm256_mul_ps(_mm256_sub_ps(d01, d00), fx));
+        let bottom = _mm256_add_ps(d10, _mm256_mul_ps(_mm256_sub_ps(d11, d10), fx));
+        _mm256_add_ps(top, _mm256_mul_ps(_mm256_sub_ps(bottom, top), fy))
+    }
+
     /// The values at `index` and `index + 1` of `data` for eight indices: (left, right), in
-    /// the indices' order.
+    /// the indices' order; with `low`, indices 4–7 are not read and get 0–3's values. (For
+    /// padding only: its weight 0 makes its lanes add ±0, which leaves a lane's sum, never
+    /// −0, unchanged: the portable kernel's bits.)
     ///
     /// # Safety
     /// The CPU has AVX2; every `index + 1` is within `data`.
     #[target_feature(enable = "avx2")]
-    unsafe fn pairs(data: *const f32, index: __m256i) -> (__m256, __m256) {
+    unsafe fn pairs(data: *const f32, index: __m256i, low: bool) -> (__m256, __m256) {
         // SAFETY: the caller's; scale 4 reads the 8 bytes at data[index].
-        let (lo, hi) = unsafe {
-            (
-                _mm256_i32gather_pd::<4>(data.cast(), _mm256_castsi256_si128(index)),
-                _mm256_i32gather_pd::<4>(data.cast(), _mm256_extracti128_si256::<1>(index)),
-            )
+        let lo = unsafe { _mm256_i32gather_pd::<4>(data.cast(), _mm256_castsi256_si128(index)) };
+        let hi = if low {
+            lo
+        } else {
+            // SAFETY: as above.
+            unsafe { _mm256_i32gather_pd::<4>(data.cast(), _mm256_extracti128_si256::<1>(index)) }
         };
         // lo holds samples 0–3 as (left, right) pairs, hi samples 4–7. Per 128-bit half,
         // shuffle takes lefts (rights) of two samples from lo then two from hi: 0 1 4 5 | 2 3
@@ -293,6 +328,11 @@ mod tests {
                 wa.push(rng.signed() as f32);
             }
         }
+        let count = w.len();
+        assert!(
+            count % LANES <= 4,
+            "the test's window must end in a half-padded run"
+        );
         while !w.len().is_multiple_of(LANES) {
             dx.push(dx[0]);
             dy.push(dy[0]);
@@ -304,6 +344,7 @@ mod tests {
             dy: &dy,
             w: &w,
             wa: &wa,
+            count,
         };
         let (mut some, mut none) = (0, 0);
         for i in 0..4000 {

@@ -27,6 +27,9 @@ pub enum CopyKind {
     Cropped(u32),
     /// Other white balance and tone curve.
     Recoloured,
+    /// A quarter turn clockwise (a landscape photo uploaded as a portrait): its camera is
+    /// the original's turned about the optical axis, where SfM registers such a copy.
+    Rotated,
 }
 
 /// Every kind, in the order originals take them.
@@ -49,13 +52,13 @@ pub struct Planted {
 /// The copy's pixels and the camera they imply: the original's lens, scaled or shifted as
 /// the pixels were (distortion, in normalised coordinates, unchanged), so a copy of a real
 /// photo with a distorting lens is planted as faithfully as a synthetic PINHOLE one.
-fn make(photo: &RgbImage, cam: &Camera, kind: CopyKind) -> (RgbImage, Camera) {
+fn make(photo: &RgbImage, cam: &Camera, kind: CopyKind) -> Result<(RgbImage, Camera)> {
     let (w, h) = (photo.width(), photo.height());
     let same = |img: RgbImage| {
         let c = cam.scaled(1.0, 1.0, w as u64, h as u64);
         (img, c)
     };
-    match kind {
+    Ok(match kind {
         CopyKind::Identical | CopyKind::Reencoded(_) => same(photo.clone()),
         CopyKind::Resized(p) => {
             let (nw, nh) = (w * p / 100, h * p / 100);
@@ -83,6 +86,65 @@ fn make(photo: &RgbImage, cam: &Camera, kind: CopyKind) -> (RgbImage, Camera) {
             });
             same(img)
         }
+        CopyKind::Rotated => (
+            image::imageops::rotate90(photo),
+            quarter_turned(&cam.scaled(1.0, 1.0, w as u64, h as u64))?,
+        ),
+    })
+}
+
+/// The camera of a photo turned a quarter clockwise: pixel (x, y) goes to (h − y, x) (pixel
+/// centres at half integers), so the focal lengths swap and the principal point moves with
+/// the pixels. Only a lens whose distortion is the same in every direction turns this way;
+/// the others (tangential or thin-prism terms, panoramas) are refused.
+fn quarter_turned(cam: &Camera) -> Result<Camera> {
+    use nrw_colmap::CameraModel as M;
+    if matches!(
+        cam.model,
+        M::OpenCv
+            | M::FullOpenCv
+            | M::ThinPrismFisheye
+            | M::RadTanThinPrismFisheye
+            | M::Equirectangular
+    ) {
+        return Err(SynthError::Spec {
+            file: format!("camera {}", cam.id),
+            problem: format!(
+                "the {} lens model is not the same in every direction, so a rotated copy's camera is not its turned original",
+                cam.model.name()
+            ),
+        });
+    }
+    let mut c = cam.clone();
+    (c.width, c.height) = (cam.height, cam.width);
+    let at = if cam.model.single_focal() {
+        1
+    } else {
+        c.params.swap(0, 1);
+        2
+    };
+    let (cx, cy) = (cam.params[at], cam.params[at + 1]);
+    c.params[at] = cam.height as f64 - cy;
+    c.params[at + 1] = cx;
+    Ok(c)
+}
+
+/// The pose of a camera turned a quarter about its optical axis as [`quarter_turned`] turns
+/// its pixels: camera coordinates (x, y, z) become (−y, x, z).
+fn quarter_turned_pose(pose: &nrw_colmap::pose::Rigid3) -> nrw_colmap::pose::Rigid3 {
+    let turn = DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
+    nrw_colmap::pose::Rigid3 {
+        rotation: turn * pose.rotation,
+        translation: turn * pose.translation,
+    }
+}
+
+/// Where SfM registers a copy of this kind of a photo at `pose`: there, turned for a
+/// rotated copy.
+fn posed(pose: &nrw_colmap::pose::Rigid3, kind: CopyKind) -> nrw_colmap::pose::Rigid3 {
+    match kind {
+        CopyKind::Rotated => quarter_turned_pose(pose),
+        _ => *pose,
     }
 }
 
@@ -198,6 +260,18 @@ fn write(rec: &Reconstruction, sparse: &Path) -> Result<()> {
 /// `sparse/0` and `images/`), kinds in [`KINDS`] order; `depth` is the scene's typical
 /// viewing distance (the scale of the pose noise). Returns what was planted.
 pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result<Vec<Planted>> {
+    plant_copies_of(scene, every, depth, seed, &KINDS)
+}
+
+/// [`plant_copies`] with the kinds taken in turn from `kinds` (never empty), such as
+/// [`KINDS`] and [`CopyKind::Rotated`].
+pub fn plant_copies_of(
+    scene: &Path,
+    every: usize,
+    depth: f64,
+    seed: u64,
+    kinds: &[CopyKind],
+) -> Result<Vec<Planted>> {
     let sparse = scene.join("sparse/0");
     let mut rec = read(scene)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -208,7 +282,7 @@ pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result
     );
     let mut planted = Vec::new();
     for (k, img) in originals.iter().enumerate() {
-        let kind = KINDS[k % KINDS.len()];
+        let kind = kinds[k % kinds.len()];
         let path = scene.join("images").join(&img.name);
         let photo = image::open(&path)
             .map_err(|source| SynthError::Image {
@@ -216,50 +290,16 @@ pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result
                 source,
             })?
             .to_rgb8();
-        let (pixels, mut camera) = make(&photo, &rec.cameras[&img.camera_id], kind);
+        let (pixels, mut camera) = make(&photo, &rec.cameras[&img.camera_id], kind)?;
         camera.id = next_camera;
-        let stem = Path::new(&img.name)
-            .file_stem()
-            .map_or("", |s| s.to_str().unwrap_or(""));
-        let copy = match kind {
-            CopyKind::Identical => format!("copy_{}", img.name),
-            CopyKind::Reencoded(_) => format!("copy_{stem}.jpg"),
-            _ => format!("copy_{stem}.png"),
-        };
-        let out = scene.join("images").join(&copy);
-        match kind {
-            CopyKind::Identical => {
-                std::fs::copy(&path, &out)
-                    .map(|_| ())
-                    .map_err(|source| SynthError::Io {
-                        path: out.clone(),
-                        source,
-                    })?
-            }
-            CopyKind::Reencoded(q) => {
-                let file = std::fs::File::create(&out).map_err(|source| SynthError::Io {
-                    path: out.clone(),
-                    source,
-                })?;
-                image::codecs::jpeg::JpegEncoder::new_with_quality(file, q)
-                    .encode_image(&pixels)
-                    .map_err(|source| SynthError::Image {
-                        path: out.clone(),
-                        source,
-                    })?;
-            }
-            _ => pixels.save(&out).map_err(|source| SynthError::Image {
-                path: out.clone(),
-                source,
-            })?,
-        }
+        let copy = write_copy(scene, &img.name, &path, &pixels, kind)?;
         rec.images.insert(
             next_image,
             Image {
                 id: next_image,
                 name: copy.clone(),
                 camera_id: next_camera,
-                cam_from_world: nudged(&img.cam_from_world, depth, &mut rng),
+                cam_from_world: nudged(&posed(&img.cam_from_world, kind), depth, &mut rng),
                 stored_quat_norm: 1.0,
                 points2d: Vec::new(),
             },
@@ -275,4 +315,112 @@ pub fn plant_copies(scene: &Path, every: usize, depth: f64, seed: u64) -> Result
     }
     write(&rec, &sparse)?;
     Ok(planted)
+}
+
+/// Write a copy of `original` (its file at `path`, `pixels` the copy's) into the scene's
+/// `images/` as its kind makes it: the same file, a JPEG, or a PNG. Returns its name.
+fn write_copy(
+    scene: &Path,
+    original: &str,
+    path: &Path,
+    pixels: &RgbImage,
+    kind: CopyKind,
+) -> Result<String> {
+    let stem = Path::new(original)
+        .file_stem()
+        .map_or("", |s| s.to_str().unwrap_or(""));
+    let copy = match kind {
+        CopyKind::Identical => format!("copy_{original}"),
+        CopyKind::Reencoded(_) => format!("copy_{stem}.jpg"),
+        _ => format!("copy_{stem}.png"),
+    };
+    let out = scene.join("images").join(&copy);
+    match kind {
+        CopyKind::Identical => {
+            std::fs::copy(path, &out)
+                .map(|_| ())
+                .map_err(|source| SynthError::Io {
+                    path: out.clone(),
+                    source,
+                })?
+        }
+        CopyKind::Reencoded(q) => {
+            let file = std::fs::File::create(&out).map_err(|source| SynthError::Io {
+                path: out.clone(),
+                source,
+            })?;
+            image::codecs::jpeg::JpegEncoder::new_with_quality(file, q)
+                .encode_image(pixels)
+                .map_err(|source| SynthError::Image {
+                    path: out.clone(),
+                    source,
+                })?;
+        }
+        _ => pixels.save(&out).map_err(|source| SynthError::Image {
+            path: out.clone(),
+            source,
+        })?,
+    }
+    Ok(copy)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nrw_colmap::CameraModel;
+
+    /// A world point lands, in the turned copy, where the turned photo's pixels put it:
+    /// (x, y) in the original goes to (h − y, x), for a lens with one focal length and
+    /// distortion, and for one with two focal lengths.
+    #[test]
+    fn a_quarter_turned_copy_sees_each_point_where_its_turned_pixels_are() {
+        let pose = nrw_colmap::pose::Rigid3 {
+            rotation: DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -0.2, 0.1),
+            translation: DVec3::new(0.4, -1.0, 5.0),
+        };
+        let cameras = [
+            (CameraModel::SimpleRadial, vec![700.0, 310.0, 205.0, -0.12]),
+            (CameraModel::Pinhole, vec![700.0, 650.0, 310.0, 205.0]),
+            (
+                CameraModel::OpenCvFisheye,
+                vec![500.0, 520.0, 300.0, 210.0, 0.05, -0.01, 0.0, 0.0],
+            ),
+        ];
+        for (model, params) in cameras {
+            let cam = Camera {
+                id: 1,
+                model,
+                width: 640,
+                height: 400,
+                params,
+            };
+            let turned = quarter_turned(&cam).unwrap();
+            let turned_pose = quarter_turned_pose(&pose);
+            assert_eq!((turned.width, turned.height), (400, 640));
+            for p in [
+                DVec3::new(0.0, 0.0, 0.0),
+                DVec3::new(1.0, 0.5, -0.3),
+                DVec3::new(-0.8, -0.4, 0.6),
+            ] {
+                let a = cam.img_from_cam(pose.transform(p)).unwrap();
+                let b = turned.img_from_cam(turned_pose.transform(p)).unwrap();
+                let want = glam::DVec2::new(cam.height as f64 - a.y, a.x);
+                assert!((b - want).length() < 1e-9, "{model:?}: {b} against {want}");
+            }
+        }
+    }
+
+    /// A lens with tangential terms is refused, naming the model.
+    #[test]
+    fn a_lens_not_the_same_in_every_direction_is_not_turned() {
+        let cam = Camera {
+            id: 3,
+            model: CameraModel::OpenCv,
+            width: 640,
+            height: 400,
+            params: vec![700.0, 700.0, 320.0, 200.0, 0.1, 0.0, 0.01, 0.0],
+        };
+        let err = quarter_turned(&cam).unwrap_err().to_string();
+        assert!(err.contains("camera 3") && err.contains("OPENCV"), "{err}");
+    }
 }

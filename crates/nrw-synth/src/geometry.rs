@@ -80,79 +80,95 @@ pub struct Landmark {
     pub texture: Option<f64>,
 }
 
+/// The building's depth behind the façade (m).
+const BODY_DEPTH: f64 = 4.0;
+
+/// The depth of the façade's front layer, the window reveals (m).
+const FRONT_DEPTH: f64 = 0.3;
+
+/// The façade's front layer (0 ≤ y ≤ [`FRONT_DEPTH`]): the complement of the window
+/// openings, row by row of windows.
+fn front_layer(spec: &GeometrySpec) -> Vec<Cuboid> {
+    let (w, h) = (spec.facade_width, spec.facade_height);
+    let x0 = -w / 2.0;
+    let bay = w / spec.bays as f64;
+    let floor = h / spec.floors as f64;
+    let (ww, wh) = (bay * 0.45, floor * 0.5);
+    let front = |xa: f64, xb: f64, za: f64, zb: f64| Cuboid {
+        min: DVec3::new(xa, 0.0, za),
+        max: DVec3::new(xb, FRONT_DEPTH, zb),
+        material: Material::Stone,
+        glazed_front: false,
+    };
+    let mut boxes = Vec::new();
+    let mut z = 0.0;
+    for j in 0..spec.floors {
+        let zc = (j as f64 + 0.55) * floor;
+        let (za, zb) = (zc - wh / 2.0, zc + wh / 2.0);
+        boxes.push(front(x0, -x0, z, za));
+        let mut x = x0;
+        for i in 0..spec.bays {
+            let xc = x0 + (i as f64 + 0.5) * bay;
+            boxes.push(front(x, xc - ww / 2.0, za, zb));
+            x = xc + ww / 2.0;
+        }
+        boxes.push(front(x, -x0, za, zb));
+        z = zb;
+    }
+    boxes.push(front(x0, -x0, z, h));
+    boxes
+}
+
+/// The portico: its steps and entablature pushed to `boxes`, its columns returned.
+fn portico(spec: &GeometrySpec, boxes: &mut Vec<Cuboid>) -> Vec<Column> {
+    let (w, h) = (spec.facade_width, spec.facade_height);
+    let x0 = -w / 2.0;
+    let col_h = (h * 0.42).max(2.5);
+    boxes.push(Cuboid {
+        min: DVec3::new(x0 - 1.0, -3.6, 0.0),
+        max: DVec3::new(-x0 + 1.0, 0.0, 0.3),
+        material: Material::Marble,
+        glazed_front: false,
+    });
+    boxes.push(Cuboid {
+        min: DVec3::new(x0 + 0.2, -2.7, col_h),
+        max: DVec3::new(-x0 - 0.2, 0.0, col_h + 0.9),
+        material: Material::Stone,
+        glazed_front: false,
+    });
+    (0..=spec.bays)
+        .map(|i| Column {
+            x: x0 + 0.7 + i as f64 * (w - 1.4) / spec.bays as f64,
+            y: -2.0,
+            radius: 0.42,
+            z0: 0.3,
+            z1: col_h,
+        })
+        .collect()
+}
+
 impl Landmark {
     /// Build the landmark a spec describes.
     pub fn new(spec: &GeometrySpec) -> Landmark {
         let (w, h) = (spec.facade_width, spec.facade_height);
-        let depth = 4.0;
-        let recess = 0.3;
         let x0 = -w / 2.0;
         let mut boxes = vec![Cuboid {
-            min: DVec3::new(x0, recess, 0.0),
-            max: DVec3::new(-x0, depth, h),
+            min: DVec3::new(x0, FRONT_DEPTH, 0.0),
+            max: DVec3::new(-x0, BODY_DEPTH, h),
             material: Material::Stone,
             glazed_front: true,
         }];
-        // The front layer (0 ≤ y ≤ recess) is the complement of the window openings.
-        let bay = w / spec.bays as f64;
-        let floor = h / spec.floors as f64;
-        let (ww, wh) = (bay * 0.45, floor * 0.5);
-        let rows: Vec<(f64, f64)> = (0..spec.floors)
-            .map(|j| {
-                let zc = (j as f64 + 0.55) * floor;
-                (zc - wh / 2.0, zc + wh / 2.0)
-            })
-            .collect();
-        let front = |xa: f64, xb: f64, za: f64, zb: f64| Cuboid {
-            min: DVec3::new(xa, 0.0, za),
-            max: DVec3::new(xb, recess, zb),
-            material: Material::Stone,
-            glazed_front: false,
-        };
-        let mut z = 0.0;
-        for &(za, zb) in &rows {
-            boxes.push(front(x0, -x0, z, za));
-            let mut x = x0;
-            for i in 0..spec.bays {
-                let xc = x0 + (i as f64 + 0.5) * bay;
-                boxes.push(front(x, xc - ww / 2.0, za, zb));
-                x = xc + ww / 2.0;
-            }
-            boxes.push(front(x, -x0, za, zb));
-            z = zb;
-        }
-        boxes.push(front(x0, -x0, z, h));
+        boxes.extend(front_layer(spec));
         // Cornice.
         boxes.push(Cuboid {
             min: DVec3::new(x0 - 0.5, -0.6, h),
-            max: DVec3::new(-x0 + 0.5, depth + 0.3, h + 0.8),
+            max: DVec3::new(-x0 + 0.5, BODY_DEPTH + 0.3, h + 0.8),
             material: Material::Stone,
             glazed_front: false,
         });
         let mut columns = Vec::new();
         if spec.columns {
-            let col_h = (h * 0.42).max(2.5);
-            boxes.push(Cuboid {
-                min: DVec3::new(x0 - 1.0, -3.6, 0.0),
-                max: DVec3::new(-x0 + 1.0, 0.0, 0.3),
-                material: Material::Marble,
-                glazed_front: false,
-            });
-            boxes.push(Cuboid {
-                min: DVec3::new(x0 + 0.2, -2.7, col_h),
-                max: DVec3::new(-x0 - 0.2, 0.0, col_h + 0.9),
-                material: Material::Stone,
-                glazed_front: false,
-            });
-            for i in 0..=spec.bays {
-                columns.push(Column {
-                    x: x0 + 0.7 + i as f64 * (w - 1.4) / spec.bays as f64,
-                    y: -2.0,
-                    radius: 0.42,
-                    z0: 0.3,
-                    z1: col_h,
-                });
-            }
+            columns = portico(spec, &mut boxes);
         }
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);

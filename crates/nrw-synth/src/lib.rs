@@ -203,8 +203,7 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
     spec.validate("scene spec")?;
     let mut landmark = Landmark::new(&spec.geometry);
     landmark.texture = spec.effects.texture;
-    let fx = &spec.effects;
-    let ext = if fx.jpeg_quality.is_some() {
+    let ext = if spec.effects.jpeg_quality.is_some() {
         "jpg"
     } else {
         "png"
@@ -221,239 +220,315 @@ pub fn generate(spec: &SceneSpec, out: &Path, progress: &(dyn Fn() + Sync)) -> R
         let p = out.join(d);
         std::fs::create_dir_all(&p).map_err(io(&p))?;
     }
+    let scene = Scene {
+        spec,
+        landmark: &landmark,
+        features: &features,
+        out,
+    };
     let counters = Counters::default();
     let results: Vec<PhotoResult> = shots
         .par_iter()
         .enumerate()
-        .map(|(i, shot)| -> Result<PhotoResult> {
-            let mut rng = seed_for(spec.seed, 0x1000 + i as u64);
-            let look = Look::draw(fx, &mut rng);
-            let people = match fx.transients {
-                Some(mean) => Person::draw(mean, shot, &mut rng),
-                None => Vec::new(),
-            };
-            let buf = render(
-                &landmark,
-                shot,
-                &look,
-                &people,
-                fx.noise,
-                hash64(spec.seed ^ (i as u64 + 1)),
-                &counters,
-            );
-            let observed = observe(
-                shot,
-                &buf.depth,
-                &features,
-                spec.observations.noise_px,
-                &mut rng,
-            );
-            let n_extra =
-                (observed.len() as f64 * spec.observations.extra_keypoints).round() as usize;
-            let extras = (0..n_extra)
-                .map(|_| {
-                    DVec2::new(
-                        rng.random_range(0.0..buf.width as f64),
-                        rng.random_range(0.0..buf.height as f64),
-                    )
-                })
-                .collect();
-            let photo = out.join("images").join(&shot.name);
-            encode(
-                &photo,
-                buf.width,
-                buf.height,
-                &buf.rgb,
-                image::ExtendedColorType::Rgb8,
-                fx.jpeg_quality,
-            )?;
-            let stem = Path::new(&shot.name).with_extension("");
-            let stem = stem.to_string_lossy();
-            write_exr(
-                &out.join(truth::DEPTH).join(format!("{stem}.exr")),
-                &DepthMap {
-                    width: buf.width,
-                    height: buf.height,
-                    data: buf.depth,
-                },
-            )?;
-            encode(
-                &out.join(truth::SEMANTICS).join(format!("{stem}.png")),
-                buf.width,
-                buf.height,
-                &buf.semantics,
-                image::ExtendedColorType::L8,
-                None,
-            )?;
-            if fx.jpeg_quality.is_some() {
-                counters.jpeg_photos.fetch_add(1, Ordering::Relaxed);
-            } else {
-                counters.png_photos.fetch_add(1, Ordering::Relaxed);
-            }
+        .map(|(i, shot)| {
+            let r = scene.photo(i, shot, &counters)?;
             progress();
-            let label = look.appearance.map_or("neutral", |a| a.label()).to_string();
-            Ok(PhotoResult {
-                truth: PhotoTruth {
-                    image_id: shot.image_id,
-                    name: shot.name.clone(),
-                    label,
-                    look,
-                    people,
-                    small: shot.small,
-                    away: shot.away,
-                    width: shot.camera.width,
-                    height: shot.camera.height,
-                },
-                observed,
-                extras,
-            })
+            Ok(r)
         })
         .collect::<Result<Vec<_>>>()?;
-
-    // Tracks: a feature seen by two or more photos becomes a 3D point.
-    let mut seen = vec![0usize; features.len()];
-    for r in &results {
-        for (k, _, _) in &r.observed {
-            seen[*k] += 1;
-        }
-    }
-    let mut point_id = vec![NO_POINT3D; features.len()];
-    let mut next = 1u64;
-    for (k, n) in seen.iter().enumerate() {
-        if *n >= 2 {
-            point_id[k] = next;
-            next += 1;
-        }
-    }
-    let origin = DVec3::from_array(spec.geometry.origin);
-    let mut rec = Reconstruction::default();
-    let mut points: BTreeMap<u64, Point3D> = BTreeMap::new();
-    let mut err_sum = 0.0;
-    let mut n_obs = 0usize;
-    for (shot, r) in shots.iter().zip(&results) {
-        rec.cameras
-            .entry(shot.camera_id)
-            .or_insert_with(|| shot.camera.clone());
-        let mut points2d = Vec::with_capacity(r.observed.len() + r.extras.len());
-        for (k, xy, e) in &r.observed {
-            let pid = point_id[*k];
-            if pid != NO_POINT3D {
-                let f = &features[*k];
-                let p = points.entry(pid).or_insert_with(|| {
-                    let a = landmark.albedo(f.material, f.p, f.normal);
-                    Point3D {
-                        id: pid,
-                        xyz: f.p + origin,
-                        rgb: [to_srgb8(a.x), to_srgb8(a.y), to_srgb8(a.z)],
-                        error: 0.0,
-                        track: Vec::new(),
-                    }
-                });
-                p.track.push(TrackElement {
-                    image_id: shot.image_id,
-                    point2d_idx: points2d.len() as u32,
-                });
-                p.error += e; // summed here, divided by track length below
-                err_sum += e;
-                n_obs += 1;
-            }
-            points2d.push(Point2D {
-                xy: *xy,
-                point3d_id: pid,
-            });
-        }
-        points2d.extend(r.extras.iter().map(|xy| Point2D {
-            xy: *xy,
-            point3d_id: NO_POINT3D,
-        }));
-        // World→camera for world coordinates shifted by `origin`: t' = t − R·origin, summed
-        // with compensated arithmetic so a georeferenced scene keeps its digits.
-        let rows = shot.pose.matrix().transpose();
-        let t = shot.pose.translation;
-        let mut pose = shot.pose;
-        pose.translation = DVec3::new(
-            dot3_plus(rows.x_axis, -origin, t.x),
-            dot3_plus(rows.y_axis, -origin, t.y),
-            dot3_plus(rows.z_axis, -origin, t.z),
-        );
-        rec.images.insert(
-            shot.image_id,
-            Image {
-                id: shot.image_id,
-                name: shot.name.clone(),
-                camera_id: shot.camera_id,
-                cam_from_world: pose,
-                stored_quat_norm: 1.0,
-                points2d,
-            },
-        );
-    }
-    for p in points.values_mut() {
-        p.error /= p.track.len() as f64;
-    }
-    rec.points = points;
-    let sparse = out.join("sparse/0");
-    for f in [Format::Binary, Format::Text] {
-        nrw_colmap::write_model(&rec, &sparse, f).map_err(io(&sparse))?;
-    }
-
-    let dense = landmark.sample_surface(spec.geometry.points, &mut seed_for(spec.seed, 3));
-    let mut cloud = PointCloud {
-        path: out.join("dense/fused.ply"),
-        positions: dense.iter().map(|s| s.p + origin).collect(),
-        colors: Some(
-            dense
-                .iter()
-                .map(|s| {
-                    let a = landmark.albedo(s.material, s.p, s.normal);
-                    [to_srgb8(a.x), to_srgb8(a.y), to_srgb8(a.z)]
-                })
-                .collect(),
-        ),
-        normals: Some(
-            dense
-                .iter()
-                .map(|s| s.normal.as_vec3().to_array())
-                .collect(),
-        ),
-    };
-    let outliers = spec.effects.outliers.map_or(0, |f| {
-        add_outliers(&mut cloud, f, &mut seed_for(spec.seed, 4))
-    });
-    nrw_colmap::write_ply(&cloud, &cloud.path).map_err(io(&cloud.path))?;
-    write_bytes_atomic(
-        &out.join(truth::OUTLIERS),
-        format!(
-            "{{\"surface_points\": {}, \"outliers\": {outliers}, \"note\": \"outliers are the last vertices of dense/fused.ply\"}}\n",
-            cloud.len() - outliers
-        )
-        .as_bytes(),
-    )?;
-
+    let (rec, observations) = scene.sparse_model(&shots, &results)?;
+    let dense_points = scene.dense_cloud()?;
     let report = SynthReport {
         out: out.to_path_buf(),
         photos: shots.len(),
         small_photos: shots.iter().filter(|s| s.small).count(),
         away_photos: shots.iter().filter(|s| s.away).count(),
         sparse_points: rec.points.len(),
-        observations: n_obs,
-        dense_points: cloud.len(),
-        mean_reprojection_error_px: (n_obs > 0).then(|| err_sum / n_obs as f64),
+        observations: observations.count,
+        dense_points,
+        mean_reprojection_error_px: (observations.count > 0)
+            .then(|| observations.error_sum / observations.count as f64),
         counters: counters.snapshot(),
     };
-    let truths: Vec<&PhotoTruth> = results.iter().map(|r| &r.truth).collect();
-    let json = |v: &dyn erased::Json, rel: &str| -> Result<()> {
-        let p = out.join(rel);
-        let mut text = v.to_json();
-        text.push('\n');
-        write_bytes_atomic(&p, text.as_bytes())?;
-        Ok(())
-    };
-    json(&truths, truth::APPEARANCE)?;
-    json(&report, truth::REPORT)?;
-    let spec_text = toml::to_string(spec).expect("a spec serialises");
-    write_bytes_atomic(&out.join("scene.toml"), spec_text.as_bytes())?;
+    scene.write_truth(&results, &report)?;
     Ok(report)
+}
+
+/// What every step of [`generate`] reads: the spec, its landmark, the features SfM may
+/// observe, and the scene folder.
+struct Scene<'a> {
+    spec: &'a SceneSpec,
+    landmark: &'a Landmark,
+    features: &'a [SurfacePoint],
+    out: &'a Path,
+}
+
+/// The observations that became track elements: how many, and the sum of their noise (px).
+struct Observations {
+    count: usize,
+    error_sum: f64,
+}
+
+impl Scene<'_> {
+    /// One photo: rendered with its look and people, its photo, true depth and labels written,
+    /// the features it observes.
+    fn photo(&self, i: usize, shot: &Shot, counters: &Counters) -> Result<PhotoResult> {
+        let (spec, fx) = (self.spec, &self.spec.effects);
+        let mut rng = seed_for(spec.seed, 0x1000 + i as u64);
+        let look = Look::draw(fx, &mut rng);
+        let people = match fx.transients {
+            Some(mean) => Person::draw(mean, shot, &mut rng),
+            None => Vec::new(),
+        };
+        let buf = render(
+            self.landmark,
+            shot,
+            &look,
+            &people,
+            fx.noise,
+            hash64(spec.seed ^ (i as u64 + 1)),
+            counters,
+        );
+        let observed = observe(
+            shot,
+            &buf.depth,
+            self.features,
+            spec.observations.noise_px,
+            &mut rng,
+        );
+        let n_extra = (observed.len() as f64 * spec.observations.extra_keypoints).round() as usize;
+        let extras = (0..n_extra)
+            .map(|_| {
+                DVec2::new(
+                    rng.random_range(0.0..buf.width as f64),
+                    rng.random_range(0.0..buf.height as f64),
+                )
+            })
+            .collect();
+        self.write_photo(shot, buf)?;
+        if fx.jpeg_quality.is_some() {
+            counters.jpeg_photos.fetch_add(1, Ordering::Relaxed);
+        } else {
+            counters.png_photos.fetch_add(1, Ordering::Relaxed);
+        }
+        let label = look.appearance.map_or("neutral", |a| a.label()).to_string();
+        Ok(PhotoResult {
+            truth: PhotoTruth {
+                image_id: shot.image_id,
+                name: shot.name.clone(),
+                label,
+                look,
+                people,
+                small: shot.small,
+                away: shot.away,
+                width: shot.camera.width,
+                height: shot.camera.height,
+            },
+            observed,
+            extras,
+        })
+    }
+
+    /// A rendered photo's three files: the photo, its true depth (EXR) and its labels (PNG).
+    fn write_photo(&self, shot: &Shot, buf: render::PhotoBuffers) -> Result<()> {
+        let out = self.out;
+        encode(
+            &out.join("images").join(&shot.name),
+            buf.width,
+            buf.height,
+            &buf.rgb,
+            image::ExtendedColorType::Rgb8,
+            self.spec.effects.jpeg_quality,
+        )?;
+        let stem = Path::new(&shot.name).with_extension("");
+        let stem = stem.to_string_lossy();
+        write_exr(
+            &out.join(truth::DEPTH).join(format!("{stem}.exr")),
+            &DepthMap {
+                width: buf.width,
+                height: buf.height,
+                data: buf.depth,
+            },
+        )?;
+        encode(
+            &out.join(truth::SEMANTICS).join(format!("{stem}.png")),
+            buf.width,
+            buf.height,
+            &buf.semantics,
+            image::ExtendedColorType::L8,
+            None,
+        )
+    }
+
+    /// The COLMAP model, written in both encodings: a feature seen by two or more photos
+    /// becomes a 3D point, and every photo an image with its keypoints.
+    fn sparse_model(
+        &self,
+        shots: &[Shot],
+        results: &[PhotoResult],
+    ) -> Result<(Reconstruction, Observations)> {
+        let point_id = self.point_ids(results);
+        let origin = DVec3::from_array(self.spec.geometry.origin);
+        let mut rec = Reconstruction::default();
+        let mut points: BTreeMap<u64, Point3D> = BTreeMap::new();
+        let mut seen = Observations {
+            count: 0,
+            error_sum: 0.0,
+        };
+        for (shot, r) in shots.iter().zip(results) {
+            rec.cameras
+                .entry(shot.camera_id)
+                .or_insert_with(|| shot.camera.clone());
+            let mut points2d = Vec::with_capacity(r.observed.len() + r.extras.len());
+            for (k, xy, e) in &r.observed {
+                let pid = point_id[*k];
+                if pid != NO_POINT3D {
+                    let p = points
+                        .entry(pid)
+                        .or_insert_with(|| self.point(pid, &self.features[*k], origin));
+                    p.track.push(TrackElement {
+                        image_id: shot.image_id,
+                        point2d_idx: points2d.len() as u32,
+                    });
+                    p.error += e; // summed here, divided by track length below
+                    seen.error_sum += e;
+                    seen.count += 1;
+                }
+                points2d.push(Point2D {
+                    xy: *xy,
+                    point3d_id: pid,
+                });
+            }
+            points2d.extend(r.extras.iter().map(|xy| Point2D {
+                xy: *xy,
+                point3d_id: NO_POINT3D,
+            }));
+            rec.images
+                .insert(shot.image_id, image_of(shot, origin, points2d));
+        }
+        for p in points.values_mut() {
+            p.error /= p.track.len() as f64;
+        }
+        rec.points = points;
+        let sparse = self.out.join("sparse/0");
+        for f in [Format::Binary, Format::Text] {
+            nrw_colmap::write_model(&rec, &sparse, f).map_err(io(&sparse))?;
+        }
+        Ok((rec, seen))
+    }
+
+    /// Each feature's 3D point id: ids from 1 in feature order for those two or more photos
+    /// observe, `NO_POINT3D` for the rest.
+    fn point_ids(&self, results: &[PhotoResult]) -> Vec<u64> {
+        let mut seen = vec![0usize; self.features.len()];
+        for r in results {
+            for (k, _, _) in &r.observed {
+                seen[*k] += 1;
+            }
+        }
+        let mut point_id = vec![NO_POINT3D; self.features.len()];
+        let mut next = 1u64;
+        for (k, n) in seen.iter().enumerate() {
+            if *n >= 2 {
+                point_id[k] = next;
+                next += 1;
+            }
+        }
+        point_id
+    }
+
+    /// A feature's 3D point, in world coordinates shifted by `origin`, its track still empty.
+    fn point(&self, id: u64, f: &SurfacePoint, origin: DVec3) -> Point3D {
+        let a = self.landmark.albedo(f.material, f.p, f.normal);
+        Point3D {
+            id,
+            xyz: f.p + origin,
+            rgb: [to_srgb8(a.x), to_srgb8(a.y), to_srgb8(a.z)],
+            error: 0.0,
+            track: Vec::new(),
+        }
+    }
+
+    /// The dense cloud (`dense/fused.ply`): the surface sampled, then the spec's outliers;
+    /// how many outliers it holds goes to the ground truth. Returns the cloud's size.
+    fn dense_cloud(&self) -> Result<usize> {
+        let (spec, landmark, origin) = (
+            self.spec,
+            self.landmark,
+            DVec3::from_array(self.spec.geometry.origin),
+        );
+        let dense = landmark.sample_surface(spec.geometry.points, &mut seed_for(spec.seed, 3));
+        let mut cloud = PointCloud {
+            path: self.out.join("dense/fused.ply"),
+            positions: dense.iter().map(|s| s.p + origin).collect(),
+            colors: Some(
+                dense
+                    .iter()
+                    .map(|s| {
+                        let a = landmark.albedo(s.material, s.p, s.normal);
+                        [to_srgb8(a.x), to_srgb8(a.y), to_srgb8(a.z)]
+                    })
+                    .collect(),
+            ),
+            normals: Some(
+                dense
+                    .iter()
+                    .map(|s| s.normal.as_vec3().to_array())
+                    .collect(),
+            ),
+        };
+        let outliers = spec.effects.outliers.map_or(0, |f| {
+            add_outliers(&mut cloud, f, &mut seed_for(spec.seed, 4))
+        });
+        nrw_colmap::write_ply(&cloud, &cloud.path).map_err(io(&cloud.path))?;
+        write_bytes_atomic(
+            &self.out.join(truth::OUTLIERS),
+            format!(
+                "{{\"surface_points\": {}, \"outliers\": {outliers}, \"note\": \"outliers are the last vertices of dense/fused.ply\"}}\n",
+                cloud.len() - outliers
+            )
+            .as_bytes(),
+        )?;
+        Ok(cloud.len())
+    }
+
+    /// Each photo's true appearance, the report and the spec itself, beside the scene.
+    fn write_truth(&self, results: &[PhotoResult], report: &SynthReport) -> Result<()> {
+        let truths: Vec<&PhotoTruth> = results.iter().map(|r| &r.truth).collect();
+        let json = |v: &dyn erased::Json, rel: &str| -> Result<()> {
+            let mut text = v.to_json();
+            text.push('\n');
+            write_bytes_atomic(&self.out.join(rel), text.as_bytes())?;
+            Ok(())
+        };
+        json(&truths, truth::APPEARANCE)?;
+        json(report, truth::REPORT)?;
+        let spec_text = toml::to_string(self.spec).expect("a spec serialises");
+        write_bytes_atomic(&self.out.join("scene.toml"), spec_text.as_bytes())?;
+        Ok(())
+    }
+}
+
+/// A shot's COLMAP image: world→camera for world coordinates shifted by `origin`
+/// (t' = t − R·origin, summed with compensated arithmetic so a georeferenced scene keeps its
+/// digits).
+fn image_of(shot: &Shot, origin: DVec3, points2d: Vec<Point2D>) -> Image {
+    let rows = shot.pose.matrix().transpose();
+    let t = shot.pose.translation;
+    let mut pose = shot.pose;
+    pose.translation = DVec3::new(
+        dot3_plus(rows.x_axis, -origin, t.x),
+        dot3_plus(rows.y_axis, -origin, t.y),
+        dot3_plus(rows.z_axis, -origin, t.z),
+    );
+    Image {
+        id: shot.image_id,
+        name: shot.name.clone(),
+        camera_id: shot.camera_id,
+        cam_from_world: pose,
+        stored_quat_norm: 1.0,
+        points2d,
+    }
 }
 
 mod erased {

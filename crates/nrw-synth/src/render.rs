@@ -178,128 +178,201 @@ pub fn render(
         depth: vec![0.0; w * h],
         semantics: vec![0; w * h],
     };
-    let cam_to_world = shot.pose.matrix().transpose();
-    let o = shot.centre;
-    let distorted = shot.camera.model.has_distortion();
-    let sun = look.sun_direction.map(DVec3::from_array);
-    let ambient = DVec3::from_array(look.ambient);
-    let sun_rad = DVec3::from_array(look.sun);
-    let gain = look.exposure_ev.map(|ev| 2f64.powf(ev));
-    let wb = look.white_balance.map(DVec3::from_array);
-    let glow = look.window_glow.map(DVec3::from_array);
-    let horizon = DVec3::from_array(look.sky_horizon);
-    let (
-        mut n_inv,
-        mut n_sun,
-        mut n_shadow,
-        mut n_glow,
-        mut n_haze,
-        mut n_exp,
-        mut n_wb,
-        mut n_tr,
-        mut n_noise,
-    ) = (0u64, 0u64, 0u64, 0u64, 0u64, 0u64, 0u64, 0u64, 0u64);
+    let light = Light::of(look);
+    let photo = Photo {
+        landmark,
+        shot,
+        look,
+        light: &light,
+        people,
+        sensor_noise,
+        noise_seed,
+        cam_to_world: shot.pose.matrix().transpose(),
+    };
+    let mut tally = Tally::default();
     for y in 0..h {
         for x in 0..w {
-            let i = y * w + x;
-            let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-            // Pinhole models invert in closed form; only distortion models iterate.
-            n_inv += distorted as u64;
-            let Some(ray) = shot.camera.cam_ray_from_img(px) else {
-                continue;
-            };
-            let d = cam_to_world * ray;
-            let mut hit = landmark.intersect(o, d, 1e-6, 1e5).map(|h| {
-                (
-                    h.t,
-                    h.normal,
-                    Some(h.material),
-                    h.class,
-                    h.cell,
-                    DVec3::ZERO,
-                )
-            });
-            if !people.is_empty() {
-                n_tr += 1;
-                for p in people {
-                    let t_max = hit.map_or(1e5, |h| h.0);
-                    if let Some((t, n)) = p.intersect(o, d, t_max) {
-                        hit = Some((t, n, None, ADE_PERSON, (0, 0), DVec3::from_array(p.color)));
-                    }
-                }
-            }
-            let mut c = match hit {
-                None => {
-                    out.semantics[i] = ADE_SKY;
-                    look.sky(d)
-                }
-                Some((t, n, material, class, cell, person_color)) => {
-                    let p = o + d * t;
-                    out.depth[i] = (t * ray.z) as f32;
-                    out.semantics[i] = class;
-                    let alb = match material {
-                        Some(m) => landmark.albedo(m, p, n),
-                        None => person_color,
-                    };
-                    let mut c = alb * ambient;
-                    if let Some(l) = sun {
-                        n_sun += 1;
-                        let ndl = n.dot(l);
-                        if ndl > 0.0 {
-                            n_shadow += 1;
-                            if !landmark.occluded(p + n * 1e-4, l, 1e4) {
-                                c += alb * sun_rad * ndl;
-                            }
-                        }
-                    }
-                    if let (Some(g), Some(Material::Glass)) = (glow, material) {
-                        n_glow += 1;
-                        if lit(cell) {
-                            c += g;
-                        }
-                    }
-                    if let Some(beta) = look.haze_density {
-                        n_haze += 1;
-                        let f = (-beta * t).exp();
-                        c = c * f + horizon * (1.0 - f);
-                    }
-                    c
-                }
-            };
-            if let Some(g) = gain {
-                n_exp += 1;
-                c *= g;
-            }
-            if let Some(g) = wb {
-                n_wb += 1;
-                c *= g;
-            }
-            for k in 0..3 {
-                let mut v = to_srgb8(c[k]) as f64;
-                if let Some(s) = sensor_noise {
-                    n_noise += 1;
-                    v += 255.0
-                        * s
-                        * hashed_gauss(hash64(
-                            noise_seed ^ ((i as u64) * 3 + k as u64).wrapping_mul(0x9e37_79b9),
-                        ));
-                }
-                out.rgb[i * 3 + k] = v.round().clamp(0.0, 255.0) as u8;
-            }
+            photo.pixel(&mut out, x, y, &mut tally);
         }
     }
-    let add = |a: &AtomicU64, v: u64| {
-        a.fetch_add(v, Ordering::Relaxed);
-    };
-    add(&counters.primary_rays, (w * h) as u64);
-    add(&counters.distortion_inversions, n_inv);
-    add(&counters.sun_shading, n_sun);
-    add(&counters.shadow_rays, n_shadow);
-    add(&counters.window_glow, n_glow);
-    add(&counters.haze, n_haze);
-    add(&counters.exposure, n_exp);
-    add(&counters.white_balance, n_wb);
-    add(&counters.transient_tests, n_tr);
-    add(&counters.sensor_noise, n_noise);
+    tally.add_to(counters, (w * h) as u64);
     out
+}
+
+/// A look's light in the form shading uses it.
+struct Light {
+    sun: Option<DVec3>,
+    ambient: DVec3,
+    sun_radiance: DVec3,
+    gain: Option<f64>,
+    white_balance: Option<DVec3>,
+    glow: Option<DVec3>,
+    horizon: DVec3,
+}
+
+impl Light {
+    fn of(look: &Look) -> Light {
+        Light {
+            sun: look.sun_direction.map(DVec3::from_array),
+            ambient: DVec3::from_array(look.ambient),
+            sun_radiance: DVec3::from_array(look.sun),
+            gain: look.exposure_ev.map(|ev| 2f64.powf(ev)),
+            white_balance: look.white_balance.map(DVec3::from_array),
+            glow: look.window_glow.map(DVec3::from_array),
+            horizon: DVec3::from_array(look.sky_horizon),
+        }
+    }
+}
+
+/// One photo's counts of each simulation stage, added to [`Counters`] once at its end.
+#[derive(Default)]
+struct Tally {
+    inversions: u64,
+    sun: u64,
+    shadow: u64,
+    glow: u64,
+    haze: u64,
+    exposure: u64,
+    white_balance: u64,
+    transients: u64,
+    noise: u64,
+}
+
+impl Tally {
+    fn add_to(&self, counters: &Counters, rays: u64) {
+        let add = |a: &AtomicU64, v: u64| {
+            a.fetch_add(v, Ordering::Relaxed);
+        };
+        add(&counters.primary_rays, rays);
+        add(&counters.distortion_inversions, self.inversions);
+        add(&counters.sun_shading, self.sun);
+        add(&counters.shadow_rays, self.shadow);
+        add(&counters.window_glow, self.glow);
+        add(&counters.haze, self.haze);
+        add(&counters.exposure, self.exposure);
+        add(&counters.white_balance, self.white_balance);
+        add(&counters.transient_tests, self.transients);
+        add(&counters.sensor_noise, self.noise);
+    }
+}
+
+/// What a primary ray hits first: distance along the ray, normal, material (none for a
+/// person), ADE20K class, window cell and a person's colour.
+type Hit = (f64, DVec3, Option<Material>, u8, (i32, i32), DVec3);
+
+/// Everything one photo's pixels share.
+struct Photo<'a> {
+    landmark: &'a Landmark,
+    shot: &'a Shot,
+    look: &'a Look,
+    light: &'a Light,
+    people: &'a [Person],
+    sensor_noise: Option<f64>,
+    noise_seed: u64,
+    cam_to_world: glam::DMat3,
+}
+
+impl Photo<'_> {
+    /// One pixel's colour, depth and label.
+    fn pixel(&self, out: &mut PhotoBuffers, x: usize, y: usize, tally: &mut Tally) {
+        let i = y * out.width + x;
+        let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+        // Pinhole models invert in closed form; only distortion models iterate.
+        tally.inversions += self.shot.camera.model.has_distortion() as u64;
+        let Some(ray) = self.shot.camera.cam_ray_from_img(px) else {
+            return;
+        };
+        let d = self.cam_to_world * ray;
+        let mut c = match self.hit(d, tally) {
+            None => {
+                out.semantics[i] = ADE_SKY;
+                self.look.sky(d)
+            }
+            Some(hit) => {
+                out.depth[i] = (hit.0 * ray.z) as f32;
+                out.semantics[i] = hit.3;
+                self.shade(d, hit, tally)
+            }
+        };
+        if let Some(g) = self.light.gain {
+            tally.exposure += 1;
+            c *= g;
+        }
+        if let Some(g) = self.light.white_balance {
+            tally.white_balance += 1;
+            c *= g;
+        }
+        for k in 0..3 {
+            let mut v = to_srgb8(c[k]) as f64;
+            if let Some(s) = self.sensor_noise {
+                tally.noise += 1;
+                v += 255.0
+                    * s
+                    * hashed_gauss(hash64(
+                        self.noise_seed ^ ((i as u64) * 3 + k as u64).wrapping_mul(0x9e37_79b9),
+                    ));
+            }
+            out.rgb[i * 3 + k] = v.round().clamp(0.0, 255.0) as u8;
+        }
+    }
+
+    /// The first surface or person along direction `d` from the camera centre.
+    fn hit(&self, d: DVec3, tally: &mut Tally) -> Option<Hit> {
+        let o = self.shot.centre;
+        let mut hit = self.landmark.intersect(o, d, 1e-6, 1e5).map(|h| {
+            (
+                h.t,
+                h.normal,
+                Some(h.material),
+                h.class,
+                h.cell,
+                DVec3::ZERO,
+            )
+        });
+        if !self.people.is_empty() {
+            tally.transients += 1;
+            for p in self.people {
+                let t_max = hit.map_or(1e5, |h| h.0);
+                if let Some((t, n)) = p.intersect(o, d, t_max) {
+                    hit = Some((t, n, None, ADE_PERSON, (0, 0), DVec3::from_array(p.color)));
+                }
+            }
+        }
+        hit
+    }
+
+    /// The linear colour of a hit: albedo under ambient and (unless shadowed) sun, a lit
+    /// window's glow, haze.
+    fn shade(&self, d: DVec3, hit: Hit, tally: &mut Tally) -> DVec3 {
+        let (t, n, material, _, cell, person_color) = hit;
+        let light = self.light;
+        let p = self.shot.centre + d * t;
+        let alb = match material {
+            Some(m) => self.landmark.albedo(m, p, n),
+            None => person_color,
+        };
+        let mut c = alb * light.ambient;
+        if let Some(l) = light.sun {
+            tally.sun += 1;
+            let ndl = n.dot(l);
+            if ndl > 0.0 {
+                tally.shadow += 1;
+                if !self.landmark.occluded(p + n * 1e-4, l, 1e4) {
+                    c += alb * light.sun_radiance * ndl;
+                }
+            }
+        }
+        if let (Some(g), Some(Material::Glass)) = (light.glow, material) {
+            tally.glow += 1;
+            if lit(cell) {
+                c += g;
+            }
+        }
+        if let Some(beta) = self.look.haze_density {
+            tally.haze += 1;
+            let f = (-beta * t).exp();
+            c = c * f + light.horizon * (1.0 - f);
+        }
+        c
+    }
 }

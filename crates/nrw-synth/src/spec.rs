@@ -198,18 +198,23 @@ impl SceneSpec {
 
     /// Reject specs that cannot make a scene, naming the key.
     pub fn validate(&self, origin: &str) -> Result<()> {
-        let bad = |key: &str, problem: String| {
-            Err(SynthError::Spec {
+        self.check_geometry()
+            .and_then(|()| self.check_cameras())
+            .and_then(|()| self.check_effects())
+            .map_err(|(key, problem)| SynthError::Spec {
                 file: origin.into(),
                 problem: format!("{key}: {problem}"),
             })
-        };
+    }
+
+    /// The geometry's sizes, counts and origin.
+    fn check_geometry(&self) -> Checked {
         let g = &self.geometry;
         if !(g.facade_width > 1.0 && g.facade_height > 1.0) {
-            return bad("geometry.facade_width/height", "must exceed 1 m".into());
+            return bad("geometry.facade_width/height", "must exceed 1 m");
         }
         if g.bays == 0 || g.floors == 0 || g.bays > 64 || g.floors > 64 {
-            return bad("geometry.bays/floors", "must be 1 to 64".into());
+            return bad("geometry.bays/floors", "must be 1 to 64");
         }
         if g.points > MAX_POINTS {
             return bad(
@@ -218,8 +223,13 @@ impl SceneSpec {
             );
         }
         if !g.origin.iter().all(|v| v.is_finite()) {
-            return bad("geometry.origin", "must be finite".into());
+            return bad("geometry.origin", "must be finite");
         }
+        Ok(())
+    }
+
+    /// The cameras' model, count, sizes, fractions and distances, and the keypoints' noise.
+    fn check_cameras(&self) -> Checked {
         let c = &self.cameras;
         match nrw_colmap::CameraModel::from_name(&c.model) {
             None => {
@@ -239,13 +249,10 @@ impl SceneSpec {
             Some(_) => {}
         }
         if c.count == 0 || c.count > 100_000 {
-            return bad("cameras.count", "must be 1 to 100000".into());
+            return bad("cameras.count", "must be 1 to 100000");
         }
         if !(16 <= c.min_size && c.min_size <= c.max_size && c.max_size <= 8192) {
-            return bad(
-                "cameras.min_size/max_size",
-                "need 16 ≤ min ≤ max ≤ 8192".into(),
-            );
+            return bad("cameras.min_size/max_size", "need 16 ≤ min ≤ max ≤ 8192");
         }
         for (k, v) in [
             ("small_fraction", c.small_fraction),
@@ -256,22 +263,21 @@ impl SceneSpec {
             }
         }
         if !(c.min_distance > 1.0 && c.min_distance <= c.max_distance) {
-            return bad(
-                "cameras.min_distance/max_distance",
-                "need 1 < min ≤ max".into(),
-            );
+            return bad("cameras.min_distance/max_distance", "need 1 < min ≤ max");
         }
         if !(self.observations.noise_px >= 0.0 && self.observations.extra_keypoints >= 0.0) {
-            return bad(
-                "observations",
-                "noise_px and extra_keypoints must be ≥ 0".into(),
-            );
+            return bad("observations", "noise_px and extra_keypoints must be ≥ 0");
         }
+        Ok(())
+    }
+
+    /// Each effect's value, where the spec asks for it.
+    fn check_effects(&self) -> Checked {
         let e = &self.effects;
         if e.appearance.as_ref().is_some_and(|a| a.is_empty()) {
             return bad(
                 "effects.appearance",
-                "list at least one time of day, or leave it out".into(),
+                "list at least one time of day, or leave it out",
             );
         }
         for (k, v) in [
@@ -283,14 +289,11 @@ impl SceneSpec {
             ("texture", e.texture),
         ] {
             if v.is_some_and(|v| !(v >= 0.0 && v.is_finite())) {
-                return bad(
-                    &format!("effects.{k}"),
-                    "must be a finite number ≥ 0".into(),
-                );
+                return bad(&format!("effects.{k}"), "must be a finite number ≥ 0");
             }
         }
         if e.jpeg_quality.is_some_and(|q| !(1..=100).contains(&q)) {
-            return bad("effects.jpeg_quality", "must be 1 to 100".into());
+            return bad("effects.jpeg_quality", "must be 1 to 100");
         }
         Ok(())
     }
@@ -298,3 +301,11 @@ impl SceneSpec {
 
 /// The default demo scene, embedded so `nrw-etl demo` needs no file.
 pub const DEMO_TOML: &str = include_str!("../../../scenes/demo.toml");
+
+/// A spec check's outcome: the key at fault and what is wrong with it.
+type Checked = std::result::Result<(), (String, String)>;
+
+/// A failed check of `key`.
+fn bad(key: &str, problem: impl Into<String>) -> Checked {
+    Err((key.to_string(), problem.into()))
+}

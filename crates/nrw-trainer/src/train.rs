@@ -351,31 +351,7 @@ pub fn train(
             labels.as_ref().map(|l| class_agreement(&emb, l, 3)),
         ))
     };
-    // A checkpoint continues when every setting but the step count matches (raising --steps
-    // extends a finished run).
-    let same = |c: &TrainConfig| {
-        TrainConfig {
-            steps: cfg.steps,
-            ..c.clone()
-        } == *cfg
-    };
-    let mut state = match load(out, &mut adam)? {
-        Some(s) if same(&s.config) => State {
-            config: cfg.clone(),
-            ..s
-        },
-        Some(_) => return Err(TrainError::OtherSettings { out: out.into() }),
-        None => {
-            let (acc, class) = evaluate(&enc)?;
-            State {
-                step: 0,
-                config: cfg.clone(),
-                losses: Vec::new(),
-                accuracy_before: acc,
-                class_before: class,
-            }
-        }
-    };
+    let mut state = starting_state(out, &mut adam, cfg, || evaluate(&enc))?;
     let resumed_from = (state.step > 0).then_some(state.step);
     // The sampler's stream is replayed up to the step reached, so a resumed run draws the
     // same triplets as an uninterrupted one.
@@ -384,23 +360,7 @@ pub fn train(
     }
     while state.step < cfg.steps {
         let t = sampler.sample(cfg.batch);
-        let ids: Vec<u32> = t
-            .iter()
-            .map(|x| x.0)
-            .chain(t.iter().map(|x| x.1))
-            .chain(t.iter().map(|x| x.2))
-            .collect();
-        let b = loader.batch_of(&ids, state.step, 0)?;
-        let e = enc.forward(&input(&b)?)?;
-        let n = cfg.batch;
-        let loss = triplet_loss(
-            &e.narrow(0, 0, n)?,
-            &e.narrow(0, n, n)?,
-            &e.narrow(0, 2 * n, n)?,
-            cfg.margin,
-        )?;
-        let l = loss.to_scalar::<f32>()? as f64;
-        adam.step(&loss)?;
+        let l = step_loss(&enc, &mut adam, &loader, &t, state.step, cfg)?;
         state.step += 1;
         state.losses.push((state.step, l));
         progress(state.step, l);
@@ -417,4 +377,68 @@ pub fn train(
         class_agreement: state.class_before.zip(class),
         resumed_from,
     })
+}
+
+/// Where a run starts: the checkpoint in `out` when every setting but the step count matches
+/// (raising --steps extends a finished run), else step 0 with the untrained encoder's
+/// figures (`evaluate`).
+fn starting_state(
+    out: &Path,
+    adam: &mut Adam,
+    cfg: &TrainConfig,
+    evaluate: impl FnOnce() -> Result<(f64, Option<f64>)>,
+) -> Result<State> {
+    let same = |c: &TrainConfig| {
+        TrainConfig {
+            steps: cfg.steps,
+            ..c.clone()
+        } == *cfg
+    };
+    Ok(match load(out, adam)? {
+        Some(s) if same(&s.config) => State {
+            config: cfg.clone(),
+            ..s
+        },
+        Some(_) => return Err(TrainError::OtherSettings { out: out.into() }),
+        None => {
+            let (acc, class) = evaluate()?;
+            State {
+                step: 0,
+                config: cfg.clone(),
+                losses: Vec::new(),
+                accuracy_before: acc,
+                class_before: class,
+            }
+        }
+    })
+}
+
+/// One optimiser step on a batch of triplets (anchors, then positives, then negatives, in
+/// one forward pass); its loss.
+fn step_loss(
+    enc: &Encoder,
+    adam: &mut Adam,
+    loader: &Loader,
+    t: &[Triplet],
+    step: u64,
+    cfg: &TrainConfig,
+) -> Result<f64> {
+    let ids: Vec<u32> = t
+        .iter()
+        .map(|x| x.0)
+        .chain(t.iter().map(|x| x.1))
+        .chain(t.iter().map(|x| x.2))
+        .collect();
+    let b = loader.batch_of(&ids, step, 0)?;
+    let e = enc.forward(&input(&b)?)?;
+    let n = cfg.batch;
+    let loss = triplet_loss(
+        &e.narrow(0, 0, n)?,
+        &e.narrow(0, n, n)?,
+        &e.narrow(0, 2 * n, n)?,
+        cfg.margin,
+    )?;
+    let l = loss.to_scalar::<f32>()? as f64;
+    adam.step(&loss)?;
+    Ok(l)
 }

@@ -179,183 +179,219 @@ impl<'a> Vm<'a> {
         for _ in 0..MAX_OPS {
             let at = self.at;
             let op = self.u8()?;
-            match op {
-                0x80 => {
-                    self.u8()?; // PROTO
-                }
-                0x95 => {
-                    self.le::<8>()?; // FRAME: a hint only
-                }
-                b'.' => return self.pop(),
-                b'(' => self.push(Obj::Mark),
-                b'N' => self.push(Obj::None),
-                0x88 => self.push(Obj::Bool(true)),
-                0x89 => self.push(Obj::Bool(false)),
-                b'K' => {
-                    let v = self.u8()?;
-                    self.push(Obj::Int(v as i64))
-                }
-                b'M' => {
-                    let v = u16::from_le_bytes(self.le()?);
-                    self.push(Obj::Int(v as i64))
-                }
-                b'J' => {
-                    let v = i32::from_le_bytes(self.le()?);
-                    self.push(Obj::Int(v as i64))
-                }
-                0x8a => {
-                    let n = self.u8()? as usize;
-                    let r = self.take(n)?;
-                    if n > 8 {
-                        return Err(format!("pickle at byte {at}: an integer of {n} bytes"));
-                    }
-                    let mut v: i64 = 0;
-                    for (i, &c) in self.b[r.clone()].iter().enumerate() {
-                        v |= (c as i64) << (8 * i);
-                    }
-                    if n > 0 && n < 8 && self.b[r.end - 1] & 0x80 != 0 {
-                        v -= 1i64 << (8 * n);
-                    }
-                    self.push(Obj::Int(v))
-                }
-                b'G' => {
-                    self.le::<8>()?; // a float: no weights file needs its value
-                    self.push(Obj::Float)
-                }
-                // Python 2 `str` (SHORT_BINSTRING, BINSTRING) and bytes: payloads.
-                b'U' | b'C' => {
-                    let n = self.u8()? as usize;
-                    self.bytes(n)?
-                }
-                b'T' | b'B' => {
-                    let n = self.len_u32()?;
-                    self.bytes(n)?
-                }
-                0x8e | 0x96 => {
-                    let n = self.len_u64()?;
-                    self.bytes(n)?
-                }
-                0x8c => {
-                    let n = self.u8()? as usize;
-                    self.unicode(n)?
-                }
-                b'X' => {
-                    let n = self.len_u32()?;
-                    self.unicode(n)?
-                }
-                0x8d => {
-                    let n = self.len_u64()?;
-                    self.unicode(n)?
-                }
-                b'c' => {
-                    let (m, n) = (self.line()?, self.line()?);
-                    self.global(&m, &n)?
-                }
-                0x93 => {
-                    let (n, m) = (self.pop()?, self.pop()?);
-                    let (Some(m), Some(n)) = (self.text(m), self.text(n)) else {
-                        return Err(format!("pickle at byte {at}: STACK_GLOBAL of non-text"));
-                    };
-                    self.global(&m, &n)?
-                }
-                b')' => self.push(Obj::Tuple(vec![])),
-                b']' => self.push(Obj::List(vec![])),
-                b'}' => self.push(Obj::Dict(vec![])),
-                b't' => {
-                    let items = self.pop_mark()?;
-                    self.push(Obj::Tuple(items))
-                }
-                b'l' => {
-                    let items = self.pop_mark()?;
-                    self.push(Obj::List(items))
-                }
-                0x85..=0x87 => {
-                    let n = (op - 0x84) as usize;
-                    if self.stack.len() < n {
-                        return Err(format!("pickle at byte {at}: TUPLE{n} on a short stack"));
-                    }
-                    let items = self.stack.split_off(self.stack.len() - n);
-                    self.push(Obj::Tuple(items))
-                }
-                b'a' => {
-                    let v = self.pop()?;
-                    let l = self.top()?;
-                    self.list_mut(l, at)?.push(v)
-                }
-                b'e' => {
-                    let items = self.pop_mark()?;
-                    let l = self.top()?;
-                    self.list_mut(l, at)?.extend(items)
-                }
-                b'd' => {
-                    let items = self.pop_mark()?;
-                    let pairs = pairs(&items, at)?;
-                    self.push(Obj::Dict(pairs))
-                }
-                b's' => {
-                    let v = self.pop()?;
-                    let k = self.pop()?;
-                    let d = self.top()?;
-                    self.dict_mut(d, at)?.push((k, v))
-                }
-                b'u' => {
-                    let items = self.pop_mark()?;
-                    let p = pairs(&items, at)?;
-                    let d = self.top()?;
-                    self.dict_mut(d, at)?.extend(p)
-                }
-                b'q' => {
-                    let k = self.u8()? as u32;
-                    self.memo.insert(k, self.top()?);
-                }
-                b'r' => {
-                    let k = u32::from_le_bytes(self.le()?);
-                    self.memo.insert(k, self.top()?);
-                }
-                0x94 => {
-                    let k = self.memo.len() as u32;
-                    self.memo.insert(k, self.top()?);
-                }
-                b'h' | b'j' => {
-                    let k = if op == b'h' {
-                        self.u8()? as u32
-                    } else {
-                        u32::from_le_bytes(self.le()?)
-                    };
-                    let i = *self
-                        .memo
-                        .get(&k)
-                        .ok_or_else(|| format!("pickle at byte {at}: memo {k} was never stored"))?;
-                    self.stack.push(i)
-                }
-                b'R' | 0x81 => {
-                    let args = self.pop()?;
-                    let f = self.pop()?;
-                    let Obj::Global(callable) = self.objs[f] else {
-                        return Err(format!("pickle at byte {at}: a call of {}", self.kind(f)));
-                    };
-                    self.push(Obj::Call {
-                        callable,
-                        args,
-                        state: None,
-                    })
-                }
-                b'b' => {
-                    let s = self.pop()?;
-                    let o = self.top()?;
-                    match &mut self.objs[o] {
-                        Obj::Call { state, .. } => *state = Some(s),
-                        _ => return Err(format!("pickle at byte {at}: BUILD on a plain value")),
-                    }
-                }
-                _ => {
-                    return Err(format!(
+            if op == b'.' {
+                return self.pop();
+            }
+            let known = self.value(op, at)?
+                || self.text_op(op, at)?
+                || self.container(op, at)?
+                || self.memo_or_call(op, at)?;
+            if !known {
+                return Err(format!(
                     "pickle at byte {at}: opcode 0x{op:02x} is not one NumPy's array pickles use"
-                ))
-                }
+                ));
             }
         }
         Err(format!("pickle: more than {MAX_OPS} opcodes"))
+    }
+
+    /// Protocol, frame, constants, integers and floats; whether `op` is one of them.
+    fn value(&mut self, op: u8, at: usize) -> Result<bool, NpyError> {
+        match op {
+            0x80 => {
+                self.u8()?; // PROTO
+            }
+            0x95 => {
+                self.le::<8>()?; // FRAME: a hint only
+            }
+            b'(' => self.push(Obj::Mark),
+            b'N' => self.push(Obj::None),
+            0x88 => self.push(Obj::Bool(true)),
+            0x89 => self.push(Obj::Bool(false)),
+            b'K' => {
+                let v = self.u8()?;
+                self.push(Obj::Int(v as i64))
+            }
+            b'M' => {
+                let v = u16::from_le_bytes(self.le()?);
+                self.push(Obj::Int(v as i64))
+            }
+            b'J' => {
+                let v = i32::from_le_bytes(self.le()?);
+                self.push(Obj::Int(v as i64))
+            }
+            0x8a => {
+                let n = self.u8()? as usize;
+                let r = self.take(n)?;
+                if n > 8 {
+                    return Err(format!("pickle at byte {at}: an integer of {n} bytes"));
+                }
+                let mut v: i64 = 0;
+                for (i, &c) in self.b[r.clone()].iter().enumerate() {
+                    v |= (c as i64) << (8 * i);
+                }
+                if n > 0 && n < 8 && self.b[r.end - 1] & 0x80 != 0 {
+                    v -= 1i64 << (8 * n);
+                }
+                self.push(Obj::Int(v))
+            }
+            b'G' => {
+                self.le::<8>()?; // a float: no weights file needs its value
+                self.push(Obj::Float)
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// Strings, bytes and globals; whether `op` is one of them.
+    fn text_op(&mut self, op: u8, at: usize) -> Result<bool, NpyError> {
+        match op {
+            // Python 2 `str` (SHORT_BINSTRING, BINSTRING) and bytes: payloads.
+            b'U' | b'C' => {
+                let n = self.u8()? as usize;
+                self.bytes(n)?
+            }
+            b'T' | b'B' => {
+                let n = self.len_u32()?;
+                self.bytes(n)?
+            }
+            0x8e | 0x96 => {
+                let n = self.len_u64()?;
+                self.bytes(n)?
+            }
+            0x8c => {
+                let n = self.u8()? as usize;
+                self.unicode(n)?
+            }
+            b'X' => {
+                let n = self.len_u32()?;
+                self.unicode(n)?
+            }
+            0x8d => {
+                let n = self.len_u64()?;
+                self.unicode(n)?
+            }
+            b'c' => {
+                let (m, n) = (self.line()?, self.line()?);
+                self.global(&m, &n)?
+            }
+            0x93 => {
+                let (n, m) = (self.pop()?, self.pop()?);
+                let (Some(m), Some(n)) = (self.text(m), self.text(n)) else {
+                    return Err(format!("pickle at byte {at}: STACK_GLOBAL of non-text"));
+                };
+                self.global(&m, &n)?
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// Tuples, lists and dicts, built and extended; whether `op` is one of them.
+    fn container(&mut self, op: u8, at: usize) -> Result<bool, NpyError> {
+        match op {
+            b')' => self.push(Obj::Tuple(vec![])),
+            b']' => self.push(Obj::List(vec![])),
+            b'}' => self.push(Obj::Dict(vec![])),
+            b't' => {
+                let items = self.pop_mark()?;
+                self.push(Obj::Tuple(items))
+            }
+            b'l' => {
+                let items = self.pop_mark()?;
+                self.push(Obj::List(items))
+            }
+            0x85..=0x87 => {
+                let n = (op - 0x84) as usize;
+                if self.stack.len() < n {
+                    return Err(format!("pickle at byte {at}: TUPLE{n} on a short stack"));
+                }
+                let items = self.stack.split_off(self.stack.len() - n);
+                self.push(Obj::Tuple(items))
+            }
+            b'a' => {
+                let v = self.pop()?;
+                let l = self.top()?;
+                self.list_mut(l, at)?.push(v)
+            }
+            b'e' => {
+                let items = self.pop_mark()?;
+                let l = self.top()?;
+                self.list_mut(l, at)?.extend(items)
+            }
+            b'd' => {
+                let items = self.pop_mark()?;
+                let pairs = pairs(&items, at)?;
+                self.push(Obj::Dict(pairs))
+            }
+            b's' => {
+                let v = self.pop()?;
+                let k = self.pop()?;
+                let d = self.top()?;
+                self.dict_mut(d, at)?.push((k, v))
+            }
+            b'u' => {
+                let items = self.pop_mark()?;
+                let p = pairs(&items, at)?;
+                let d = self.top()?;
+                self.dict_mut(d, at)?.extend(p)
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// The memo, calls and BUILD; whether `op` is one of them.
+    fn memo_or_call(&mut self, op: u8, at: usize) -> Result<bool, NpyError> {
+        match op {
+            b'q' => {
+                let k = self.u8()? as u32;
+                self.memo.insert(k, self.top()?);
+            }
+            b'r' => {
+                let k = u32::from_le_bytes(self.le()?);
+                self.memo.insert(k, self.top()?);
+            }
+            0x94 => {
+                let k = self.memo.len() as u32;
+                self.memo.insert(k, self.top()?);
+            }
+            b'h' | b'j' => {
+                let k = if op == b'h' {
+                    self.u8()? as u32
+                } else {
+                    u32::from_le_bytes(self.le()?)
+                };
+                let i = *self
+                    .memo
+                    .get(&k)
+                    .ok_or_else(|| format!("pickle at byte {at}: memo {k} was never stored"))?;
+                self.stack.push(i)
+            }
+            b'R' | 0x81 => {
+                let args = self.pop()?;
+                let f = self.pop()?;
+                let Obj::Global(callable) = self.objs[f] else {
+                    return Err(format!("pickle at byte {at}: a call of {}", self.kind(f)));
+                };
+                self.push(Obj::Call {
+                    callable,
+                    args,
+                    state: None,
+                })
+            }
+            b'b' => {
+                let s = self.pop()?;
+                let o = self.top()?;
+                match &mut self.objs[o] {
+                    Obj::Call { state, .. } => *state = Some(s),
+                    _ => return Err(format!("pickle at byte {at}: BUILD on a plain value")),
+                }
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
     }
 
     fn list_mut(&mut self, i: usize, at: usize) -> Result<&mut Vec<usize>, NpyError> {

@@ -116,37 +116,14 @@ fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<P
         ..UndistortOptions::default()
     };
     let distorted = crate::model::undistort_model(&mut rec, &options, &scene.model_dir)?;
-    let (ws, remote) = match &out {
-        Location::Local(dir) => {
-            claim(&out, &Store::local(dir), cfg.overwrite)?;
-            (Workspace::new(&staging_dir(dir)), None)
-        }
-        Location::Url(_) => {
-            let remote = Remote::open(&out)?;
-            claim(&out, &remote.out, cfg.overwrite)?;
-            (Workspace::new(&remote.scratch), Some(remote))
-        }
-    };
+    let (ws, remote) = workspace(cfg, &out)?;
     // The record lives where the units share the workspace: the staging folder or prefix.
     let shared = match &remote {
         Some(r) => r.staging.clone(),
         None => Store::local(&ws.root),
     };
     let settings = Settings::of(cfg);
-    let record = match (agree(&shared, RECORD, &settings, settings_of)?, step) {
-        (Agreement::Same(r), _) => Some(r),
-        (Agreement::Differs { .. }, Step::Whole) => None,
-        (Agreement::Differs { differ, .. }, _) => {
-            return Err(settings_differ(shared.name(RECORD), &differ))
-        }
-        (Agreement::Fresh, Step::Finalize) => {
-            return Err(PipelineError::input(
-                shared.root(),
-                "holds no densify work: run `densify --unit I/N --pass photometric`, then `--pass geometric`, before finalize",
-            ))
-        }
-        (Agreement::Fresh, _) => None,
-    };
+    let record = earlier_record(&shared, &settings, step)?;
     if record.is_none() && step == Step::Whole {
         // A whole run starts over; units share the folder, so they only add to it.
         shared.delete_dir("")?;
@@ -187,6 +164,41 @@ fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<P
         plan,
         verdicts,
         undistort_seconds,
+    })
+}
+
+/// The workspace the views are densified in (the output's staging folder, or a local scratch
+/// folder for an object-store output), the output claimed first; the remote output, if any.
+fn workspace(cfg: &DensifyConfig, out: &Location) -> Result<(Workspace, Option<Remote>)> {
+    Ok(match out {
+        Location::Local(dir) => {
+            claim(out, &Store::local(dir), cfg.overwrite)?;
+            (Workspace::new(&staging_dir(dir)), None)
+        }
+        Location::Url(_) => {
+            let remote = Remote::open(out)?;
+            claim(out, &remote.out, cfg.overwrite)?;
+            (Workspace::new(&remote.scratch), Some(remote))
+        }
+    })
+}
+
+/// The record earlier work left with these settings, if any: other settings are an error
+/// for units and finalize (a whole run starts over), and finalize needs earlier work.
+fn earlier_record(shared: &Store, settings: &Settings, step: Step) -> Result<Option<Record>> {
+    Ok(match (agree(shared, RECORD, settings, settings_of)?, step) {
+        (Agreement::Same(r), _) => Some(r),
+        (Agreement::Differs { .. }, Step::Whole) => None,
+        (Agreement::Differs { differ, .. }, _) => {
+            return Err(settings_differ(shared.name(RECORD), &differ))
+        }
+        (Agreement::Fresh, Step::Finalize) => {
+            return Err(PipelineError::input(
+                shared.root(),
+                "holds no densify work: run `densify --unit I/N --pass photometric`, then `--pass geometric`, before finalize",
+            ))
+        }
+        (Agreement::Fresh, _) => None,
     })
 }
 

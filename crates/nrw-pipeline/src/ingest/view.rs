@@ -160,11 +160,36 @@ pub(super) fn process(
         ..o
     };
     let name = format!("image {}", img.id);
+    let (photo, labels, signals) = match decode(cfg, p, img, &photo_path, &o, (w, h))? {
+        Ok(d) => d,
+        Err(dropped) => return Ok((dropped, None)),
+    };
+    let photo = resize_photo(&photo, w, h);
+    let o = ImageOutcome {
+        signals: Some(signals),
+        ..o
+    };
+    let row = view_row((img, cam), &name, (&view, &buf, empty), &photo, labels)?;
+    Ok((o, Some(row)))
+}
+
+/// The photo as its row needs it: decoded, its signals measured, undistorted, with its label
+/// maps; or the outcome that drops it (too blurry, or unreadable unless `--strict`).
+fn decode(
+    cfg: &IngestConfig,
+    p: &Prepared,
+    img: &nrw_colmap::Image,
+    photo_path: &std::path::Path,
+    o: &ImageOutcome,
+    (w, h): (u32, u32),
+) -> Result<std::result::Result<(RgbImage, LabelPngs, PhotoSignals), ImageOutcome>> {
+    let name = format!("image {}", img.id);
+    let cam = &p.rec.cameras[&img.camera_id];
     let undistort = p
         .distorted
         .as_ref()
         .map(|originals| (&originals[&img.camera_id], cam));
-    let decoded = load_photo(&photo_path)
+    let decoded = load_photo(photo_path)
         .map_err(PipelineError::from)
         .and_then(|photo| {
             let signals = super::signals::signals(&photo);
@@ -188,22 +213,27 @@ pub(super) fn process(
             )?;
             Ok(Ok((photo, labels, signals)))
         });
-    let (photo, (semantics_png, transient_png, labels_png), signals) = match decoded {
-        Ok(Ok(d)) => d,
-        Ok(Err(blurry)) => return Ok((blurry, None)),
+    match decoded {
         Err(PipelineError::Dataset(nrw_dataset::DatasetError::Unreadable { path, problem }))
             if !cfg.strict =>
         {
-            return Ok((unreadable(&path, problem), None));
+            Ok(Err(unreadable(&path, problem)))
         }
-        Err(e) => return Err(e),
-    };
-    let photo = resize_photo(&photo, w, h);
-    let o = ImageOutcome {
-        signals: Some(signals),
-        ..o
-    };
-    let row = ViewRow {
+        other => other,
+    }
+}
+
+/// A kept view's shard row: its pose and camera, its photo (at the render's size), the
+/// render's colour, depth and normals, and its label maps.
+fn view_row(
+    (img, cam): (&nrw_colmap::Image, &nrw_colmap::Camera),
+    name: &str,
+    (view, buf, empty): (&View, &nrw_render::DeepBuffer, f64),
+    photo: &RgbImage,
+    (semantics_png, transient_png, labels_png): LabelPngs,
+) -> Result<ViewRow> {
+    let (w, h) = (view.width, view.height);
+    Ok(ViewRow {
         image_id: img.id,
         name: img.name.clone(),
         camera_id: cam.id,
@@ -216,22 +246,21 @@ pub(super) fn process(
         qvec: img.cam_from_world.qvec(),
         tvec: img.cam_from_world.translation.to_array(),
         empty_ratio: empty,
-        photo_png: encode_rgb(&name, &photo)?,
-        color_png: encode_color_render(&name, w, h, buf.color.as_deref(), &buf.depth)?,
+        photo_png: encode_rgb(name, photo)?,
+        color_png: encode_color_render(name, w, h, buf.color.as_deref(), &buf.depth)?,
         depth_exr: nrw_dataset::depth::encode_exr(&nrw_dataset::depth::DepthMap {
             width: w as usize,
             height: h as usize,
             data: buf.depth.clone(),
         })?,
         normal_png: match &buf.normal {
-            Some(n) => Some(encode_normals(&name, w, h, n, &buf.depth)?),
+            Some(n) => Some(encode_normals(name, w, h, n, &buf.depth)?),
             None => None,
         },
         semantics_png,
         transient_png,
         labels_png,
-    };
-    Ok((o, Some(row)))
+    })
 }
 
 /// Render one group, write its shard, then its record.

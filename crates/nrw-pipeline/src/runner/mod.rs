@@ -207,6 +207,45 @@ fn style_config(s: &StyleTable, dataset: &Location, weights: Option<&Path>) -> R
     })
 }
 
+/// The configs of the stages a pipeline file turns on that are built before any runs (so a
+/// bad table stops the run before any work).
+struct StageConfigs {
+    style: Option<StyleConfig>,
+    export: Option<(Layout, ExportConfig)>,
+    ingest: Option<IngestConfig>,
+}
+
+impl StageConfigs {
+    fn of(
+        p: &Pipeline,
+        scene: &Path,
+        (out, export_dir): (&Location, &Location),
+        models: Models,
+    ) -> Result<StageConfigs> {
+        let style = p
+            .style
+            .as_ref()
+            .map(|s| style_config(s, out, models.vgg))
+            .transpose()?;
+        let segmented = models.segformer.is_some() && p.ingest.is_some();
+        let export = p
+            .export
+            .as_ref()
+            .map(|e| export_config(e, out, export_dir, segmented))
+            .transpose()?;
+        let ingest = p
+            .ingest
+            .as_ref()
+            .map(|i| ingest_config(i, scene, out, models))
+            .transpose()?;
+        Ok(StageConfigs {
+            style,
+            export,
+            ingest,
+        })
+    }
+}
+
 /// Run every stage `p` lists on `scene` into the dataset `out` (the export into
 /// `export_dir`, the report into out/qa). Settings are checked before the first stage runs.
 #[allow(clippy::too_many_arguments)] // each a place or a model the caller names
@@ -220,22 +259,11 @@ pub fn run(
     progress: &dyn Progress,
     done: &mut dyn FnMut(StageDone),
 ) -> Result<RunOutcome> {
-    let style = p
-        .style
-        .as_ref()
-        .map(|s| style_config(s, out, models.vgg))
-        .transpose()?;
-    let segmented = models.segformer.is_some() && p.ingest.is_some();
-    let export = p
-        .export
-        .as_ref()
-        .map(|e| export_config(e, out, export_dir, segmented))
-        .transpose()?;
-    let mut ingest = p
-        .ingest
-        .as_ref()
-        .map(|i| ingest_config(i, scene, out, models))
-        .transpose()?;
+    let StageConfigs {
+        style,
+        export,
+        mut ingest,
+    } = StageConfigs::of(p, scene, (out, export_dir), models)?;
     let mut outcome = RunOutcome {
         kept: true,
         dataset: out.clone(),

@@ -387,6 +387,28 @@ pub fn style_unit_on(
         progress,
         &|_, _| Ok(()),
     )?;
+    let record = unit_record(cfg, unit, &kind, &ids, net, t0);
+    crate::stage::record_unit::<StyleStage>(store, unit, &record)?;
+    Ok(StyleSummary {
+        dataset: store.root().to_string(),
+        unit,
+        tier: kind.tier,
+        photos: owned_photos,
+        parts_written: d.ran,
+        parts_skipped: d.resumed,
+        seconds: record.seconds,
+    })
+}
+
+/// A style unit's record: its settings, the kept ids it covered (by hash) and its time.
+fn unit_record(
+    cfg: &StyleConfig,
+    unit: Unit,
+    kind: &DescriptorKind,
+    ids: &[u32],
+    net: Option<&dyn Backend>,
+    t0: Instant,
+) -> UnitRecord {
     let parameters = to_parameters(&StyleParameters {
         tier: kind.tier.clone(),
         weights_sha256: kind.weights_sha256.clone(),
@@ -400,7 +422,7 @@ pub fn style_unit_on(
         sha256: crate::sha256_hex(&ids.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<_>>()),
         rows: None,
     };
-    let record = UnitRecord {
+    UnitRecord {
         stage: units::STYLE.into(),
         index: unit.index,
         count: unit.count,
@@ -412,17 +434,7 @@ pub fn style_unit_on(
         groups: ids.len().div_ceil(cfg.photos_per_part),
         seconds: t0.elapsed().as_secs_f64(),
         instruction_set: device_of(net),
-    };
-    crate::stage::record_unit::<StyleStage>(store, unit, &record)?;
-    Ok(StyleSummary {
-        dataset: store.root().to_string(),
-        unit,
-        tier: kind.tier,
-        photos: owned_photos,
-        parts_written: d.ran,
-        parts_skipped: d.resumed,
-        seconds: record.seconds,
-    })
+    }
 }
 
 /// Describe every kept photo in this process, then list the parts in the manifest. Parts

@@ -13,6 +13,7 @@ use crate::error::Result;
 use crate::plots;
 use crate::tables::ImageRow;
 use crate::thumbs::{self, THUMB};
+use crate::Figures;
 
 mod markup;
 mod wild;
@@ -38,7 +39,6 @@ const CHECK: &str = "window.addEventListener('load',function(){var bad=[];docume
 /// Build the page.
 pub fn render(inp: &Inputs) -> Result<String> {
     let f = inp.figures;
-    let c = &f.counts;
     let mut h = String::new();
     let _ = write!(
         h,
@@ -52,7 +52,31 @@ pub fn render(inp: &Inputs) -> Result<String> {
         esc(&f.scene_dir),
         esc(&f.tool)
     );
-    // Summary
+    summary(&mut h, f);
+    parameters(&mut h, f);
+    warnings(&mut h, f);
+    licences(&mut h, inp);
+    drops(&mut h, inp)?;
+    distributions(&mut h, inp)?;
+    sharpness(&mut h, inp)?;
+    near_duplicates(&mut h, inp);
+    // Views are read only when something was kept (an all-dropped dataset has no shards).
+    let ds = if inp.figures.counts.shard_rows > 0 {
+        Some(Dataset::open(inp.dir)?)
+    } else {
+        None
+    };
+    contact_sheet(&mut h, inp, ds.as_ref())?;
+    split(&mut h, inp)?;
+    triplets(&mut h, inp, ds.as_ref())?;
+    let _ = writeln!(h, "<script>{CHECK}</script></body></html>");
+    Ok(h)
+}
+
+/// The funnel of counts from registered to split, and what the shards, descriptors and
+/// triplets hold.
+fn summary(h: &mut String, f: &Figures) {
+    let c = &f.counts;
     h.push_str("<h2>Summary</h2><div class=\"funnel\">");
     let stages = [
         ("registered", c.registered),
@@ -87,6 +111,10 @@ pub fn render(inp: &Inputs) -> Result<String> {
             None => "no triplets yet (run <code>nrw-etl triplets</code>)".into(),
         }
     );
+}
+
+/// Every recorded parameter and stage timing, folded.
+fn parameters(h: &mut String, f: &Figures) {
     h.push_str("<details open><summary>Parameters and timings</summary><table><tr><th>parameter</th><th>value</th></tr>");
     for (k, v) in &f.parameters {
         let _ = write!(
@@ -104,7 +132,10 @@ pub fn render(inp: &Inputs) -> Result<String> {
         h.push_str("<tr><td colspan=2>no timings recorded</td></tr>");
     }
     h.push_str("</table></details>");
-    // Warnings
+}
+
+/// The warnings, each with up to 20 of its photos.
+fn warnings(h: &mut String, f: &Figures) {
     h.push_str("<h2>Worth a look</h2>");
     if f.warnings.is_empty() {
         h.push_str("<p class=\"ok\">Nothing unusual found.</p>");
@@ -127,22 +158,6 @@ pub fn render(inp: &Inputs) -> Result<String> {
         }
         h.push_str("</div>");
     }
-    licences(&mut h, inp);
-    drops(&mut h, inp)?;
-    distributions(&mut h, inp)?;
-    sharpness(&mut h, inp)?;
-    near_duplicates(&mut h, inp);
-    // Views are read only when something was kept (an all-dropped dataset has no shards).
-    let ds = if inp.figures.counts.shard_rows > 0 {
-        Some(Dataset::open(inp.dir)?)
-    } else {
-        None
-    };
-    contact_sheet(&mut h, inp, ds.as_ref())?;
-    split(&mut h, inp)?;
-    triplets(&mut h, inp, ds.as_ref())?;
-    let _ = writeln!(h, "<script>{CHECK}</script></body></html>");
-    Ok(h)
 }
 
 fn drops(h: &mut String, inp: &Inputs) -> Result<()> {

@@ -15,9 +15,9 @@ impl Problem<'_> {
         let centre = img.at(x, y) as f64;
         let sc2 = 2.0 * self.opts.sigma_color * self.opts.sigma_color;
         let stride = self.window.len().next_multiple_of(LANES);
-        // One allocation a pixel: the four runs (the last holds the grey values until the
-        // mean is known; f32 holds them exactly).
-        let mut buf = vec![0.0f32; 4 * stride];
+        // The four runs in one pooled buffer (the last holds the grey values until the mean
+        // is known; f32 holds them exactly).
+        let mut buf = super::problem::pooled(4 * stride);
         let (dxs, rest) = buf.split_at_mut(stride);
         let (dys, rest) = rest.split_at_mut(stride);
         let (ws, was) = rest.split_at_mut(stride);
@@ -44,12 +44,13 @@ impl Problem<'_> {
         }
         let len = count.next_multiple_of(LANES);
         for k in count..len {
-            (dxs[k], dys[k]) = (dxs[0], dys[0]);
+            (dxs[k], dys[k], ws[k], was[k]) = (dxs[0], dys[0], 0.0, 0.0);
         }
         Patch {
             buf,
             stride,
             len,
+            count,
             sum_w,
             var: var / sum_w,
         }

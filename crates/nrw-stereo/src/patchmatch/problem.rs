@@ -68,9 +68,13 @@ pub(super) struct Problem<'a> {
 /// so a padded sample is never outside when the real ones are inside).
 pub(super) struct Patch {
     /// dx, dy, weight, and weight × (grey value minus the weighted mean): `stride` apart.
+    /// Taken from this thread's [`POOL`] and given back on drop.
     pub(super) buf: Vec<f32>,
     pub(super) stride: usize,
+    /// The samples with their padding.
     pub(super) len: usize,
+    /// The real samples (the first `count` of each run).
+    pub(super) count: usize,
     pub(super) sum_w: f64,
     pub(super) var: f64,
 }
@@ -88,7 +92,29 @@ impl Patch {
             dy: self.run(1),
             w: self.run(2),
             wa: self.run(3),
+            count: self.count,
         }
+    }
+}
+
+thread_local! {
+    /// Window buffers no patch holds: a pixel's patch reuses one rather than allocating
+    /// (and zeroing) its own, each time a sweep visits the pixel.
+    pub(super) static POOL: std::cell::RefCell<Vec<Vec<f32>>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A buffer of `len` f32 from this thread's pool (its contents are whatever the last patch
+/// left: [`Problem::patch`] writes every value it reads).
+pub(super) fn pooled(len: usize) -> Vec<f32> {
+    let mut buf = POOL.with(|p| p.borrow_mut().pop()).unwrap_or_default();
+    buf.resize(len, 0.0);
+    buf
+}
+
+impl Drop for Patch {
+    fn drop(&mut self) {
+        let buf = std::mem::take(&mut self.buf);
+        POOL.with(|p| p.borrow_mut().push(buf));
     }
 }
 

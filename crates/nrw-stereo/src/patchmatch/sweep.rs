@@ -7,7 +7,9 @@ use rayon::prelude::*;
 use crate::rng::PixelRng;
 
 use super::options::{Hypotheses, MAX_COST};
-use super::problem::{facing, to_d, to_f, Known, Problem, Update, DIRECTIONS, NEIGHBOUR_STEPS};
+use super::problem::{
+    facing, to_d, to_f, Known, Patch, Problem, Update, DIRECTIONS, NEIGHBOUR_STEPS,
+};
 
 impl Problem<'_> {
     /// One pixel's sweep: the neighbours' planes, then random refinements, compared on the
@@ -42,29 +44,71 @@ impl Problem<'_> {
         // The current plane's cost over its selected views is the mean of its best `best_k`
         // costs, which is the cost it was stored with (the selected views are its best
         // `best_k + 1`): it is not computed again (precision given up: the stored f32).
-        let (start, mut best_known) = if !self.in_range(d_cur) {
+        let (start, known) = if !self.in_range(d_cur) {
             (f64::INFINITY, Known::NONE)
         } else if current.3 != 0 {
             (current.2 as f64, Known::NONE)
         } else {
             self.subset_cost(&patch, x, y, d_cur, n_cur, mask)
         };
-        let mut best = (d_cur, n_cur, start);
-        let mut changed = false;
-        let mut consider = |d: f64, n: DVec3, best: &mut (f64, DVec3, f64)| {
-            if !self.in_range(d) {
-                return;
-            }
-            let (c, known) = self.subset_cost(&patch, x, y, d, n, mask);
-            if c < best.2 {
-                *best = (d, n, c);
-                best_known = known;
-                changed = true;
-            }
+        let mut search = Search {
+            best: (d_cur, n_cur, start),
+            known,
+            changed: false,
         };
-        for (dx, dy) in DIRECTIONS {
-            // ACMH's adaptive choice, reduced: of the direction's neighbours at odd
-            // distances, the one whose plane has the lowest cost (the nearest on a tie).
+        for (d, n) in self
+            .neighbour_planes(state, x, y, ray)
+            .into_iter()
+            .flatten()
+        {
+            self.consider(&mut search, &patch, (x, y, mask), d, n);
+        }
+        let mut rng = PixelRng::new(self.opts.seed, view_salt, iteration as u64 + 1, i as u64);
+        for (d, n) in self.refinements(search.best, ray, iteration, &mut rng) {
+            self.consider(&mut search, &patch, (x, y, mask), d, n);
+        }
+        if !search.changed && current.3 != 0 {
+            return current;
+        }
+        let (d, n, _) = search.best;
+        let (cost, views) = self.cost(&patch, x, y, d, n, &search.known);
+        (d as f32, to_f(n), cost as f32, views)
+    }
+
+    /// Compare plane (d, n) with the pixel's best on its selected views (`at`: x, y, mask),
+    /// and take it if it costs less.
+    fn consider(
+        &self,
+        search: &mut Search,
+        patch: &Patch,
+        at: (usize, usize, u32),
+        d: f64,
+        n: DVec3,
+    ) {
+        if !self.in_range(d) {
+            return;
+        }
+        let (x, y, mask) = at;
+        let (c, known) = self.subset_cost(patch, x, y, d, n, mask);
+        if c < search.best.2 {
+            search.best = (d, n, c);
+            search.known = known;
+            search.changed = true;
+        }
+    }
+
+    /// The planes of the pixel's neighbours, one for each of the four directions, taken
+    /// through the pixel's ray (none where the plane does not face it). ACMH's adaptive
+    /// choice, reduced: of a direction's neighbours at odd distances, the one whose plane
+    /// has the lowest cost (the nearest on a tie).
+    fn neighbour_planes(
+        &self,
+        state: &Hypotheses,
+        x: usize,
+        y: usize,
+        ray: DVec3,
+    ) -> [Option<(f64, DVec3)>; 4] {
+        DIRECTIONS.map(|(dx, dy)| {
             let mut pick: Option<(usize, usize, f32)> = None;
             for step in NEIGHBOUR_STEPS {
                 let (nx, ny) = (x as isize + dx * step, y as isize + dy * step);
@@ -77,19 +121,24 @@ impl Problem<'_> {
                     pick = Some((nx, ny, c));
                 }
             }
-            let Some((nx, ny, _)) = pick else {
-                continue;
-            };
+            let (nx, ny, _) = pick?;
             let j = ny * state.width + nx;
             let n = to_d(state.normal[j]);
             let plane_point = self.reference.lens.pixel_ray(nx, ny) * state.depth[j] as f64;
             let denom = n.dot(ray);
-            if denom >= -1e-12 {
-                continue;
-            }
-            consider(n.dot(plane_point) / denom, n, &mut best);
-        }
-        let mut rng = PixelRng::new(self.opts.seed, view_salt, iteration as u64 + 1, i as u64);
+            (denom < -1e-12).then(|| (n.dot(plane_point) / denom, n))
+        })
+    }
+
+    /// Five random planes around the best so far (d0, n0): a fresh one, its depth or normal
+    /// perturbed or both (by less each iteration), and its depth with a fresh normal.
+    fn refinements(
+        &self,
+        best: (f64, DVec3, f64),
+        ray: DVec3,
+        iteration: usize,
+        rng: &mut PixelRng,
+    ) -> [(f64, DVec3); 5] {
         let shrink = 0.5f64.powi(iteration as i32);
         let (d0, n0) = (best.0, best.1);
         let perturb_d = |rng: &mut PixelRng| d0 * (1.0 + 0.05 * shrink * rng.signed());
@@ -97,24 +146,13 @@ impl Problem<'_> {
             let v = n0 + DVec3::new(rng.signed(), rng.signed(), rng.signed()) * (0.3 * shrink);
             facing(v.normalize_or(n0), ray)
         };
-        let candidates = [
-            (
-                self.random_depth(&mut rng),
-                Self::random_normal(ray, &mut rng),
-            ),
-            (perturb_d(&mut rng), n0),
-            (d0, perturb_n(&mut rng)),
-            (perturb_d(&mut rng), perturb_n(&mut rng)),
-            (d0, Self::random_normal(ray, &mut rng)),
-        ];
-        for (d, n) in candidates {
-            consider(d, n, &mut best);
-        }
-        if !changed && current.3 != 0 {
-            return current;
-        }
-        let (cost, views) = self.cost(&patch, x, y, best.0, best.1, &best_known);
-        (best.0 as f32, to_f(best.1), cost as f32, views)
+        [
+            (self.random_depth(rng), Self::random_normal(ray, rng)),
+            (perturb_d(rng), n0),
+            (d0, perturb_n(rng)),
+            (perturb_d(rng), perturb_n(rng)),
+            (d0, Self::random_normal(ray, rng)),
+        ]
     }
 
     /// Random hypotheses for every pixel, each with its cost.
@@ -239,4 +277,12 @@ pub(super) fn upsampled(coarse: &Hypotheses, w: usize, h: usize) -> Hypotheses {
         }
     }
     out
+}
+
+/// One pixel's search: its best plane (depth, normal, cost on its selected views), the
+/// source costs that plane's cost was computed from, and whether it changed.
+struct Search {
+    best: (f64, DVec3, f64),
+    known: Known,
+    changed: bool,
 }

@@ -224,6 +224,7 @@ mod x86 {
     }
 
     impl Homography8 {
+        /// `warp`'s coefficients, broadcast.
         #[target_feature(enable = "avx2")]
         fn new(warp: &Warp) -> Homography8 {
             let lanes = |v: glam::Vec3| v.to_array().map(|c| _mm256_set1_ps(c));

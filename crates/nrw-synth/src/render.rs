@@ -211,6 +211,7 @@ struct Light {
 }
 
 impl Light {
+    /// The light a photo's look describes.
     fn of(look: &Look) -> Light {
         Light {
             sun: look.sun_direction.map(DVec3::from_array),
@@ -239,6 +240,7 @@ struct Tally {
 }
 
 impl Tally {
+    /// Add this photo's counts, and its `rays` primary rays, to the scene's counters.
     fn add_to(&self, counters: &Counters, rays: u64) {
         let add = |a: &AtomicU64, v: u64| {
             a.fetch_add(v, Ordering::Relaxed);

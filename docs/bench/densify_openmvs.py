@@ -103,8 +103,11 @@ def openmvs(bindir, ws, work, threads):
 
 
 def openmvs_version(bindir):
-    r = subprocess.run([os.path.join(bindir, "DensifyPointCloud"), "--help"],
-                       capture_output=True, text=True)
+    """The version `DensifyPointCloud --help` prints (run in a scratch folder: it leaves a
+    log file where it runs)."""
+    with tempfile.TemporaryDirectory() as scratch:
+        r = subprocess.run([os.path.join(bindir, "DensifyPointCloud"), "--help"],
+                           capture_output=True, text=True, cwd=scratch)
     m = re.search(r"OpenMVS[^\n]*?v?(\d+\.\d+\.\d+)", r.stdout + r.stderr)
     return m.group(1) if m else "unknown version"
 

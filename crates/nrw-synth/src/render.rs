@@ -188,6 +188,7 @@ pub fn render(
         sensor_noise,
         noise_seed,
         cam_to_world: shot.pose.matrix().transpose(),
+        distorted: shot.camera.model.has_distortion(),
     };
     let mut tally = Tally::default();
     for y in 0..h {
@@ -272,6 +273,8 @@ struct Photo<'a> {
     sensor_noise: Option<f64>,
     noise_seed: u64,
     cam_to_world: glam::DMat3,
+    /// Whether the lens distorts (its rays are found by iteration).
+    distorted: bool,
 }
 
 impl Photo<'_> {
@@ -280,7 +283,7 @@ impl Photo<'_> {
         let i = y * out.width + x;
         let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
         // Pinhole models invert in closed form; only distortion models iterate.
-        tally.inversions += self.shot.camera.model.has_distortion() as u64;
+        tally.inversions += self.distorted as u64;
         let Some(ray) = self.shot.camera.cam_ray_from_img(px) else {
             return;
         };

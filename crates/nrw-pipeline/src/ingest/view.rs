@@ -160,7 +160,7 @@ pub(super) fn process(
         ..o
     };
     let name = format!("image {}", img.id);
-    let (photo, labels, signals) = match decode(cfg, p, img, &photo_path, &o, (w, h))? {
+    let (photo, labels, signals) = match decode(cfg, p, (img, &name), &photo_path, &o, (w, h))? {
         Ok(d) => d,
         Err(dropped) => return Ok((dropped, None)),
     };
@@ -178,12 +178,11 @@ pub(super) fn process(
 fn decode(
     cfg: &IngestConfig,
     p: &Prepared,
-    img: &nrw_colmap::Image,
+    (img, name): (&nrw_colmap::Image, &str),
     photo_path: &std::path::Path,
     o: &ImageOutcome,
     (w, h): (u32, u32),
 ) -> Result<std::result::Result<(RgbImage, LabelPngs, PhotoSignals), ImageOutcome>> {
-    let name = format!("image {}", img.id);
     let cam = &p.rec.cameras[&img.camera_id];
     let undistort = p
         .distorted
@@ -201,16 +200,7 @@ fn decode(
                 Some((from, to)) => crate::model::undistorted_photo(&photo, from, to),
                 None => photo,
             };
-            let labels = label_pngs(
-                cfg,
-                p,
-                &name,
-                &img.name,
-                &photo,
-                original,
-                undistort,
-                (w, h),
-            )?;
+            let labels = label_pngs(cfg, p, name, &img.name, &photo, original, undistort, (w, h))?;
             Ok(Ok((photo, labels, signals)))
         });
     match decoded {

@@ -11,7 +11,7 @@ pub enum EtlError {
     Dataset(#[from] nrw_dataset::DatasetError),
     /// A flag's value the library refused, named by the flag.
     #[error("{flag} {problem}")]
-    Flag { flag: &'static str, problem: String },
+    Flag { flag: String, problem: String },
 }
 
 /// A stage's error; a setting it names is shown as the flag that sets it.
@@ -28,13 +28,13 @@ impl From<nrw_pipeline::PipelineError> for EtlError {
 }
 
 /// The command-line flag (or argument) of a stage setting ([`nrw_pipeline::Setting::flag`]).
-pub fn flag(s: nrw_pipeline::Setting) -> &'static str {
+pub fn flag(s: nrw_pipeline::Setting) -> String {
     s.flag()
 }
 
-/// A library message as the CLI shows it ([`nrw_pipeline::error::flags`]).
+/// A library message as the CLI shows it ([`nrw_pipeline::settings::flags`]).
 pub fn flags(text: &str) -> String {
-    nrw_pipeline::error::flags(text)
+    nrw_pipeline::settings::flags(text)
 }
 
 impl EtlError {
@@ -82,9 +82,9 @@ mod tests {
         }
         let m = format!(
             "{} 7 needs 8 photos; use {} 6 or a smaller {}",
-            Setting::K,
-            Setting::K,
-            Setting::Crop
+            Setting::Key("triplets.k"),
+            Setting::Key("triplets.k"),
+            Setting::Key("export.crop")
         );
         assert_eq!(
             flags(&m),
@@ -95,25 +95,35 @@ mod tests {
     }
 
     /// The stages whose keys messages mention (`stage.field`).
-    const STAGES: [&str; 7] = [
-        "ingest", "style", "triplets", "split", "export", "segment", "corpus",
+    const STAGES: [&str; 8] = [
+        "ingest", "style", "triplets", "split", "export", "segment", "corpus", "densify",
     ];
 
     /// Endings that make a backticked word a file name (`export.json`), not a key.
     const FILE_ENDINGS: [&str; 4] = ["json", "parquet", "toml", "txt"];
 
-    /// Backticked `stage.field` words in the crates' sources that name no setting: a message
-    /// of a crate below nrw-pipeline spells the key itself, and a renamed key must not leave
-    /// it shown raw by the CLI.
+    /// Backticked `stage.field` words and `Setting::Key` names in the crates' sources that
+    /// name no setting: a message of a crate below nrw-pipeline spells the key itself, and a
+    /// renamed key must not leave it shown raw by the CLI.
     #[test]
     fn every_key_the_crates_mention_is_a_setting() {
-        let known: Vec<String> = Setting::ALL.iter().map(|s| s.key().to_string()).collect();
+        let known = |word: &str| {
+            Setting::ALL.iter().any(|s| s.key() == word)
+                || nrw_pipeline::settings::flag_of(word).is_some()
+        };
         let crates = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let mut orphans = Vec::new();
         let mut seen = 0;
         for krate in ["nrw-colmap", "nrw-dataset", "nrw-export", "nrw-pipeline"] {
             for file in rs_files(&crates.join(krate).join("src")) {
                 let text = std::fs::read_to_string(&file).unwrap();
+                for named in text.split("Setting::Key(\"").skip(1) {
+                    let word = named.split('"').next().unwrap_or_default();
+                    seen += 1;
+                    if !known(word) {
+                        orphans.push(format!("{}: Setting::Key(\"{word}\")", file.display()));
+                    }
+                }
                 for word in text.split('`').skip(1).step_by(2) {
                     let Some((stage, field)) = word.split_once('.') else {
                         continue;
@@ -124,7 +134,7 @@ mod tests {
                         && field.chars().all(|c| c.is_ascii_lowercase() || c == '_');
                     if is_key {
                         seen += 1;
-                        if !known.iter().any(|k| k == word) {
+                        if !known(word) {
                             orphans.push(format!("{}: `{word}`", file.display()));
                         }
                     }

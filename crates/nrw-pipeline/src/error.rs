@@ -91,26 +91,15 @@ pub enum PipelineError {
 }
 
 /// A setting of a stage's configuration that a message can name. The library names it by its
-/// key (the stage's config field, as pipeline files spell it) in backticks, wherever in a
-/// message it stands; the CLI shows its flag instead ([`Setting::ALL`] is the closed set it
-/// looks for), so no library message spells a flag.
+/// key (`stage.field`, as pipeline files spell it) in backticks, wherever in a message it
+/// stands; the CLI shows its flag instead, so no library message spells a flag. A field of a
+/// stage's settings struct is a [`Setting::Key`], its flag read from the struct; the variants
+/// name what no settings struct holds (places, work units, tables), and [`Setting::ALL`] is
+/// their closed set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Setting {
-    RowsPerShard,
-    Radius,
-    MaxEmpty,
-    /// `--min-sharpness`: the blur filter.
-    MinSharpness,
-    EstimateNormals,
-    Undistort,
     SegmentWeights,
-    SegmentMode,
-    /// The SegFormer's input size in pixels.
-    SegmentSize,
-    PhotosPerPart,
-    Tier,
     Weights,
-    K,
     Unit,
     /// How many units a `Unit::parse("auto")` run has, where the scheduler does not say.
     UnitCount,
@@ -120,119 +109,60 @@ pub enum Setting {
     Split,
     /// The photo folder, where it is not the model's `images/`.
     Images,
-    /// A folder of label maps given instead of a segmentation model.
-    Semantics,
     /// A point cloud given instead of the scene's `dense/fused.ply`.
     Points,
     /// Whether a stage may replace what an earlier run of other settings wrote.
     Overwrite,
-    /// How many photos the split holds out for validation.
-    Val,
-    /// The share of the kept photos the split holds out for validation.
-    ValFraction,
-    /// The square an export crops views to.
-    Crop,
-    /// How many TFRecord files an export writes per split.
-    TfrecordFiles,
-    /// Metres a model unit (IMC 2022's scaling factor).
-    MetresPerUnit,
-    Licences,
-    /// Whether an export writes the views' semantic labels.
-    ExportSemantics,
     /// The corpus index's list of scenes and their outcomes.
     Entries,
     /// Whether photo names may resolve through links out of the photo folder.
     FollowOutsideLinks,
     /// Where densify writes its dense workspace.
     DenseOut,
-    /// Source views stereo matches each view with.
-    MaxSources,
-    /// The longer side densify's undistorted views are capped at.
-    MaxImageSize,
     /// The PatchMatch kernel's settings (iterations, window, scales).
     Stereo,
-    /// The fewest pixels fusion merges into a point.
-    MinNumPixels,
+    /// A field of a stage's settings struct ([`crate::settings`]), named by its key
+    /// (`stage.field`): its flag is the one the struct declares, so a setting needs no
+    /// variant of its own.
+    Key(&'static str),
 }
 
 impl Setting {
-    /// Every setting: the set the CLI maps from keys to flags.
-    pub const ALL: [Setting; 35] = [
-        Setting::RowsPerShard,
-        Setting::Radius,
-        Setting::MaxEmpty,
-        Setting::MinSharpness,
-        Setting::EstimateNormals,
-        Setting::Undistort,
+    /// Every named variant: the set the CLI maps from keys to flags besides the settings
+    /// structs' fields.
+    pub const ALL: [Setting; 13] = [
         Setting::SegmentWeights,
-        Setting::SegmentMode,
-        Setting::SegmentSize,
-        Setting::PhotosPerPart,
-        Setting::Tier,
         Setting::Weights,
-        Setting::K,
         Setting::Unit,
         Setting::UnitCount,
         Setting::Photos,
         Setting::Split,
         Setting::Images,
-        Setting::Semantics,
         Setting::Points,
         Setting::Overwrite,
-        Setting::Val,
-        Setting::ValFraction,
-        Setting::Crop,
-        Setting::TfrecordFiles,
-        Setting::MetresPerUnit,
-        Setting::Licences,
-        Setting::ExportSemantics,
         Setting::Entries,
         Setting::FollowOutsideLinks,
         Setting::DenseOut,
-        Setting::MaxSources,
-        Setting::MaxImageSize,
         Setting::Stereo,
-        Setting::MinNumPixels,
     ];
 
     /// The setting's key: `stage.field` as a pipeline file or a library caller names it.
     pub fn key(self) -> &'static str {
         match self {
-            Setting::RowsPerShard => "ingest.rows_per_shard",
-            Setting::Radius => "ingest.radius",
-            Setting::MaxEmpty => "ingest.max_empty",
-            Setting::MinSharpness => "ingest.min_sharpness",
-            Setting::EstimateNormals => "ingest.estimate_normals",
-            Setting::Undistort => "ingest.undistort",
             Setting::SegmentWeights => "ingest.segment_weights",
-            Setting::SegmentMode => "ingest.segment_mode",
-            Setting::SegmentSize => "ingest.segment_size",
-            Setting::PhotosPerPart => "style.photos_per_part",
-            Setting::Tier => "style.tier",
             Setting::Weights => "style.weights",
-            Setting::K => "triplets.k",
             Setting::Unit => "unit",
             Setting::UnitCount => "unit_count",
             Setting::Photos => "segment.scene",
             Setting::Split => "split",
             Setting::Images => "ingest.images",
-            Setting::Semantics => "ingest.semantics",
             Setting::Points => "ingest.points",
             Setting::Overwrite => "overwrite",
-            Setting::Val => "split.val",
-            Setting::ValFraction => "split.val_fraction",
-            Setting::Crop => "export.crop",
-            Setting::TfrecordFiles => "export.tfrecord_files",
-            Setting::MetresPerUnit => "export.metres_per_unit",
-            Setting::Licences => "export.licences",
-            Setting::ExportSemantics => "export.semantics",
             Setting::Entries => "corpus.entries",
             Setting::FollowOutsideLinks => "follow_outside_links",
             Setting::DenseOut => "densify.out",
-            Setting::MaxSources => "densify.max_sources",
-            Setting::MaxImageSize => "densify.max_image_size",
             Setting::Stereo => "densify.stereo",
-            Setting::MinNumPixels => "densify.min_num_pixels",
+            Setting::Key(key) => key,
         }
     }
 }
@@ -281,64 +211,6 @@ impl PipelineError {
     }
 }
 
-impl Setting {
-    /// The command-line flag (or argument) of the setting: what the CLI names where a
-    /// pipeline file names its key.
-    pub fn flag(self) -> &'static str {
-        use Setting as S;
-        match self {
-            S::RowsPerShard => "--rows-per-shard",
-            S::Radius => "--radius",
-            S::MaxEmpty => "--max-empty",
-            S::MinSharpness => "--min-sharpness",
-            S::EstimateNormals => "--estimate-normals",
-            S::Undistort => "--undistort",
-            S::SegmentWeights => "--segment-weights",
-            S::SegmentMode => "--segment-mode",
-            S::SegmentSize => "--segment-size",
-            S::PhotosPerPart => "--photos-per-part",
-            S::Tier => "--tier",
-            S::Weights => "--weights",
-            S::K => "--k",
-            S::Unit => "--unit",
-            S::UnitCount => "--unit-count",
-            S::Photos => "SCENE",
-            // Only a pipeline file has a [split] table.
-            S::Split => "[split]",
-            S::Images => "--images",
-            S::Semantics => "--semantics",
-            S::Points => "--points",
-            S::Overwrite => "--overwrite",
-            S::Val => "--val",
-            S::ValFraction => "--val-fraction",
-            S::Crop => "--crop",
-            S::TfrecordFiles => "--tfrecord-files",
-            S::MetresPerUnit => "--metres-per-unit",
-            S::Licences => "--licences",
-            // The flag turns the setting off.
-            S::ExportSemantics => "--no-semantics",
-            S::Entries => "--entries",
-            S::FollowOutsideLinks => "--follow-outside-links",
-            S::DenseOut => "--out",
-            S::MaxSources => "--max-sources",
-            S::MaxImageSize => "--max-image-size",
-            S::Stereo => "--iterations/--window-radius/--scales",
-            S::MinNumPixels => "--min-num-pixels",
-        }
-    }
-}
-
-/// A library message as the CLI shows it: every setting it mentions (its key in backticks,
-/// as [`Setting`] displays) shown as the flag that sets it.
-pub fn flags(text: &str) -> String {
-    if !text.contains('`') {
-        return text.to_string();
-    }
-    Setting::ALL
-        .iter()
-        .fold(text.to_string(), |t, s| t.replace(&s.to_string(), s.flag()))
-}
-
 #[cfg(test)]
 mod tests {
     use super::Setting;
@@ -357,6 +229,7 @@ mod tests {
             .map(str::trim)
             .filter(|l| !l.is_empty() && !l.starts_with("//"))
             .map(|l| l.trim_end_matches(','))
+            .filter(|l| !l.starts_with("Key("))
             .collect();
         let listed: Vec<String> = Setting::ALL.iter().map(|s| format!("{s:?}")).collect();
         assert_eq!(declared, listed);

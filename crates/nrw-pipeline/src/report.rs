@@ -152,7 +152,7 @@ pub fn export(dataset: &Location, out: &Location, s: &ExportSummary) -> Report {
     for e in &s.empty_splits {
         r.err(format!(
             "split {e} has no view: not written (the published code's {e} glob will find nothing; the split stage's {} N holds out N photos)",
-            Setting::Val
+            Setting::Key("split.val")
         ));
     }
     let train = s
@@ -173,7 +173,7 @@ pub fn export(dataset: &Location, out: &Location, s: &ExportSummary) -> Report {
         None if s.layout == Layout::Official.name() => r.err(
             format!(
                 "no dist_NAME.pckl: the dataset has no official style descriptors (the style stage with {} official and {} VGG16)",
-                Setting::Tier,
+                Setting::Key("style.tier"),
                 Setting::Weights
             ),
         ),
@@ -213,7 +213,7 @@ pub fn split(cfg: &SplitConfig, s: &SplitSummary) -> Report {
             names.join(", ")
         ));
     }
-    let Some(tsv) = &cfg.from_tsv else {
+    let Some(tsv) = &cfg.settings.from_tsv else {
         r.out(format!(
             "split {}: {} train, {} val ({} kept as before, {} newly assigned with seed {}){}",
             cfg.dataset,
@@ -221,7 +221,7 @@ pub fn split(cfg: &SplitConfig, s: &SplitSummary) -> Report {
             s.val,
             s.kept,
             s.new,
-            cfg.seed,
+            cfg.settings.seed,
             match s.duplicate_groups {
                 0 => String::new(),
                 n => format!("; {n} near-duplicate groups each kept on one side"),

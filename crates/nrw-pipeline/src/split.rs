@@ -1,35 +1,71 @@
 //! Split: a reproducible, incremental train/validation assignment of the kept photos.
 
+use crate::settings::split::SplitSettings;
 use nrw_dataset::split::VAL;
-use std::path::PathBuf;
 
 use nrw_dataset::split::{assign_grouped, read_splits, write_splits};
 use nrw_dataset::{Manifest, Store};
 
-use crate::error::{PipelineError, Result};
+use crate::error::{PipelineError, Result, Setting};
 
-/// Split's settings; `new` is the paper's (100 validation photos, seed 0).
+/// A split: the dataset, its settings (declared once, in [`crate::settings::split`]) and
+/// the count of validation photos they come to.
 #[derive(Debug, Clone)]
 pub struct SplitConfig {
     pub dataset: nrw_dataset::Location,
-    /// Validation photos; 0 puts every photo in training.
+    /// Validation photos (`settings`' count, or its fraction of the kept photos); 0 puts
+    /// every photo in training.
     pub val: usize,
-    /// Same seed, same split on any machine.
-    pub seed: u64,
-    /// A published split file (NeRF-W's Phototourism `*.tsv`) to take the sets from instead
-    /// of drawing them; it replaces any earlier split.
-    pub from_tsv: Option<PathBuf>,
+    pub settings: SplitSettings,
 }
 
 impl SplitConfig {
-    /// The paper's split of a dataset.
+    /// The paper's split of a dataset: 100 validation photos, seed 0.
     pub fn new(dataset: impl Into<nrw_dataset::Location>) -> SplitConfig {
         SplitConfig {
             dataset: dataset.into(),
-            val: 100,
-            seed: 0,
-            from_tsv: None,
+            val: PAPER_VAL,
+            settings: SplitSettings::default(),
         }
+    }
+}
+
+/// The paper's validation photos.
+pub const PAPER_VAL: usize = 100;
+
+impl SplitSettings {
+    /// The split of `dataset` these settings ask for: a fraction becomes a count of the
+    /// dataset's kept photos here, for the CLI and pipeline files alike.
+    pub fn config(&self, dataset: &nrw_dataset::Location) -> Result<SplitConfig> {
+        let val = match (self.val, self.val_fraction) {
+            (None, None) => PAPER_VAL,
+            (Some(v), None) => v,
+            (None, Some(f)) if (0.0..1.0).contains(&f) => {
+                let store = nrw_dataset::Store::open(dataset)?;
+                let kept = nrw_dataset::reader::Dataset::open(store)?.len();
+                ((kept as f64 * f) as usize).max(1)
+            }
+            (None, Some(f)) => {
+                return Err(PipelineError::config(
+                    Setting::Key("split.val_fraction"),
+                    format!("is {f}: a fraction of the kept photos, at least 0 and below 1"),
+                ))
+            }
+            (Some(_), Some(_)) => {
+                return Err(PipelineError::config(
+                    Setting::Key("split.val"),
+                    format!(
+                        "and {} were both given: give exactly one, a count or a fraction",
+                        Setting::Key("split.val_fraction")
+                    ),
+                ))
+            }
+        };
+        Ok(SplitConfig {
+            dataset: dataset.clone(),
+            val,
+            settings: self.clone(),
+        })
     }
 }
 
@@ -130,7 +166,7 @@ fn split_from_tsv(tsv: &std::path::Path, store: &Store) -> Result<SplitSummary> 
 pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
     let store = &Store::open(&cfg.dataset)?;
     crate::timing::timed(store, "split", || {
-        if let Some(tsv) = &cfg.from_tsv {
+        if let Some(tsv) = &cfg.settings.from_tsv {
             return split_from_tsv(tsv, store);
         }
         let mut manifest = Manifest::read(store)?;
@@ -141,7 +177,7 @@ pub fn split(cfg: &SplitConfig) -> Result<SplitSummary> {
             .collect();
         let previous = read_splits(store)?;
         let (groups, duplicate_groups) = duplicate_groups(store)?;
-        let (rows, change) = assign_grouped(&kept, &previous, cfg.val, cfg.seed, &groups)
+        let (rows, change) = assign_grouped(&kept, &previous, cfg.val, cfg.settings.seed, &groups)
             .map_err(|e| PipelineError::dataset(&cfg.dataset, e.to_string()))?;
         manifest.replace_table(write_splits(store, &rows)?);
         manifest

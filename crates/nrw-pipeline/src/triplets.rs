@@ -9,19 +9,14 @@ use nrw_dataset::triplets::{write_triplets, TripletInfo, TripletRow};
 use nrw_dataset::{Manifest, Store};
 
 use crate::error::{PipelineError, Result, Setting};
+use crate::settings::triplets::TripletsSettings;
 
-/// Triplets' settings; `new` is the paper's (k = 20, exact, training split).
+/// A triplets run: the dataset, and the settings it runs with (declared once, in
+/// [`crate::settings::triplets`]).
 #[derive(Debug, Clone)]
 pub struct TripletsConfig {
     pub dataset: nrw_dataset::Location,
-    /// Neighbours per anchor, nearest and furthest.
-    pub k: usize,
-    /// Anchors and neighbours from every split, not only training.
-    pub all_splits: bool,
-    /// Approximate through a PCA projection to this many dimensions, re-ranked exactly.
-    pub pca: Option<usize>,
-    /// Measure the approximate path's recall against the exact one up to this many photos.
-    pub check_up_to: usize,
+    pub settings: TripletsSettings,
 }
 
 impl TripletsConfig {
@@ -29,10 +24,17 @@ impl TripletsConfig {
     pub fn new(dataset: impl Into<nrw_dataset::Location>) -> TripletsConfig {
         TripletsConfig {
             dataset: dataset.into(),
-            k: 20,
-            all_splits: false,
-            pca: None,
-            check_up_to: 20_000,
+            settings: TripletsSettings::default(),
+        }
+    }
+}
+
+impl TripletsSettings {
+    /// The triplets of `dataset` these settings ask for.
+    pub fn config(&self, dataset: &nrw_dataset::Location) -> TripletsConfig {
+        TripletsConfig {
+            dataset: dataset.clone(),
+            settings: self.clone(),
         }
     }
 }
@@ -69,7 +71,7 @@ fn in_scope(
     ids: &BTreeSet<u32>,
 ) -> Result<(&'static str, Option<BTreeSet<u32>>)> {
     let splits = nrw_dataset::split::read_splits(store)?;
-    if cfg.all_splits || splits.is_empty() {
+    if cfg.settings.all_splits || splits.is_empty() {
         return Ok(("all", None));
     }
     let train: BTreeSet<u32> = splits
@@ -146,31 +148,31 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
     let (scope, allowed) = in_scope(cfg, store, &described)?;
     index.retain(|r| allowed.as_ref().is_none_or(|a| a.contains(&r.image_id)));
     let rows = &index.entries;
-    if cfg.k + 1 > rows.len() {
-        return Err(PipelineError::config(Setting::K, format!(
+    if cfg.settings.k + 1 > rows.len() {
+        return Err(PipelineError::config(Setting::Key("triplets.k"), format!(
             "{} needs at least {} photos in scope {scope}, found {}; use {} {} or fewer (dataset {})",
-            cfg.k,
-            cfg.k + 1,
+            cfg.settings.k,
+            cfg.settings.k + 1,
             rows.len(),
-            Setting::K,
+            Setting::Key("triplets.k"),
             rows.len().saturating_sub(1),
             cfg.dataset
         )));
     }
     let desc = spill(store, &index)?;
     let name_err = |e| descriptor_error(&cfg.dataset, rows, e);
-    let (found, method, recall) = match cfg.pca {
+    let (found, method, recall) = match cfg.settings.pca {
         None => (
-            nrw_knn::exact_spilled(&desc, cfg.k).map_err(name_err)?,
+            nrw_knn::exact_spilled(&desc, cfg.settings.k).map_err(name_err)?,
             "exact".to_string(),
             None,
         ),
         Some(rank) => {
-            let approx =
-                nrw_knn::approx::approximate_spilled(&desc, cfg.k, rank, 3, 0).map_err(name_err)?;
-            let recall = (desc.len() <= cfg.check_up_to)
+            let approx = nrw_knn::approx::approximate_spilled(&desc, cfg.settings.k, rank, 3, 0)
+                .map_err(name_err)?;
+            let recall = (desc.len() <= cfg.settings.check_up_to)
                 .then(|| {
-                    nrw_knn::exact_spilled(&desc, cfg.k)
+                    nrw_knn::exact_spilled(&desc, cfg.settings.k)
                         .map(|e| nrw_knn::approx::recall(&e, &approx))
                 })
                 .transpose()
@@ -199,11 +201,11 @@ fn run(cfg: &TripletsConfig, store: &Store) -> Result<TripletsSummary> {
     manifest.replace_table(write_triplets(store, &info, &table)?);
     manifest
         .parameters
-        .insert("triplets_k".into(), cfg.k.into());
+        .insert("triplets_k".into(), cfg.settings.k.into());
     manifest.write(store)?;
     Ok(TripletsSummary {
         anchors: table.len(),
-        k: cfg.k,
+        k: cfg.settings.k,
         tier: index.kind.tier,
         scope: scope.into(),
         method,
@@ -242,8 +244,8 @@ pub fn official_distance_matrix(
     if let Some(c) = crop.filter(|&c| c < tier_crop) {
         return Err(field(format!(
             "the descriptors are of a {tier_crop}×{tier_crop} crop but the export crops to {c}×{c}; describe with {} official-{c} or export with a larger {}",
-            Setting::Tier,
-            Setting::Crop
+            Setting::Key("style.tier"),
+            Setting::Key("export.crop")
         )));
     }
     let want: BTreeMap<u32, usize> = ids.iter().enumerate().map(|(p, id)| (*id, p)).collect();

@@ -74,7 +74,7 @@ pub fn run(args: &DensifyArgs) -> Result<()> {
             Some(_) => MapPass::Photometric,
             None => {
                 return Err(crate::error::EtlError::Flag {
-                    flag: "--unit",
+                    flag: "--unit".into(),
                     problem: "needs --pass photometric or --pass geometric".into(),
                 })
             }

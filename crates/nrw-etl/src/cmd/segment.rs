@@ -14,7 +14,7 @@ use nrw_colmap::Format;
 /// The library's mode for `--mode`/`--size` (or ingest's `--segment-mode`/`--segment-size`).
 pub fn mode(kind: ModeKind, size: u32) -> Result<Mode> {
     Mode::new(kind, size).map_err(|problem| EtlError::Flag {
-        flag: "--size",
+        flag: "--size".into(),
         problem: format!("{size}: {problem}"),
     })
 }

@@ -92,7 +92,7 @@ impl Settings {
 pub(super) fn check(cfg: &DensifyConfig) -> Result<()> {
     if cfg.max_sources == 0 || cfg.max_sources > nrw_stereo::patchmatch::MAX_SOURCES {
         return Err(PipelineError::config(
-            Setting::MaxSources,
+            Setting::Key("densify.max_sources"),
             format!(
                 "is {}; it must be 1 to {}",
                 cfg.max_sources,
@@ -102,13 +102,13 @@ pub(super) fn check(cfg: &DensifyConfig) -> Result<()> {
     }
     if cfg.fusion.min_num_pixels == 0 {
         return Err(PipelineError::config(
-            Setting::MinNumPixels,
+            Setting::Key("densify.min_num_pixels"),
             "is 0; a fused point needs at least 1 pixel (the default is 2, COLMAP's 5)",
         ));
     }
     if cfg.max_image_size == Some(0) {
         return Err(PipelineError::config(
-            Setting::MaxImageSize,
+            Setting::Key("densify.max_image_size"),
             "is 0; leave it out for the photos' own size",
         ));
     }

@@ -42,7 +42,7 @@ pub(super) fn point_source(
         .collect();
     let mean_centre = centres.values().copied().sum::<glam::DVec3>() / centres.len().max(1) as f64;
     match candidate {
-        Some(p) if cfg.denoise.is_none() && cfg.estimate_normals.is_none() => {
+        Some(p) if cfg.settings.denoise.is_none() && cfg.settings.estimate_normals.is_none() => {
             let mut local = nrw_render::cloud::LocalPoints::new(rec.scene_origin());
             nrw_colmap::read_ply_file_into(&p, &mut local)?;
             Ok((RawCloud::Local(local), "ply".into(), Some(p)))
@@ -124,7 +124,7 @@ pub(super) fn render_cloud(
             seen_from,
         } => (positions, colors, normals, seen_from),
     };
-    if let Some((k, sigma)) = cfg.denoise {
+    if let Some(crate::settings::ingest::Denoise { k, sigma }) = cfg.settings.denoise {
         let (keep, r) = nrw_render::clean::statistical_outliers(&positions, origin, k, sigma);
         keep_where(&mut positions, &keep);
         keep_where(&mut seen_from, &keep);
@@ -144,11 +144,11 @@ pub(super) fn render_cloud(
             removed: r.removed,
         });
     }
-    if let Some(k) = cfg.estimate_normals {
+    if let Some(k) = cfg.settings.estimate_normals {
         if normals.is_some() {
             warnings.push(format!(
                 "{} {k}: the cloud has normals of its own; they are used",
-                Setting::EstimateNormals
+                Setting::Key("ingest.estimate_normals")
             ));
         } else {
             let n = nrw_render::clean::estimate_normals(&positions, origin, k, &|i| seen_from[i]);

@@ -2,17 +2,21 @@
 //! the stage reads, in a file of its own so they import it and not each other.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use nrw_colmap::{Format, Reconstruction, UndistortOptions};
+use nrw_colmap::{Format, Reconstruction};
 use nrw_dataset::units::UnitRecord;
-use nrw_render::{Filters, RenderCloud};
+use nrw_render::RenderCloud;
+
+use crate::error::{PipelineError, Result, Setting};
+use crate::settings::ingest::IngestSettings;
 
 /// Largest splat radius accepted: wider splats smear a render into a few blobs, and each
 /// point would touch thousands of pixels.
 pub const MAX_RADIUS: f32 = 32.0;
 
-/// Ingest's settings; [`IngestConfig::new`] fills in the paper's.
+/// An ingest run: where the scene, photos and cloud are, where the dataset goes, and the
+/// settings it runs with (declared once, in [`crate::settings::ingest`]).
 #[derive(Debug, Clone)]
 pub struct IngestConfig {
     /// Scene folder (COLMAP layout) or a model folder itself.
@@ -27,33 +31,11 @@ pub struct IngestConfig {
     pub model: Option<u32>,
     /// Point cloud [default: dense/fused.ply, else the sparse points].
     pub points: Option<PathBuf>,
-    /// Folder of per-photo ADE20K label maps.
-    pub semantics: Option<PathBuf>,
     /// CSV or JSON Lines file of each photo's licence, author and source, keyed by image
     /// name ([`nrw_dataset::photo_info`]).
     pub photo_info: Option<PathBuf>,
     /// Segment each kept photo with this model instead of reading label maps.
     pub segment: Option<InlineSegment>,
-    /// Store every view as COLMAP's `image_undistorter` would: the PINHOLE camera it computes
-    /// and the photo resampled to it (`ingest --undistort`).
-    pub undistort: Option<UndistortOptions>,
-    /// Statistical outlier removal before rendering: (k neighbours, σ) (`ingest --denoise`).
-    pub denoise: Option<(usize, f64)>,
-    /// Normals by PCA of k neighbours for a cloud without them (`ingest --estimate-normals`).
-    pub estimate_normals: Option<usize>,
-    /// Shorter side of a render in pixels (the paper: 600).
-    pub min_dim: u32,
-    /// Splat radius in render pixels (the paper: 1).
-    pub radius: f32,
-    /// The paper's filters: 85% empty, 450 px.
-    pub filters: Filters,
-    /// Drop a photo whose sharpness (variance of the Laplacian, [`nrw_dataset::PhotoSignals`])
-    /// is under this (`ingest --min-sharpness`; off by default).
-    pub min_sharpness: Option<f64>,
-    /// Images per shard (the unit of resumption and of work units).
-    pub rows_per_shard: usize,
-    /// Make an unreadable photo or label map an error instead of an `unreadable` verdict.
-    pub strict: bool,
     /// Read a photo that is a symbolic link out of the images folder (refused by default: a
     /// model's names cannot make ingest read files the user did not put there).
     pub follow_outside_links: bool,
@@ -61,6 +43,8 @@ pub struct IngestConfig {
     pub stop_after_groups: Option<usize>,
     /// Sleep this long after each group (so tests can kill a unit mid-way).
     pub pause_after_group: Option<std::time::Duration>,
+    /// How views are rendered, filtered and recorded (the paper's by default).
+    pub settings: IngestSettings,
 }
 
 impl IngestConfig {
@@ -73,22 +57,44 @@ impl IngestConfig {
             format: None,
             model: None,
             points: None,
-            semantics: None,
             photo_info: None,
             segment: None,
-            undistort: None,
-            denoise: None,
-            estimate_normals: None,
-            min_sharpness: None,
-            min_dim: 600,
-            radius: 1.0,
-            filters: Filters::default(),
-            rows_per_shard: 64,
-            strict: false,
             follow_outside_links: false,
             stop_after_groups: None,
             pause_after_group: None,
+            settings: IngestSettings::default(),
         }
+    }
+}
+
+impl IngestSettings {
+    /// Ingest of `scene` into `out` with these settings; `segment_weights` (a SegFormer given
+    /// on the command line) labels the photos inline.
+    pub fn config(
+        &self,
+        scene: &Path,
+        out: &nrw_dataset::Location,
+        segment_weights: Option<PathBuf>,
+    ) -> Result<IngestConfig> {
+        let segment = match segment_weights {
+            Some(weights) => Some(InlineSegment {
+                weights,
+                mode: nrw_segment::Mode::new(self.segment_mode, self.segment_size).map_err(
+                    |e| {
+                        PipelineError::config(
+                            Setting::Key("ingest.segment_size"),
+                            format!("{}: {e}", self.segment_size),
+                        )
+                    },
+                )?,
+            }),
+            None => None,
+        };
+        Ok(IngestConfig {
+            segment,
+            settings: self.clone(),
+            ..IngestConfig::new(scene, out)
+        })
     }
 }
 

@@ -61,52 +61,59 @@ pub struct UnitSummary {
 }
 
 fn check_config(cfg: &IngestConfig) -> Result<()> {
-    if cfg.rows_per_shard == 0 {
+    if cfg.settings.rows_per_shard == 0 {
         return Err(PipelineError::config(
-            Setting::RowsPerShard,
+            Setting::Key("ingest.rows_per_shard"),
             "must be at least 1",
         ));
     }
-    if !(0.0..=MAX_RADIUS).contains(&cfg.radius) {
+    if !(0.0..=MAX_RADIUS).contains(&cfg.settings.radius) {
         return Err(PipelineError::config(
-            Setting::Radius,
+            Setting::Key("ingest.radius"),
             format!(
                 "{} is outside 0..={MAX_RADIUS} render pixels (the paper uses 1)",
-                cfg.radius
+                cfg.settings.radius
             ),
         ));
     }
-    if !(0.0..=1.0).contains(&cfg.filters.max_empty_ratio) {
+    if !(0.0..=1.0).contains(&cfg.settings.max_empty) {
         return Err(PipelineError::config(
-            Setting::MaxEmpty,
+            Setting::Key("ingest.max_empty"),
             format!(
                 "{} is not a fraction in 0..=1 (the paper drops views above 0.85)",
-                cfg.filters.max_empty_ratio
+                cfg.settings.max_empty
             ),
         ));
     }
-    if let Some(s) = cfg.min_sharpness.filter(|s| !(s.is_finite() && *s >= 0.0)) {
+    if let Some(s) = cfg
+        .settings
+        .min_sharpness
+        .filter(|s| !(s.is_finite() && *s >= 0.0))
+    {
         return Err(PipelineError::config(
-            Setting::MinSharpness,
+            Setting::Key("ingest.min_sharpness"),
             format!("{s} is not a variance (a number ≥ 0; colmap2nerf's sharp photos score in the hundreds)"),
         ));
     }
-    if cfg.estimate_normals.is_some_and(|k| k < 3) {
+    if cfg.settings.estimate_normals.is_some_and(|k| k < 3) {
         return Err(PipelineError::config(
-            Setting::EstimateNormals,
+            Setting::Key("ingest.estimate_normals"),
             "K needs K ≥ 3 neighbours (a plane needs three points)",
         ));
     }
-    if let Some(d) = cfg.semantics.as_ref().filter(|d| !d.is_dir()) {
+    if let Some(d) = cfg.settings.semantics.as_ref().filter(|d| !d.is_dir()) {
         return Err(PipelineError::input(
             d,
-            format!("{} is not a folder", Setting::Semantics),
+            format!("{} is not a folder", Setting::Key("ingest.semantics")),
         ));
     }
-    if cfg.semantics.is_some() && cfg.segment.is_some() {
+    if cfg.settings.semantics.is_some() && cfg.segment.is_some() {
         return Err(PipelineError::config(
             Setting::SegmentWeights,
-            format!("and {} both give label maps: use one", Setting::Semantics),
+            format!(
+                "and {} both give label maps: use one",
+                Setting::Key("ingest.semantics")
+            ),
         ));
     }
     Ok(())
@@ -169,6 +176,46 @@ fn photo_info_names(cfg: &IngestConfig, rec: &nrw_colmap::Reconstruction) -> Res
     Ok(warnings)
 }
 
+/// What a unit records of how it ran: the settings (each in its field of
+/// [`IngestParameters`], or under its own key) with what it found (the model's encoding, the
+/// cloud, the outlier removal, the SegFormer).
+fn recorded(
+    cfg: &IngestConfig,
+    (enc, source, points): (&str, &str, usize),
+    cleaned: &cloud::Cleaned,
+    segmenter: Option<&(nrw_segment::Segformer, nrw_segment::Mode)>,
+) -> nrw_dataset::provenance::Parameters {
+    let mut parameters = nrw_dataset::provenance::to_parameters(&IngestParameters {
+        format: enc.into(),
+        point_source: source.into(),
+        points,
+        min_dim: cfg.settings.min_dim,
+        // f32 → f64 is exact: the record holds the radius the renderer used.
+        radius: cfg.settings.radius as f64,
+        max_empty: cfg.settings.max_empty,
+        min_photo_side: cfg.settings.min_photo_side,
+        rows_per_shard: cfg.settings.rows_per_shard,
+        semantics: cfg
+            .settings
+            .semantics
+            .as_ref()
+            .map(|d| d.display().to_string()),
+        undistort: cfg
+            .settings
+            .undistort_options()
+            .as_ref()
+            .map(undistort_record),
+        denoise: cleaned.denoise,
+        estimated_normals_k: cleaned.estimated_normals_k,
+        segment_model_sha256: segmenter.map(|(m, _)| m.sha256.clone()),
+        segment_mode: segmenter.map(|(_, mode)| mode.to_string()),
+        photo_info: cfg.photo_info.as_ref().map(|p| p.display().to_string()),
+        min_sharpness: cfg.settings.min_sharpness,
+    });
+    parameters.extend(cfg.settings.unrecorded());
+    parameters
+}
+
 fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     check_config(cfg)?;
     let (scene, mut rec) = load_model(&cfg.scene, cfg.format, cfg.model)?;
@@ -178,7 +225,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
     let mut warnings: Vec<String> = rec.warnings.iter().map(|w| w.to_string()).collect();
     warnings.extend(scene.choice.explain(&model_dir));
     let photos = photo_sizes(&rec, &photos_dir, cfg, &mut warnings)?;
-    let distorted = match &cfg.undistort {
+    let distorted = match &cfg.settings.undistort_options() {
         Some(o) => Some(undistort_model(&mut rec, o, &model_dir)?),
         None => None,
     };
@@ -197,25 +244,12 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
         Some(s) => Some((crate::segment::load_segformer(&s.weights)?, s.mode)),
         None => None,
     };
-    let parameters = nrw_dataset::provenance::to_parameters(&IngestParameters {
-        format: enc.into(),
-        point_source: source.clone(),
-        points: cloud.len(),
-        min_dim: cfg.min_dim,
-        // f32 → f64 is exact: the record holds the radius the renderer used.
-        radius: cfg.radius as f64,
-        max_empty: cfg.filters.max_empty_ratio,
-        min_photo_side: cfg.filters.min_photo_side,
-        rows_per_shard: cfg.rows_per_shard,
-        semantics: cfg.semantics.as_ref().map(|d| d.display().to_string()),
-        undistort: cfg.undistort.as_ref().map(undistort_record),
-        denoise: cleaned.denoise,
-        estimated_normals_k: cleaned.estimated_normals_k,
-        segment_model_sha256: segmenter.as_ref().map(|(m, _)| m.sha256.clone()),
-        segment_mode: segmenter.as_ref().map(|(_, mode)| mode.to_string()),
-        photo_info: cfg.photo_info.as_ref().map(|p| p.display().to_string()),
-        min_sharpness: cfg.min_sharpness,
-    });
+    let parameters = recorded(
+        cfg,
+        (enc, &source, cloud.len()),
+        &cleaned,
+        segmenter.as_ref(),
+    );
     let record = UnitRecord {
         stage: units::INGEST.into(),
         index: unit.index,
@@ -231,7 +265,7 @@ fn prepare(cfg: &IngestConfig, unit: Unit) -> Result<Prepared> {
             layout: layout.into(),
         }),
         warnings,
-        groups: rec.images.len().div_ceil(cfg.rows_per_shard),
+        groups: rec.images.len().div_ceil(cfg.settings.rows_per_shard),
         seconds: 0.0,
         // Renders go through no GEMM: the same bits on every instruction set.
         instruction_set: None,
@@ -309,7 +343,7 @@ pub fn ingest_unit(cfg: &IngestConfig, unit: Unit, progress: &dyn Progress) -> R
         &stage,
         unit,
         &ids,
-        cfg.rows_per_shard,
+        cfg.settings.rows_per_shard,
         "rendering",
         progress,
         &|ran, todo| after_group(cfg, ran, todo),
@@ -388,9 +422,9 @@ pub fn ingest(cfg: &IngestConfig, progress: &dyn Progress) -> Result<IngestSumma
         points: u.points,
         resumed_groups: u.resumed_groups,
         least_empty: f.least_empty,
-        max_empty: cfg.filters.max_empty_ratio,
-        min_photo_side: cfg.filters.min_photo_side,
-        min_sharpness: cfg.min_sharpness,
+        max_empty: cfg.settings.max_empty,
+        min_photo_side: cfg.settings.min_photo_side,
+        min_sharpness: cfg.settings.min_sharpness,
         warnings: f.warnings,
         seconds: t0.elapsed().as_secs_f64(),
     })
@@ -403,16 +437,14 @@ mod tests {
     #[test]
     fn a_setting_out_of_range_is_named_by_its_key_for_library_callers() {
         let tmp = std::env::temp_dir().join("nrw-no-such-scene");
-        let cfg = IngestConfig {
-            radius: 40.0,
-            ..IngestConfig::new(&tmp, tmp.join("out"))
-        };
+        let mut cfg = IngestConfig::new(&tmp, tmp.join("out"));
+        cfg.settings.radius = 40.0;
         let e = ingest(&cfg, &crate::Silent).unwrap_err();
         assert!(
             matches!(
                 e,
                 PipelineError::Config {
-                    setting: Setting::Radius,
+                    setting: Setting::Key("ingest.radius"),
                     ..
                 }
             ),

@@ -39,7 +39,7 @@ pub(super) fn photo_sizes(
     cfg: &IngestConfig,
     warnings: &mut Vec<String>,
 ) -> Result<PhotoSizes> {
-    let strict = cfg.strict;
+    let strict = cfg.settings.strict;
     let mut photos = BTreeMap::new();
     let mut unreadable = BTreeMap::new();
     let mut missing = Vec::new();

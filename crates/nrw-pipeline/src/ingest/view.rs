@@ -106,7 +106,7 @@ pub(super) fn label_pngs(
     let labels = if let Some((model, mode)) = &p.segmenter {
         let what = p.photos_dir.join(photo_name).display().to_string();
         nrw_segment::segment(model, photo, *mode, &what, nrw_segment::Parallelism::None)?
-    } else if let Some(dir) = &cfg.semantics {
+    } else if let Some(dir) = &cfg.settings.semantics {
         let path = nrw_dataset::semantics::label_path(dir, photo_name)?;
         let labels = nrw_dataset::semantics::load_labels(&path, original.0, original.1)?;
         match undistort {
@@ -142,14 +142,18 @@ pub(super) fn process(
         ));
     }
     let size = p.photos[&image_id];
-    if let Some(v) = cfg.filters.check_size(size.0 as u64, size.1 as u64) {
+    if let Some(v) = cfg
+        .settings
+        .filters()
+        .check_size(size.0 as u64, size.1 as u64)
+    {
         return Ok((outcome(&v, None, None), None));
     }
-    let (w, h) = render_size(cam.width, cam.height, cfg.min_dim);
-    let view = View::new(img, cam, p.cloud.origin, w, h, cfg.radius);
+    let (w, h) = render_size(cam.width, cam.height, cfg.settings.min_dim);
+    let view = View::new(img, cam, p.cloud.origin, w, h, cfg.settings.radius);
     let buf = render(&view, &p.cloud);
     let empty = buf.empty_ratio();
-    let verdict = cfg.filters.check_render(empty);
+    let verdict = cfg.settings.filters().check_render(empty);
     let o = outcome(&verdict, Some(empty), Some((w, h)));
     if !matches!(verdict, FilterVerdict::Kept { .. }) {
         return Ok((o, None));
@@ -192,7 +196,11 @@ fn decode(
         .map_err(PipelineError::from)
         .and_then(|photo| {
             let signals = super::signals::signals(&photo);
-            if let Some(min) = cfg.min_sharpness.filter(|min| signals.sharpness < *min) {
+            if let Some(min) = cfg
+                .settings
+                .min_sharpness
+                .filter(|min| signals.sharpness < *min)
+            {
                 return Ok(Err(too_blurry(o.clone(), signals, min)));
             }
             let original = (photo.width(), photo.height());
@@ -205,7 +213,7 @@ fn decode(
         });
     match decoded {
         Err(PipelineError::Dataset(nrw_dataset::DatasetError::Unreadable { path, problem }))
-            if !cfg.strict =>
+            if !cfg.settings.strict =>
         {
             Ok(Err(unreadable(&path, problem)))
         }

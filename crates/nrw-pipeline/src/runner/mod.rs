@@ -12,7 +12,7 @@ use crate::error::{PipelineError, Result, Setting};
 use crate::ingest::{IngestConfig, IngestSummary};
 use crate::split::SplitSummary;
 use crate::style::{StyleConfig, StyleSummary};
-use crate::triplets::{TripletsConfig, TripletsSummary};
+use crate::triplets::TripletsSummary;
 use crate::Progress;
 
 /// A pipeline file: each table present is a stage to run, with its parameters.
@@ -176,7 +176,7 @@ fn ingest_config(
     models: Models,
 ) -> Result<IngestConfig> {
     let mut c = i.config(scene, out, models.segformer.map(Into::into))?;
-    c.semantics = i.semantics.as_ref().map(|s| scene.join(s));
+    c.settings.semantics = i.semantics.as_ref().map(|s| scene.join(s));
     Ok(c)
 }
 
@@ -298,10 +298,9 @@ pub fn run(
         done(StageDone::Style(&r));
     }
     if let Some(t) = &p.triplets {
-        let r = crate::triplets::triplets(&TripletsConfig {
-            k: capped_k(t.k, out, progress)?,
-            ..t.config(out)
-        })?;
+        let mut cfg = t.config(out);
+        cfg.settings.k = capped_k(t.k, out, progress)?;
+        let r = crate::triplets::triplets(&cfg)?;
         done(StageDone::Triplets(&r));
     }
     if let Some((layout, c)) = &export {

@@ -46,7 +46,7 @@ fn a_table_of_one_setting_takes_the_papers_others() {
     assert_eq!(i.max_empty, 0.99);
     assert_eq!(
         (i.min_dim, i.radius, i.min_photo_side, i.rows_per_shard),
-        (600, 1.0, 450, paper.rows_per_shard)
+        (600, 1.0, 450, paper.settings.rows_per_shard)
     );
     let s = p.split.unwrap();
     assert_eq!((s.val, s.val_fraction, s.seed), (None, None, 3));

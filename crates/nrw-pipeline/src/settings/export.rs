@@ -120,14 +120,14 @@ impl ExportSettings {
         if let Some(m) = self.metres_per_unit {
             if !(m.is_finite() && m > 0.0) {
                 return Err(PipelineError::config(
-                    Setting::MetresPerUnit,
+                    Setting::Key("export.metres_per_unit"),
                     format!("is {m}: a length in metres above zero (e.g. 0.0254)"),
                 ));
             }
         }
         if self.tfrecord_files == 0 {
             return Err(PipelineError::config(
-                Setting::TfrecordFiles,
+                Setting::Key("export.tfrecord_files"),
                 "is 0: a split needs at least one TFRecord file",
             ));
         }
@@ -152,8 +152,9 @@ impl ExportSettings {
                 .map(|l| {
                     l.iter()
                         .map(|s| {
-                            parse_licence(s)
-                                .map_err(|e| PipelineError::config(Setting::Licences, e))
+                            parse_licence(s).map_err(|e| {
+                                PipelineError::config(Setting::Key("export.licences"), e)
+                            })
                         })
                         .collect::<Result<Vec<_>>>()
                 })

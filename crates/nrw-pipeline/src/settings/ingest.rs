@@ -3,15 +3,11 @@
 //! command line (places, not settings); in a pipeline file `semantics` is relative to the
 //! scene folder.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use nrw_dataset::Location;
 use nrw_render::Filters;
-use nrw_segment::{Mode, ModeKind};
+use nrw_segment::ModeKind;
 use serde::{Deserialize, Serialize};
-
-use crate::error::{PipelineError, Result, Setting};
-use crate::ingest::{IngestConfig, InlineSegment};
 
 /// How views are rendered and filtered; a setting left out is the paper's.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
@@ -83,17 +79,18 @@ pub struct IngestSettings {
 }
 
 impl Default for IngestSettings {
-    /// The paper's settings, as ingest's own configuration holds them.
+    /// The paper's settings: 600 px renders of 1 px splats, its filters (nrw-render's
+    /// [`Filters`]), 64 images a shard.
     fn default() -> Self {
-        let paper = IngestConfig::new("", "");
+        let paper = Filters::default();
         IngestSettings {
-            min_dim: paper.min_dim,
-            radius: paper.radius,
-            max_empty: paper.filters.max_empty_ratio,
-            min_photo_side: paper.filters.min_photo_side,
+            min_dim: 600,
+            radius: 1.0,
+            max_empty: paper.max_empty_ratio,
+            min_photo_side: paper.min_photo_side,
             min_sharpness: None,
-            rows_per_shard: paper.rows_per_shard,
-            strict: paper.strict,
+            rows_per_shard: 64,
+            strict: false,
             semantics: None,
             segment_mode: ModeKind::Resize,
             segment_size: 512,
@@ -154,50 +151,65 @@ impl From<Denoise> for String {
 }
 
 impl IngestSettings {
-    /// Ingest of `scene` into `out` with these settings; `segment_weights` (a SegFormer given
-    /// on the command line) labels the photos inline.
-    pub fn config(
-        &self,
-        scene: &Path,
-        out: &Location,
-        segment_weights: Option<PathBuf>,
-    ) -> Result<IngestConfig> {
-        let segment = match segment_weights {
-            Some(weights) => Some(InlineSegment {
-                weights,
-                mode: Mode::new(self.segment_mode, self.segment_size).map_err(|e| {
-                    PipelineError::config(
-                        Setting::SegmentSize,
-                        format!("{}: {e}", self.segment_size),
-                    )
-                })?,
-            }),
-            None => None,
-        };
-        let undistort = self.undistort.then_some(nrw_colmap::UndistortOptions {
+    /// The paper's filters with these thresholds.
+    pub fn filters(&self) -> Filters {
+        Filters {
+            max_empty_ratio: self.max_empty,
+            min_photo_side: self.min_photo_side,
+        }
+    }
+
+    /// COLMAP's undistorter options, with `--undistort`.
+    pub fn undistort_options(&self) -> Option<nrw_colmap::UndistortOptions> {
+        self.undistort.then_some(nrw_colmap::UndistortOptions {
             blank_pixels: self.blank_pixels,
             max_image_size: self.undistort_max_size,
             ..Default::default()
-        });
-        Ok(IngestConfig {
-            segment,
-            undistort,
-            denoise: self.denoise.map(|d| (d.k, d.sigma)),
-            estimate_normals: self.estimate_normals,
-            semantics: self.semantics.clone(),
-            min_dim: self.min_dim,
-            radius: self.radius,
-            filters: Filters {
-                max_empty_ratio: self.max_empty,
-                min_photo_side: self.min_photo_side,
-            },
-            min_sharpness: self.min_sharpness,
-            rows_per_shard: self.rows_per_shard,
-            strict: self.strict,
-            ..IngestConfig::new(scene, out)
         })
     }
+
+    /// The settings the run's record does not hold in a field of its own
+    /// ([`nrw_dataset::provenance::IngestParameters`]) and that differ from the paper's, each
+    /// under its own key: a setting added here is recorded (and tells units apart) without
+    /// another file changing, and a run that leaves it at its default keeps its bytes.
+    pub fn unrecorded(&self) -> nrw_dataset::provenance::Parameters {
+        use nrw_dataset::provenance::to_parameters;
+        without_recorded(to_parameters(self), &to_parameters(&Self::default()))
+    }
 }
+
+/// `settings` without the keys [`RECORDED_ELSEWHERE`] names and those at their `defaults`.
+fn without_recorded(
+    mut settings: nrw_dataset::provenance::Parameters,
+    defaults: &nrw_dataset::provenance::Parameters,
+) -> nrw_dataset::provenance::Parameters {
+    settings.retain(|key, value| {
+        !RECORDED_ELSEWHERE.contains(&key.as_str()) && defaults.get(key) != Some(value)
+    });
+    settings
+}
+
+/// Settings the record holds otherwise: in a field of
+/// [`nrw_dataset::provenance::IngestParameters`] (some with what the run found), or not at
+/// all because they never change a byte of the dataset (`strict` only turns a drop into an
+/// error).
+const RECORDED_ELSEWHERE: &[&str] = &[
+    "min_dim",
+    "radius",
+    "max_empty",
+    "min_photo_side",
+    "min_sharpness",
+    "rows_per_shard",
+    "strict",
+    "semantics",
+    "segment_mode",
+    "segment_size",
+    "undistort",
+    "blank_pixels",
+    "undistort_max_size",
+    "denoise",
+    "estimate_normals",
+];
 
 #[cfg(test)]
 mod tests {
@@ -226,5 +238,29 @@ mod tests {
         );
         let e = toml::from_str::<IngestSettings>("denoise = \"1,2\"").unwrap_err();
         assert!(e.to_string().contains("K must be at least 2"), "{e}");
+    }
+
+    #[test]
+    fn a_setting_without_a_field_of_the_record_is_recorded_under_its_own_key() {
+        let settings = IngestSettings {
+            strict: true,
+            min_dim: 96,
+            ..Default::default()
+        };
+        let mut all = nrw_dataset::provenance::to_parameters(&settings);
+        // Every name the list gives is a setting (a renamed one would be recorded twice).
+        for key in RECORDED_ELSEWHERE {
+            assert!(all.contains_key(*key), "{key} is not a setting");
+        }
+        // A setting the list does not name (one added later) goes in with its value, unless
+        // it is at its default.
+        let mut defaults = nrw_dataset::provenance::to_parameters(&IngestSettings::default());
+        all.insert("new_setting".into(), 7.into());
+        defaults.insert("new_setting".into(), 0.into());
+        let kept = without_recorded(all.clone(), &defaults);
+        assert_eq!(kept.keys().collect::<Vec<_>>(), ["new_setting"]);
+        assert_eq!(kept["new_setting"], 7);
+        defaults.insert("new_setting".into(), 7.into());
+        assert!(without_recorded(all, &defaults).is_empty());
     }
 }

@@ -20,6 +20,8 @@ pub mod triplets;
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 
+use crate::error::Setting;
+
 /// A clap parser over a library enum's names (`ALL`, `name`, `summary`), each value with its
 /// help line: the CLI, pipeline files and the library share one enum.
 pub fn names<T>(
@@ -31,11 +33,110 @@ where
     T: Copy + Send + Sync + std::str::FromStr + 'static,
     T::Err: std::fmt::Debug,
 {
+    // Help that mentions a setting shows its flag, except while [`flag_of`] reads the
+    // structs (it needs the flags' names, and the help would ask it again).
+    let help = |v: T| match LOOKING_UP.get() {
+        true => summary(v).to_string(),
+        false => flags(summary(v)),
+    };
     PossibleValuesParser::new(
         all.iter()
-            .map(|v| PossibleValue::new(name(*v)).help(crate::error::flags(summary(*v)))),
+            .map(|v| PossibleValue::new(name(*v)).help(help(*v))),
     )
     .map(|n| n.parse::<T>().expect("clap passes only the listed names"))
+}
+
+thread_local! {
+    /// Whether this thread is inside [`flag_of`].
+    static LOOKING_UP: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// The flag that sets `key` (`stage.field`) as its stage's settings struct declares it
+/// (`--no-geometric` for `densify.geometric`), or `None` for a key no struct has.
+pub fn flag_of(key: &str) -> Option<String> {
+    use clap::Args;
+    let (stage, field) = key.split_once('.')?;
+    let cmd = clap::Command::new("stage");
+    let was = LOOKING_UP.replace(true);
+    let cmd = match stage {
+        "densify" => densify::DensifySettings::augment_args(cmd),
+        "export" => export::ExportSettings::augment_args(cmd),
+        "ingest" => ingest::IngestSettings::augment_args(cmd),
+        "split" => split::SplitSettings::augment_args(cmd),
+        "style" => style::StyleSettings::augment_args(cmd),
+        "triplets" => triplets::TripletsSettings::augment_args(cmd),
+        _ => clap::Command::new("none"),
+    };
+    LOOKING_UP.set(was);
+    let arg = cmd.get_arguments().find(|a| a.get_id() == field)?;
+    arg.get_long().map(|long| format!("--{long}"))
+}
+
+impl Setting {
+    /// The command-line flag (or argument) of the setting: what the CLI names where a
+    /// pipeline file names its key.
+    pub fn flag(self) -> String {
+        match self {
+            Setting::Key(key) => flag_of(key).unwrap_or_else(|| format!("`{key}`")),
+            named => named.named_flag().to_string(),
+        }
+    }
+
+    /// The flag of a setting with a variant of its own.
+    fn named_flag(self) -> &'static str {
+        use Setting as S;
+        match self {
+            S::SegmentWeights => "--segment-weights",
+            S::Weights => "--weights",
+            S::Unit => "--unit",
+            S::UnitCount => "--unit-count",
+            S::Photos => "SCENE",
+            // Only a pipeline file has a [split] table.
+            S::Split => "[split]",
+            S::Images => "--images",
+            S::Points => "--points",
+            S::Overwrite => "--overwrite",
+            S::Entries => "--entries",
+            S::FollowOutsideLinks => "--follow-outside-links",
+            S::DenseOut => "--out",
+            S::Stereo => "--iterations/--window-radius/--scales",
+            S::Key(key) => key,
+        }
+    }
+}
+
+/// A library message as the CLI shows it: every setting it mentions (its key in backticks,
+/// as [`Setting`] displays) shown as the flag that sets it.
+pub fn flags(text: &str) -> String {
+    if !text.contains('`') {
+        return text.to_string();
+    }
+    let named = Setting::ALL.iter().fold(text.to_string(), |t, s| {
+        t.replace(&s.to_string(), &s.flag())
+    });
+    declared_flags(&named)
+}
+
+/// `text` with each backticked key of a settings struct's field shown as its flag.
+fn declared_flags(text: &str) -> String {
+    let pieces: Vec<&str> = text.split('`').collect();
+    let mut out = String::with_capacity(text.len());
+    for (i, piece) in pieces.iter().enumerate() {
+        let quoted = i % 2 == 1;
+        match flag_of(piece).filter(|_| quoted && i + 1 < pieces.len()) {
+            Some(flag) => out.push_str(&flag),
+            None if quoted => {
+                out.push('`');
+                out.push_str(piece);
+                // An opening backtick without a closing one is kept as it was.
+                if i + 1 < pieces.len() {
+                    out.push('`');
+                }
+            }
+            None => out.push_str(piece),
+        }
+    }
+    out
 }
 
 #[cfg(test)]

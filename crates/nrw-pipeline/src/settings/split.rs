@@ -3,15 +3,11 @@
 
 use std::path::PathBuf;
 
-use nrw_dataset::Location;
 use serde::{Deserialize, Serialize};
-
-use crate::error::{PipelineError, Result, Setting};
-use crate::split::SplitConfig;
 
 /// How the kept photos are split into train and val; with neither `val` nor `val_fraction`,
 /// the paper's 100 validation photos.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(deny_unknown_fields, default)]
 pub struct SplitSettings {
     /// Number of validation photos [default: 100, the paper's]; 0 puts every photo in
@@ -32,54 +28,6 @@ pub struct SplitSettings {
     pub from_tsv: Option<PathBuf>,
 }
 
-impl Default for SplitSettings {
-    fn default() -> Self {
-        SplitSettings {
-            val: None,
-            val_fraction: None,
-            seed: SplitConfig::new("").seed,
-            from_tsv: None,
-        }
-    }
-}
-
-impl SplitSettings {
-    /// The split of `dataset` these settings ask for: a fraction becomes a count of the
-    /// dataset's kept photos here, for the CLI and pipeline files alike.
-    pub fn config(&self, dataset: &Location) -> Result<SplitConfig> {
-        let val = match (self.val, self.val_fraction) {
-            (None, None) => SplitConfig::new("").val,
-            (Some(v), None) => v,
-            (None, Some(f)) if (0.0..1.0).contains(&f) => {
-                let store = nrw_dataset::Store::open(dataset)?;
-                let kept = nrw_dataset::reader::Dataset::open(store)?.len();
-                ((kept as f64 * f) as usize).max(1)
-            }
-            (None, Some(f)) => {
-                return Err(PipelineError::config(
-                    Setting::ValFraction,
-                    format!("is {f}: a fraction of the kept photos, at least 0 and below 1"),
-                ))
-            }
-            (Some(_), Some(_)) => {
-                return Err(PipelineError::config(
-                    Setting::Val,
-                    format!(
-                        "and {} were both given: give exactly one, a count or a fraction",
-                        Setting::ValFraction
-                    ),
-                ))
-            }
-        };
-        Ok(SplitConfig {
-            val,
-            seed: self.seed,
-            from_tsv: self.from_tsv.clone(),
-            ..SplitConfig::new(dataset)
-        })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,7 +45,9 @@ mod tests {
             val_fraction: Some(0.5),
             ..SplitSettings::default()
         };
-        let e = both.config(&Location::parse("/nowhere")).unwrap_err();
+        let e = both
+            .config(&nrw_dataset::Location::parse("/nowhere"))
+            .unwrap_err();
         assert!(e.to_string().contains("split.val_fraction"), "{e}");
     }
 }

@@ -2,14 +2,11 @@
 //! file, one declaration. The weights are a file named on the command line (`style
 //! --weights`, `run --vgg-weights`), never a table key: the tool never downloads them.
 
-use std::path::PathBuf;
-
-use nrw_dataset::Location;
 use nrw_style::{Preprocess, Tier};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{PipelineError, Result, Setting};
-use crate::style::{StyleConfig, PART_PHOTOS};
+/// Photos per descriptor part by default (the unit of resumption and of work units).
+pub const PART_PHOTOS: usize = 64;
 
 /// How photos are described; a setting left out is the paper's reference tier.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
@@ -58,30 +55,11 @@ impl From<Scaling> for Preprocess {
 
 impl Default for StyleSettings {
     fn default() -> Self {
-        let c = StyleConfig::new("");
         StyleSettings {
-            tier: c.tier.name(),
+            tier: Tier::reference().name(),
             preprocess: Scaling::Imagenet,
-            photos_per_part: c.photos_per_part,
+            photos_per_part: PART_PHOTOS,
         }
-    }
-}
-
-impl StyleSettings {
-    /// The style run over `dataset` these settings ask for, with the weights the caller was
-    /// given (a tier that needs them and has none is refused when they are loaded).
-    pub fn config(&self, dataset: &Location, weights: Option<PathBuf>) -> Result<StyleConfig> {
-        let tier = self
-            .tier
-            .parse::<Tier>()
-            .map_err(|e| PipelineError::config(Setting::Tier, e))?;
-        Ok(StyleConfig {
-            tier,
-            weights,
-            preprocess: self.preprocess.into(),
-            photos_per_part: self.photos_per_part,
-            ..StyleConfig::new(dataset.clone())
-        })
     }
 }
 
@@ -101,7 +79,9 @@ mod tests {
             tier: "vgg17".into(),
             ..StyleSettings::default()
         };
-        let e = bad.config(&Location::parse("/ds"), None).unwrap_err();
+        let e = bad
+            .config(&nrw_dataset::Location::parse("/ds"), None)
+            .unwrap_err();
         assert!(e.to_string().contains("style.tier"), "{e}");
     }
 }

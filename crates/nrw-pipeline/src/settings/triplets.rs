@@ -1,10 +1,7 @@
 //! `triplets`' settings: the flags of `nrw-etl triplets` and the `[triplets]` table of a
 //! pipeline file, one declaration.
 
-use nrw_dataset::Location;
 use serde::{Deserialize, Serialize};
-
-use crate::triplets::TripletsConfig;
 
 /// How the style triplets are mined; a setting left out is the paper's (k = 20, exact, the
 /// training split).
@@ -29,26 +26,13 @@ pub struct TripletsSettings {
 }
 
 impl Default for TripletsSettings {
+    /// The paper's: k = 20, exact, the training split.
     fn default() -> Self {
-        let c = TripletsConfig::new("");
         TripletsSettings {
-            k: c.k,
-            all_splits: c.all_splits,
-            pca: c.pca,
-            check_up_to: c.check_up_to,
-        }
-    }
-}
-
-impl TripletsSettings {
-    /// The triplets of `dataset` these settings ask for.
-    pub fn config(&self, dataset: &Location) -> TripletsConfig {
-        TripletsConfig {
-            k: self.k,
-            all_splits: self.all_splits,
-            pca: self.pca,
-            check_up_to: self.check_up_to,
-            ..TripletsConfig::new(dataset.clone())
+            k: 20,
+            all_splits: false,
+            pca: None,
+            check_up_to: 20_000,
         }
     }
 }

@@ -15,6 +15,7 @@ use nrw_style::{Backend, Preprocess, Tier};
 use rayon::prelude::*;
 
 use crate::error::{PipelineError, Result, Setting};
+use crate::settings::style::StyleSettings;
 use crate::stage::GroupStage;
 use crate::units::{check_units, close_stage, units_error};
 use crate::{Progress, Unit};
@@ -25,22 +26,20 @@ mod weights;
 
 pub use weights::{image_grams, load_weights};
 
-/// Photos per descriptor part by default.
-pub const PART_PHOTOS: usize = 64;
+pub use crate::settings::style::PART_PHOTOS;
 
-/// Style's settings; [`StyleConfig::new`] is the paper's reference tier.
+/// A style run: the dataset, its settings (declared once, in [`crate::settings::style`]),
+/// the tier they name and the weights file the caller gave.
 #[derive(Debug, Clone)]
 pub struct StyleConfig {
     pub dataset: nrw_dataset::Location,
+    /// `settings.tier`, parsed.
     pub tier: Tier,
     /// VGG weights (safetensors, torchvision names); required by the VGG tiers.
     pub weights: Option<PathBuf>,
     /// Replace descriptors of another kind instead of refusing.
     pub overwrite: bool,
-    /// Network input scaling asked for (the official tier always uses its own).
-    pub preprocess: Preprocess,
-    /// Photos per descriptor part (the unit of resumption and of work units).
-    pub photos_per_part: usize,
+    pub settings: StyleSettings,
 }
 
 impl StyleConfig {
@@ -51,9 +50,35 @@ impl StyleConfig {
             tier: Tier::reference(),
             weights: None,
             overwrite: false,
-            preprocess: Preprocess::Imagenet,
-            photos_per_part: PART_PHOTOS,
+            settings: StyleSettings::default(),
         }
+    }
+
+    /// The network input scaling asked for (the official tier always uses its own).
+    fn preprocess(&self) -> Preprocess {
+        self.tier.preprocess(self.settings.preprocess.into())
+    }
+}
+
+impl StyleSettings {
+    /// The style run over `dataset` these settings ask for, with the weights the caller was
+    /// given (a tier that needs them and has none is refused when they are loaded).
+    pub fn config(
+        &self,
+        dataset: &nrw_dataset::Location,
+        weights: Option<PathBuf>,
+    ) -> Result<StyleConfig> {
+        let tier = self
+            .tier
+            .parse::<Tier>()
+            .map_err(|e| PipelineError::config(Setting::Key("style.tier"), e))?;
+        Ok(StyleConfig {
+            dataset: dataset.clone(),
+            tier,
+            weights,
+            overwrite: false,
+            settings: self.clone(),
+        })
     }
 }
 
@@ -76,7 +101,7 @@ fn kind(cfg: &StyleConfig, net: Option<&dyn Backend>) -> DescriptorKind {
         weights_sha256: net.map_or(String::new(), |n| n.weights_sha256().to_string()),
         // color-stats ignores the network's input scaling, so it never tells descriptors apart
         preprocess: if cfg.tier.needs_weights() {
-            cfg.tier.preprocess(cfg.preprocess).name().to_string()
+            cfg.preprocess().name().to_string()
         } else {
             String::new()
         },
@@ -231,7 +256,7 @@ fn describe_batch(
     k: usize,
     batch: &[nrw_dataset::ViewRow],
 ) -> Result<Vec<DescriptorRow>> {
-    let pre = cfg.tier.preprocess(cfg.preprocess);
+    let pre = cfg.preprocess();
     let inputs: Vec<nrw_style::NetInput> = batch
         .par_iter()
         .map(|v| {
@@ -344,9 +369,9 @@ pub fn style_unit_on(
     // A backend given with color-stats computes nothing: dropped here, it names no weights
     // and no device either (as the loading path, which loads none).
     let net = net.filter(|_| cfg.tier.needs_weights());
-    if cfg.photos_per_part == 0 {
+    if cfg.settings.photos_per_part == 0 {
         return Err(PipelineError::config(
-            Setting::PhotosPerPart,
+            Setting::Key("style.photos_per_part"),
             "must be at least 1",
         ));
     }
@@ -360,7 +385,7 @@ pub fn style_unit_on(
         .collect();
     ids.sort_unstable();
     let groups: Vec<(usize, &[u32])> = ids
-        .chunks(cfg.photos_per_part)
+        .chunks(cfg.settings.photos_per_part)
         .enumerate()
         .filter(|(k, _)| unit.owns(*k))
         .collect();
@@ -382,7 +407,7 @@ pub fn style_unit_on(
         &stage,
         unit,
         &ids,
-        cfg.photos_per_part,
+        cfg.settings.photos_per_part,
         &kind.tier,
         progress,
         &|_, _| Ok(()),
@@ -414,7 +439,7 @@ fn unit_record(
         weights_sha256: kind.weights_sha256.clone(),
         preprocess: kind.preprocess.clone(),
         photos: ids.len(),
-        photos_per_part: cfg.photos_per_part,
+        photos_per_part: cfg.settings.photos_per_part,
     });
     let ids_entry = nrw_dataset::FileEntry {
         path: "kept image ids".into(),
@@ -431,7 +456,7 @@ fn unit_record(
         inputs: vec![ids_entry],
         scene: None,
         warnings: Vec::new(),
-        groups: ids.len().div_ceil(cfg.photos_per_part),
+        groups: ids.len().div_ceil(cfg.settings.photos_per_part),
         seconds: t0.elapsed().as_secs_f64(),
         instruction_set: device_of(net),
     }

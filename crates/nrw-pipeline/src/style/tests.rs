@@ -55,12 +55,13 @@ fn demo_dataset(dir: &Path) -> PathBuf {
 }
 
 fn cfg(dataset: &Path) -> StyleConfig {
-    StyleConfig {
+    let mut c = StyleConfig {
         tier: Tier::parse("vgg16-64-l1").unwrap(),
         overwrite: true,
-        photos_per_part: 5,
         ..StyleConfig::new(dataset)
-    }
+    };
+    c.settings.photos_per_part = 5;
+    c
 }
 
 #[test]

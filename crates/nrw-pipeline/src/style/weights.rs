@@ -14,7 +14,7 @@ pub fn load_weights(path: Option<&Path>, tier: &Tier) -> Result<Option<Vgg>> {
         (true, None) => Err(PipelineError::config(Setting::Weights, format!(
             "FILE is required for tier {} (the tool never downloads weights; any safetensors with torchvision VGG16 names works); {} color-stats is the explicit non-neural fallback",
             tier.name(),
-            Setting::Tier
+            Setting::Key("style.tier")
         ))),
         (true, Some(p)) => {
             let net = Vgg::load(p)?;

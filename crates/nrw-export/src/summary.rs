@@ -3,7 +3,8 @@
 
 use serde::Serialize;
 
-use crate::published::{DepthMapping, DepthScale};
+use crate::imc::ImcOptions;
+use crate::published::{DepthScale, PaperOptions};
 
 /// What to export and how.
 #[derive(Debug, Clone)]
@@ -14,17 +15,11 @@ pub struct ExportConfig {
     /// The dataset name the published code is run with (`--dataset_name`): TFRecord and
     /// distance-matrix file names.
     pub name: String,
-    /// A centred `crop` × `crop` of every channel (the published code's 512), official and
-    /// tfrecord layouts; views smaller than it are skipped and listed.
-    pub crop: Option<u32>,
-    /// Write semantics (official and tfrecord): a dataset without them is refused unless this
-    /// is false.
-    pub semantics: bool,
-    pub depth: DepthMapping,
-    /// TFRecord files per split (1: `<name>_<split>.tfrecord`).
-    pub tfrecord_files: usize,
-    /// Metres a model unit, when known: IMC 2022's `scaling_factors.csv` (megadepth layout).
-    pub metres_per_unit: Option<f64>,
+    /// What the paper's layouts (official, tfrecord) write: crop, semantics, depth levels,
+    /// TFRecord files.
+    pub paper: PaperOptions,
+    /// What the megadepth layout's IMC 2022 files need that a model does not hold.
+    pub imc: ImcOptions,
     /// Export only photos under these licences (SPDX ids, `unknown` for photos nobody gave
     /// one for; [`nrw_dataset::photo_info`]); `None` exports every view.
     pub licences: Option<Vec<String>>,
@@ -36,11 +31,8 @@ impl ExportConfig {
         ExportConfig {
             out,
             name,
-            crop: Some(crate::published::PUBLISHED_CROP),
-            semantics: true,
-            depth: DepthMapping::Linear,
-            tfrecord_files: 1,
-            metres_per_unit: None,
+            paper: PaperOptions::published(),
+            imc: ImcOptions::default(),
             licences: None,
         }
     }

@@ -58,7 +58,8 @@ pub fn export(
             source: m.source(),
             depth: &mvs_depth,
         });
-        let dist = |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.crop);
+        let dist =
+            |ids: &[u32]| crate::triplets::official_distance_matrix(store, ids, cfg.paper.crop);
         let inputs = nrw_export::Inputs {
             dist: Some(&dist),
             points: points.as_deref(),

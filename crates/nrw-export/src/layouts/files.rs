@@ -26,7 +26,7 @@ pub struct Files;
 impl LayoutWriter for Files {
     fn check(&self, job: &Job) -> Result<()> {
         crate::paper::check_counts(job.cfg)?;
-        if job.cfg.crop.is_some() {
+        if job.cfg.paper.crop.is_some() {
             // The files layout keeps every payload as stored; a crop would be silently ignored.
             return Err(ExportError::refused(
                 &job.cfg.out,

@@ -188,7 +188,7 @@ fn export_config(
 ) -> Result<(Layout, ExportConfig)> {
     let mut c = e.config(dataset, out)?;
     // A run that segments its photos exports their labels.
-    c.semantics |= segmented;
+    c.paper.semantics |= segmented;
     Ok((e.layout, c))
 }
 

@@ -58,10 +58,10 @@ impl Default for ExportSettings {
             layout: Layout::Official,
             name: None,
             crop: None,
-            semantics: c.semantics,
-            depth: c.depth,
-            tfrecord_files: c.tfrecord_files,
-            metres_per_unit: c.metres_per_unit,
+            semantics: c.paper.semantics,
+            depth: c.paper.depth,
+            tfrecord_files: c.paper.tfrecord_files,
+            metres_per_unit: c.imc.metres_per_unit,
             licences: None,
         }
     }
@@ -136,16 +136,21 @@ impl ExportSettings {
                 .name
                 .clone()
                 .unwrap_or_else(|| crate::export::default_name(dataset)),
-            // The files layout keeps views whole; the paper's layouts take the published crop.
-            crop: match self.crop {
-                Some(Crop::Side(n)) => Some(n),
-                Some(Crop::Word(NoCrop::None)) => None,
-                None => self.layout.about().default_crop,
+            paper: nrw_export::published::PaperOptions {
+                // The files layout keeps views whole; the paper's layouts take the published
+                // crop.
+                crop: match self.crop {
+                    Some(Crop::Side(n)) => Some(n),
+                    Some(Crop::Word(NoCrop::None)) => None,
+                    None => self.layout.about().default_crop,
+                },
+                semantics: self.semantics,
+                depth: self.depth,
+                tfrecord_files: self.tfrecord_files,
             },
-            semantics: self.semantics,
-            depth: self.depth,
-            tfrecord_files: self.tfrecord_files,
-            metres_per_unit: self.metres_per_unit,
+            imc: nrw_export::imc::ImcOptions {
+                metres_per_unit: self.metres_per_unit,
+            },
             licences: self
                 .licences
                 .as_ref()

@@ -28,6 +28,13 @@
 use crate::error::{ExportError, Result};
 use crate::staging::Staged;
 
+/// What IMC 2022's files need that a model does not hold.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ImcOptions {
+    /// Metres a model unit, when known: `scaling_factors.csv` (left out without it).
+    pub metres_per_unit: Option<f64>,
+}
+
 /// A 3 × 3 matrix as rows.
 pub type Mat3 = [[f64; 3]; 3];
 

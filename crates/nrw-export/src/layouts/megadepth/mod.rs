@@ -124,7 +124,7 @@ impl LayoutWriter for Megadepth {
             .map(|(i, v)| info.imc_view(i, &v.stem, &v.jpg, v.camera.width, v.camera.height))
             .collect();
         let pairs_of = |i: usize| info.shared_pairs_of(i);
-        let unit = job.cfg.metres_per_unit;
+        let unit = job.cfg.imc.metres_per_unit;
         summary
             .warnings
             .extend(crate::imc::write(name, &imc, &pairs_of, unit, staged)?);

@@ -41,7 +41,7 @@ pub fn check(job: &Job) -> Result<()> {
 
 /// Refuse a crop or a shard count of 0.
 pub fn check_counts(cfg: &ExportConfig) -> Result<()> {
-    if cfg.crop.is_some_and(|c| c == 0) || cfg.tfrecord_files == 0 {
+    if cfg.paper.crop.is_some_and(|c| c == 0) || cfg.paper.tfrecord_files == 0 {
         return Err(ExportError::refused(
             &cfg.out,
             "the crop and the TFRecord files per split must be at least 1",
@@ -57,12 +57,12 @@ impl Paper {
             nrw_dataset::scene::read_depth_range(&job.ds.store)?.unwrap_or((1.0, 1.0));
         Ok(Paper {
             scale: DepthScale {
-                mapping: job.cfg.depth,
+                mapping: job.cfg.paper.depth,
                 near,
                 far,
             },
-            crop: job.cfg.crop,
-            semantics: job.cfg.semantics,
+            crop: job.cfg.paper.crop,
+            semantics: job.cfg.paper.semantics,
         })
     }
 

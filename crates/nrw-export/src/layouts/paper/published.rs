@@ -44,6 +44,33 @@ pub fn official_colors() -> &'static [[u8; 3]; 151] {
 /// the other channels to it, and `pretrain_appearance` crops all but seg to its resolution.
 pub const PUBLISHED_CROP: u32 = 512;
 
+/// What the paper's layouts (official, tfrecord) are written with; [`PaperOptions::published`]
+/// is what the published code runs with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PaperOptions {
+    /// A centred `crop` × `crop` of every channel (the published code's 512); views smaller
+    /// than it are skipped and listed. The files layout refuses one (it keeps views whole).
+    pub crop: Option<u32>,
+    /// Write semantics: a dataset without them is refused unless this is false.
+    pub semantics: bool,
+    /// How depth becomes the 8-bit levels the published code reads.
+    pub depth: DepthMapping,
+    /// TFRecord files per split (1: `<name>_<split>.tfrecord`).
+    pub tfrecord_files: usize,
+}
+
+impl PaperOptions {
+    /// The published code's: a 512 crop, semantics, linear depth, one TFRecord file a split.
+    pub fn published() -> PaperOptions {
+        PaperOptions {
+            crop: Some(PUBLISHED_CROP),
+            semantics: true,
+            depth: DepthMapping::Linear,
+            tfrecord_files: 1,
+        }
+    }
+}
+
 /// ADE20K class ids → the official colour-coded RGB image (`*_seg_rgb.png`).
 pub fn official_seg_rgb(labels: &GrayImage) -> RgbImage {
     let t = official_colors();

@@ -35,7 +35,7 @@ impl LayoutWriter for Tfrecord {
         let records = Records {
             paper: &paper,
             name: &job.cfg.name,
-            files: job.cfg.tfrecord_files,
+            files: job.cfg.paper.tfrecord_files,
         };
         write_views(job, staged, &records, summary)?;
         paper.require_written_train(job, summary)

@@ -196,8 +196,7 @@ pub(crate) fn splat(
 /// f64 formulas), check and place points in one branch-free loop, as the one-at-a-time loop
 /// would (near plane, z ≥ f64::EPSILON, finite pixel, not beyond the lens's `fold` when
 /// given). The compiler does not vectorise it (yet); it saves the per-point `Option`s and
-/// branches: SIMPLE_RADIAL, 10⁶ points, r = 0: 6.2 → 4.6 ms/view. Point `i` has index
-/// `first + i`. Call only where `fits(z)`.
+/// branches (docs/rendering.md has the figures). Point `i` has index `first + i`. Call only where `fits(z)`.
 pub(crate) fn place<P: Projection>(
     z: &ZBuffer,
     pts: Span,
@@ -342,8 +341,8 @@ mod x86 {
 
     /// Where the draw loops prefetch the cloud's next piece: its projection, which follows,
     /// then reads from cache instead of waiting on memory (the hardware prefetcher restarts at
-    /// every chunk, whose positions lie apart in memory when chunks in between are culled).
-    /// 10⁷ points, whole views, r = 1: projection 7 → 4 ms/view; r = 0: 13.9 → 13.0 ms/view.
+    /// every chunk, whose positions lie apart in memory when chunks in between are culled;
+    /// docs/rendering.md has the figures).
     struct Ahead {
         /// Each axis's first byte.
         start: [*const i8; 3],
@@ -409,22 +408,7 @@ mod x86 {
         let side = (2 * reach + 1) as usize;
         let vectors = side.div_ceil(4);
         assert!(vectors <= MAX_VECTORS && 4 * vectors - side <= SLACK);
-        let mut offsets = [_mm256_setzero_pd(); MAX_VECTORS];
-        for (v, o) in offsets[..vectors].iter_mut().enumerate() {
-            let lane = |l: usize| {
-                let col = 4 * v + l;
-                if col < side {
-                    if P::F32 {
-                        (col as i64 - reach) as f64 + 0.5
-                    } else {
-                        col as f64 + 0.5
-                    }
-                } else {
-                    1e6
-                }
-            };
-            *o = _mm256_set_pd(lane(3), lane(2), lane(1), lane(0));
-        }
+        let offsets = lane_offsets(P::F32, reach, side, vectors);
         let offsets = &offsets[..vectors];
         // Squared offsets: columns as vectors, rows one lane each.
         let mut dx2 = [_mm256_setzero_pd(); MAX_VECTORS];
@@ -452,7 +436,7 @@ mod x86 {
             }
         };
         let ahead = Ahead::new(next, z.keys.as_ptr());
-        // (Wider squares overlap less, and ran slower interleaved: r = 2, 8.0 -> 9.5 ms/view.)
+        // (Wider squares overlap less, and ran slower interleaved.)
         for i in 0..proj.len() {
             if i % 16 == 0 {
                 ahead.fetch(i);
@@ -499,17 +483,37 @@ mod x86 {
         }
     }
 
+    /// The lanes' offsets of `draw`: column 4v + l of a `side`-wide square at (col − reach) +
+    /// 0.5 from the fraction (`f32`) or col + 0.5 from the square's first column; 10⁶ past
+    /// the square.
+    #[target_feature(enable = "avx2")]
+    fn lane_offsets(f32: bool, reach: i64, side: usize, vectors: usize) -> [__m256d; MAX_VECTORS] {
+        let mut offsets = [_mm256_setzero_pd(); MAX_VECTORS];
+        for (v, o) in offsets[..vectors].iter_mut().enumerate() {
+            let lane = |l: usize| {
+                let col = 4 * v + l;
+                match (col < side, f32) {
+                    (true, true) => (col as i64 - reach) as f64 + 0.5,
+                    (true, false) => col as f64 + 0.5,
+                    (false, _) => 1e6,
+                }
+            };
+            *o = _mm256_set_pd(lane(3), lane(2), lane(1), lane(0));
+        }
+        offsets
+    }
+
     /// Reach 1 (radius in [0.5, 1.5), the paper's 1 included): `draw`'s arithmetic for a 3×3
     /// square, lane for lane (columns as one vector, the three rows' offsets as another,
     /// broadcast per row), with a batch's four quarters drawn interleaved. Consecutive points
     /// of a chunk (Morton order) mostly hit the same square or one that overlaps it (in the
     /// benchmark's whole views at 10⁷ points: 55% the same pixel, 42% a neighbour within 2),
     /// so each point's loads would wait for the stores of the one before; the quarters of a
-    /// chunk lie apart in the image, and four such chains overlap in time (32 → 27 ms/view).
-    /// Not for r = 0, whose single-key update ran slower interleaved (14 → 18 ms/view), nor
-    /// for wider squares, which overlap less (r = 2: 8.0 → 9.5 ms/view). Its own loop, with
+    /// chunk lie apart in the image, and four such chains overlap in time.
+    /// Not for r = 0, whose single-key update ran slower interleaved, nor
+    /// for wider squares, which overlap less (docs/rendering.md has the figures). Its own loop, with
     /// the body a macro (a closure was not inlined), rather than `draw`'s generic one: half
-    /// the instructions per point (27 → 23 ms/view with the prefetch of `Ahead`).
+    /// the instructions per point.
     #[target_feature(enable = "avx2")]
     pub(super) fn draw_reach1<P: Splats + ?Sized>(z: &mut ZBuffer, proj: &P, r2: f64, next: Span) {
         let stride = z.stride as usize;

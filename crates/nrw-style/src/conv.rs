@@ -163,9 +163,20 @@ pub fn conv3x3_relu(conv: &Conv, x: &Activation, par: Parallelism) -> Activation
             );
         }
     }
-    // Bias and ReLU on image pixels; the border columns (written by the straddling pixels)
-    // back to zero.
-    let bias_relu = |(y, row): (usize, &mut [f32])| {
+    bias_relu(conv, &mut out, h, pw, par);
+    Activation {
+        c: co,
+        h,
+        w,
+        data: out,
+    }
+}
+
+/// Bias and ReLU on the image pixels of `out` (h + 2 padded rows of `pw` pixels); the border
+/// columns (written by the GEMM's straddling pixels) back to zero.
+fn bias_relu(conv: &Conv, out: &mut [f32], h: usize, pw: usize, par: Parallelism) {
+    let co = conv.out_ch;
+    let row_of = |(y, row): (usize, &mut [f32])| {
         if y == 0 || y == h + 1 {
             return;
         }
@@ -178,15 +189,9 @@ pub fn conv3x3_relu(conv: &Conv, x: &Activation, par: Parallelism) -> Activation
         }
     };
     if matches!(par, Parallelism::None) {
-        out.chunks_mut(pw * co).enumerate().for_each(bias_relu);
+        out.chunks_mut(pw * co).enumerate().for_each(row_of);
     } else {
-        out.par_chunks_mut(pw * co).enumerate().for_each(bias_relu);
-    }
-    Activation {
-        c: co,
-        h,
-        w,
-        data: out,
+        out.par_chunks_mut(pw * co).enumerate().for_each(row_of);
     }
 }
 

@@ -49,8 +49,8 @@ pub struct RenderCloud {
     /// World point that local coordinates are relative to (f64, exact).
     pub origin: DVec3,
     /// Local f32 positions, one array per axis (x, y, z): the pinhole projection loads 8
-    /// points per axis per instruction instead of de-interleaving x, y, z (10⁷ points, whole
-    /// views, r = 1: 22.9 → 21.9 ms/view). `position` gives one point.
+    /// points per axis per instruction instead of de-interleaving x, y, z (docs/rendering.md has
+    /// the figures). `position` gives one point.
     pub xyz: [Vec<f32>; 3],
     pub colors: Option<Vec<[u8; 3]>>,
     pub normals: Option<Vec<Vec3>>,

@@ -22,7 +22,7 @@ pub(super) fn finish(
     cfg: &DensifyConfig,
     progress: &dyn Progress,
 ) -> Result<DensifyReport> {
-    let last = if cfg.geometric {
+    let last = if cfg.settings.geometric {
         MapPass::Geometric
     } else {
         MapPass::Photometric
@@ -52,8 +52,8 @@ pub(super) fn finish(
         &prep.rec,
         &prep.entries,
         &prep.plan,
-        &cfg.fusion,
-        cfg.fusion_cache_bytes,
+        &cfg.settings.fusion(),
+        cfg.settings.fusion_cache_bytes(),
     )?;
     progress.finish();
     let fusing = timer.elapsed().as_secs_f64();

@@ -112,7 +112,7 @@ fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<P
         .clone()
         .unwrap_or_else(|| scene.dir.join("dense").into());
     let options = UndistortOptions {
-        max_image_size: cfg.max_image_size,
+        max_image_size: cfg.settings.max_image_size(),
         ..UndistortOptions::default()
     };
     let distorted = crate::model::undistort_model(&mut rec, &options, &scene.model_dir)?;
@@ -172,12 +172,12 @@ fn prepare(cfg: &DensifyConfig, step: Step, progress: &dyn Progress) -> Result<P
 fn workspace(cfg: &DensifyConfig, out: &Location) -> Result<(Workspace, Option<Remote>)> {
     Ok(match out {
         Location::Local(dir) => {
-            claim(out, &Store::local(dir), cfg.overwrite)?;
+            claim(out, &Store::local(dir), cfg.settings.overwrite)?;
             (Workspace::new(&staging_dir(dir)), None)
         }
         Location::Url(_) => {
             let remote = Remote::open(out)?;
-            claim(out, &remote.out, cfg.overwrite)?;
+            claim(out, &remote.out, cfg.settings.overwrite)?;
             (Workspace::new(&remote.scratch), Some(remote))
         }
     })

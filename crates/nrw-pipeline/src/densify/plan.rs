@@ -30,7 +30,7 @@ pub(super) fn plan(
 ) -> (Vec<Plan>, Vec<Option<DensifyVerdict>>) {
     let sources = nrw_colmap::overlap::source_images(
         rec,
-        cfg.max_sources,
+        cfg.settings.max_sources,
         nrw_colmap::overlap::DEFAULT_MIN_ANGLE_DEG,
     );
     let ranges = nrw_colmap::overlap::depth_ranges(rec);
@@ -76,7 +76,7 @@ pub(super) fn run_pass(
     unit: Unit,
     progress: &dyn Progress,
 ) -> Result<(usize, usize, usize)> {
-    if pass == MapPass::Geometric && !cfg.geometric {
+    if pass == MapPass::Geometric && !cfg.settings.geometric {
         // Without a geometric pass the photometric one writes the final maps.
         return Ok((0, 0, 0));
     }
@@ -134,7 +134,7 @@ pub(super) fn last_map(
     pass: MapPass,
 ) -> Result<PathBuf> {
     match pass {
-        MapPass::Photometric if cfg.geometric => {
+        MapPass::Photometric if cfg.settings.geometric => {
             map_path(ws, MapKind::Normal, MapPass::Photometric, name)
         }
         _ => map_path(ws, MapKind::Confidence, MapPass::Geometric, name),
@@ -144,7 +144,7 @@ pub(super) fn last_map(
 /// The map files a view's pass writes, in the order it writes them ([`last_map`] last).
 fn written(ws: &Workspace, cfg: &DensifyConfig, name: &str, pass: MapPass) -> Result<Vec<PathBuf>> {
     let (kinds, pass): (&[MapKind], _) = match pass {
-        MapPass::Photometric if cfg.geometric => {
+        MapPass::Photometric if cfg.settings.geometric => {
             (&[MapKind::Depth, MapKind::Normal], MapPass::Photometric)
         }
         _ => (
@@ -231,13 +231,13 @@ pub(super) fn photometric_view(
             depth: None,
         })
         .collect();
-    let state = nrw_stereo::photometric(&reference, &s, p.2, &cfg.stereo)
+    let state = nrw_stereo::photometric(&reference, &s, p.2, &cfg.settings.stereo())
         .expect("a planned view has sources and a range");
     let name = &entries[p.0].name;
-    if cfg.geometric {
+    if cfg.settings.geometric {
         return write_hypotheses(ws, name, MapPass::Photometric, &state);
     }
-    let maps = nrw_stereo::filter(&reference, &s, p.2, &state, false, &cfg.stereo);
+    let maps = nrw_stereo::filter(&reference, &s, p.2, &state, false, &cfg.settings.stereo());
     write_maps(ws, name, MapPass::Geometric, &maps)
 }
 
@@ -263,8 +263,8 @@ pub(super) fn geometric_view(
         .collect();
     let name = &entries[p.0].name;
     let start = read_hypotheses(ws, name)?;
-    let state = nrw_stereo::geometric(&reference, &s, p.2, start, &cfg.stereo);
-    let maps = nrw_stereo::filter(&reference, &s, p.2, &state, true, &cfg.stereo);
+    let state = nrw_stereo::geometric(&reference, &s, p.2, start, &cfg.settings.stereo());
+    let maps = nrw_stereo::filter(&reference, &s, p.2, &state, true, &cfg.settings.stereo());
     write_maps(ws, name, MapPass::Geometric, &maps)
 }
 

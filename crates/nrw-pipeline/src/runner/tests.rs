@@ -23,14 +23,26 @@ fn a_densify_table_of_one_setting_takes_densifys_defaults() {
     let d = p.densify.unwrap();
     let c = densify_config(&d, Path::new("s"));
     let defaults = crate::densify::DensifyConfig::new(Path::new("s"));
-    assert_eq!(c.max_image_size, Some(320));
+    assert_eq!(c.settings.max_image_size(), Some(320));
     assert_eq!(
-        (c.max_sources, c.geometric, c.overwrite, &c.stereo),
-        (defaults.max_sources, true, false, &defaults.stereo)
+        (
+            c.settings.max_sources,
+            c.settings.geometric,
+            c.settings.overwrite,
+            c.settings.stereo()
+        ),
+        (
+            defaults.settings.max_sources,
+            true,
+            false,
+            defaults.settings.stereo()
+        )
     );
     let none: Pipeline = toml::from_str("name = \"x\"\n[densify]\nmax_image_size = 0\n").unwrap();
     assert_eq!(
-        densify_config(&none.densify.unwrap(), Path::new("s")).max_image_size,
+        densify_config(&none.densify.unwrap(), Path::new("s"))
+            .settings
+            .max_image_size(),
         None
     );
 }

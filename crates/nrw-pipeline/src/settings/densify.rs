@@ -1,14 +1,22 @@
 //! `densify`'s settings: the flags of `nrw-etl densify` and the `[densify]` table of a
 //! pipeline file, one declaration.
 
-use std::path::Path;
-
+use nrw_stereo::{FusionOptions, PatchMatchOptions};
 use serde::{Deserialize, Serialize};
 
-use crate::densify::DensifyConfig;
+/// The longer side the undistorted views are capped at by default (about 0.5 MP at 4:3):
+/// stereo's time grows with the pixels.
+pub const DEFAULT_MAX_IMAGE_SIZE: u64 = 800;
+
+/// Source views matched per reference view by default (COLMAP's `__auto__, 20` takes 20;
+/// the cost of a view grows with the count, and Gipuma's best-3 rarely needs more than 8).
+pub const DEFAULT_MAX_SOURCES: usize = 8;
+
+/// Fusion's map cache by default, in MiB: about 100 views at 0.5 MP (19 bytes a pixel).
+pub const DEFAULT_FUSION_CACHE_MB: usize = 1024;
 
 /// How densify matches and fuses; a setting left out of `[densify]` (or off the command line)
-/// is densify's default ([`DensifyConfig::new`]).
+/// is densify's default.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(deny_unknown_fields, default)]
 pub struct DensifySettings {
@@ -52,40 +60,53 @@ pub struct DensifySettings {
 }
 
 impl Default for DensifySettings {
+    /// Densify's defaults: 800 px views, 8 sources, nrw-stereo's matching and fusion.
     fn default() -> Self {
-        let c = DensifyConfig::new(Path::new(""));
+        let (stereo, fusion) = (PatchMatchOptions::default(), FusionOptions::default());
         DensifySettings {
-            max_image_size: c.max_image_size.unwrap_or(0),
-            max_sources: c.max_sources,
-            iterations: c.stereo.iterations,
-            window_radius: c.stereo.window_radius,
-            scales: c.stereo.scales,
-            geometric: c.geometric,
-            min_num_pixels: c.fusion.min_num_pixels,
-            min_consistent: c.stereo.filter_min_consistent,
-            fusion_cache_mb: c.fusion_cache_bytes >> 20,
-            overwrite: c.overwrite,
+            max_image_size: DEFAULT_MAX_IMAGE_SIZE,
+            max_sources: DEFAULT_MAX_SOURCES,
+            iterations: stereo.iterations,
+            window_radius: stereo.window_radius,
+            scales: stereo.scales,
+            geometric: true,
+            min_num_pixels: fusion.min_num_pixels,
+            min_consistent: stereo.filter_min_consistent,
+            fusion_cache_mb: DEFAULT_FUSION_CACHE_MB,
+            overwrite: false,
         }
     }
 }
 
 impl DensifySettings {
-    /// Densify's configuration for `scene` with these settings (the output and the photo
-    /// folder are the caller's).
-    pub fn config(&self, scene: &Path) -> DensifyConfig {
-        let mut c = DensifyConfig::new(scene);
-        c.max_image_size = (self.max_image_size > 0).then_some(self.max_image_size);
-        c.max_sources = self.max_sources;
-        c.stereo.iterations = self.iterations;
-        c.stereo.window_radius = self.window_radius;
-        c.stereo.sigma_spatial = self.window_radius as f64;
-        c.stereo.scales = self.scales;
-        c.geometric = self.geometric;
-        c.fusion.min_num_pixels = self.min_num_pixels;
-        c.stereo.filter_min_consistent = self.min_consistent;
-        c.fusion_cache_bytes = self.fusion_cache_mb.saturating_mul(1 << 20);
-        c.overwrite = self.overwrite;
-        c
+    /// The longer side of the undistorted views (`None`: the photos' own size).
+    pub fn max_image_size(&self) -> Option<u64> {
+        (self.max_image_size > 0).then_some(self.max_image_size)
+    }
+
+    /// The PatchMatch options these settings ask for (the others nrw-stereo's defaults).
+    pub fn stereo(&self) -> PatchMatchOptions {
+        PatchMatchOptions {
+            iterations: self.iterations,
+            window_radius: self.window_radius,
+            sigma_spatial: self.window_radius as f64,
+            scales: self.scales,
+            filter_min_consistent: self.min_consistent,
+            ..PatchMatchOptions::default()
+        }
+    }
+
+    /// The fusion options these settings ask for (the others COLMAP's defaults).
+    pub fn fusion(&self) -> FusionOptions {
+        FusionOptions {
+            min_num_pixels: self.min_num_pixels,
+            ..FusionOptions::default()
+        }
+    }
+
+    /// The most bytes of maps fusion holds at once.
+    pub fn fusion_cache_bytes(&self) -> usize {
+        self.fusion_cache_mb.saturating_mul(1 << 20)
     }
 }
 

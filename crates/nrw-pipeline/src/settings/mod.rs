@@ -76,16 +76,17 @@ impl Setting {
     /// The command-line flag (or argument) of the setting: what the CLI names where a
     /// pipeline file names its key.
     pub fn flag(self) -> String {
-        match self {
-            Setting::Key(key) => flag_of(key).unwrap_or_else(|| format!("`{key}`")),
-            named => named.named_flag().to_string(),
+        match self.named_flag() {
+            Some(flag) => flag.to_string(),
+            None => flag_of(self.key()).unwrap_or_else(|| self.to_string()),
         }
     }
 
-    /// The flag of a setting with a variant of its own.
-    fn named_flag(self) -> &'static str {
+    /// The flag of a setting with a variant of its own (`None` for a [`Setting::Key`], whose
+    /// flag its settings struct declares).
+    fn named_flag(self) -> Option<&'static str> {
         use Setting as S;
-        match self {
+        Some(match self {
             S::SegmentWeights => "--segment-weights",
             S::Weights => "--weights",
             S::Unit => "--unit",
@@ -100,8 +101,8 @@ impl Setting {
             S::FollowOutsideLinks => "--follow-outside-links",
             S::DenseOut => "--out",
             S::Stereo => "--iterations/--window-radius/--scales",
-            S::Key(key) => key,
-        }
+            S::Key(_) => return None,
+        })
     }
 }
 
@@ -122,18 +123,17 @@ fn declared_flags(text: &str) -> String {
     let pieces: Vec<&str> = text.split('`').collect();
     let mut out = String::with_capacity(text.len());
     for (i, piece) in pieces.iter().enumerate() {
+        // Odd pieces stand between backticks; the last is closed only if one follows.
         let quoted = i % 2 == 1;
-        match flag_of(piece).filter(|_| quoted && i + 1 < pieces.len()) {
-            Some(flag) => out.push_str(&flag),
-            None if quoted => {
-                out.push('`');
-                out.push_str(piece);
-                // An opening backtick without a closing one is kept as it was.
-                if i + 1 < pieces.len() {
-                    out.push('`');
-                }
-            }
-            None => out.push_str(piece),
+        let closed = i + 1 < pieces.len();
+        match (quoted, quoted && closed) {
+            (false, _) => out.push_str(piece),
+            (true, true) => match flag_of(piece) {
+                Some(flag) => out.push_str(&flag),
+                None => out.push_str(&format!("`{piece}`")),
+            },
+            // An opening backtick without a closing one is kept as it was.
+            (true, false) => out.push_str(&format!("`{piece}")),
         }
     }
     out
@@ -156,6 +156,19 @@ pub(crate) mod tests {
         <Cli<T> as clap::Parser>::try_parse_from(argv)
             .unwrap_or_else(|e| panic!("{args:?}: {e}"))
             .settings
+    }
+
+    #[test]
+    fn a_backticked_key_shows_as_its_flag_and_other_text_as_it_was() {
+        assert_eq!(
+            super::flags("`densify.geometric` off; see ingest.radius and `export.json`"),
+            "--no-geometric off; see ingest.radius and `export.json`"
+        );
+        assert_eq!(super::flags("an open `ingest.radius"), "an open `ingest.radius");
+        assert_eq!(
+            super::flags("`ingest.no_such` and `unit`"),
+            "`ingest.no_such` and --unit"
+        );
     }
 
     /// The settings a pipeline file's table gives.

@@ -33,7 +33,7 @@ pub use crate::settings::style::PART_PHOTOS;
 #[derive(Debug, Clone)]
 pub struct StyleConfig {
     pub dataset: nrw_dataset::Location,
-    /// `settings.tier`, parsed.
+    /// The tier that runs: `settings.tier` parsed (the stage reads this, never the name).
     pub tier: Tier,
     /// VGG weights (safetensors, torchvision names); required by the VGG tiers.
     pub weights: Option<PathBuf>,

@@ -7,7 +7,7 @@ use glam::{DMat3, DVec2, DVec3};
 use crate::ncc::{self, Warp, LANES};
 
 use super::options::{MAX_COST, MAX_SOURCES};
-use super::problem::{Known, Patch, Problem, Rel};
+use super::problem::{Known, Patch, Plane, Problem, Rel};
 
 impl Problem<'_> {
     pub(super) fn patch(&self, x: usize, y: usize) -> Patch {
@@ -87,23 +87,21 @@ impl Problem<'_> {
         (1.0 - ncc).clamp(0.0, MAX_COST as f64)
     }
 
-    /// The homography of the plane (depth, normal) at pixel (x, y) into `src`, or `None` when
-    /// the plane passes through the reference centre.
-    pub(super) fn homography(
-        &self,
-        src: &Rel,
-        x: usize,
-        y: usize,
-        depth: f64,
-        n: DVec3,
-    ) -> Option<DMat3> {
+    /// A hypothesis at pixel (x, y) as every source's cost uses it: its point and the row of
+    /// its homographies, computed once for all the sources.
+    pub(super) fn plane(&self, x: usize, y: usize, depth: f64, n: DVec3) -> Plane {
         let point = self.reference.lens.pixel_ray(x, y) * depth;
         let dp = n.dot(point);
-        if dp >= -1e-12 * point.length() {
-            return None;
-        }
-        // K (R + t nᵀ / dp) K⁻¹ = K R K⁻¹ + (K t) (K⁻ᵀ n / dp)ᵀ: a rank-one update.
-        let m = self.k_inv_t * n / dp;
+        // K (R + t nᵀ / dp) K⁻¹ = K R K⁻¹ + (K t) (K⁻ᵀ n / dp)ᵀ: a rank-one update whose
+        // row does not depend on the source.
+        let row = (!(dp >= -1e-12 * point.length())).then(|| self.k_inv_t * n / dp);
+        Plane { x, y, point, row }
+    }
+
+    /// The homography of `plane` into `src`, or `None` when the plane passes through the
+    /// reference centre.
+    pub(super) fn homography(&self, src: &Rel, plane: &Plane) -> Option<DMat3> {
+        let m = plane.row?;
         Some(src.krk + DMat3::from_cols(src.kt * m.x, src.kt * m.y, src.kt * m.z))
     }
 
@@ -135,22 +133,14 @@ impl Problem<'_> {
 
     /// One source's cost of a hypothesis (photometric, plus the weighted reprojection error
     /// in the geometric pass).
-    pub(super) fn source_cost(
-        &self,
-        patch: &Patch,
-        src: &Rel,
-        x: usize,
-        y: usize,
-        depth: f64,
-        n: DVec3,
-    ) -> f64 {
-        let Some(h) = self.homography(src, x, y, depth, n) else {
+    pub(super) fn source_cost(&self, patch: &Patch, src: &Rel, plane: &Plane) -> f64 {
+        let Some(h) = self.homography(src, plane) else {
             return MAX_COST as f64;
         };
+        let (x, y) = (plane.x, plane.y);
         let mut c = self.ncc_cost(patch, src, &h, x, y);
         if self.geometric {
-            let point = self.reference.lens.pixel_ray(x, y) * depth;
-            let e = self.fb_error(src, point, x, y).unwrap_or(f64::INFINITY);
+            let e = self.fb_error(src, plane.point, x, y).unwrap_or(f64::INFINITY);
             c += self.opts.geom_regularizer * e.min(self.opts.geom_max_cost);
         }
         c
@@ -168,9 +158,10 @@ impl Problem<'_> {
         known: &Known,
     ) -> [f64; MAX_SOURCES] {
         let mut costs = known.costs;
+        let plane = self.plane(x, y, depth, n);
         for (j, src) in self.sources.iter().enumerate() {
             if known.mask & (1 << j) == 0 {
-                costs[j] = self.source_cost(patch, src, x, y, depth, n);
+                costs[j] = self.source_cost(patch, src, &plane);
             }
         }
         costs
@@ -190,8 +181,12 @@ impl Problem<'_> {
     ) -> (f64, u32) {
         let m = self.sources.len();
         let costs = self.source_costs(patch, x, y, depth, n, known);
-        let mut order: Vec<usize> = (0..m).collect();
-        order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]).then(a.cmp(&b)));
+        let mut order = [0usize; MAX_SOURCES];
+        for (j, o) in order.iter_mut().enumerate() {
+            *o = j;
+        }
+        let order = &mut order[..m];
+        order.sort_unstable_by(|&a, &b| costs[a].total_cmp(&costs[b]).then(a.cmp(&b)));
         let k = self.opts.best_k.clamp(1, m);
         let mean = order[..k].iter().map(|&j| costs[j]).sum::<f64>() / k as f64;
         let mask = order[..(k + 1).min(m)]
@@ -218,11 +213,12 @@ impl Problem<'_> {
         };
         let mut costs = [MAX_COST as f64; MAX_SOURCES];
         let mut count = 0;
+        let plane = self.plane(x, y, depth, n);
         for (j, src) in self.sources.iter().enumerate() {
             if mask & (1 << j) == 0 {
                 continue;
             }
-            known.costs[j] = self.source_cost(patch, src, x, y, depth, n);
+            known.costs[j] = self.source_cost(patch, src, &plane);
             costs[count] = known.costs[j];
             count += 1;
         }

@@ -49,6 +49,17 @@ pub(super) struct Rel<'a> {
     pub(super) depth: Option<&'a [f32]>,
 }
 
+/// A plane hypothesis at one pixel, as each source's cost reads it.
+pub(super) struct Plane {
+    pub(super) x: usize,
+    pub(super) y: usize,
+    /// The pixel's point on the plane, in reference-camera coordinates.
+    pub(super) point: DVec3,
+    /// K⁻ᵀ n / (n · point): the row every source's homography adds; `None` when the plane
+    /// passes through the reference centre.
+    pub(super) row: Option<DVec3>,
+}
+
 /// One reference view's matching problem.
 pub(super) struct Problem<'a> {
     pub(super) reference: &'a StereoView,

@@ -148,8 +148,8 @@ mod x86 {
         let last_y = set((img.height - 1) as f32);
         let int = |v: usize| _mm256_set1_epi32(v as i32);
         let max_x0 = int(img.width - 2);
-        let (max_y0, max_y1) = (int(img.height - 2), int(img.height - 1));
-        let (stride, one_i) = (int(img.width), int(1));
+        let max_y0 = int(img.height - 2);
+        let stride = int(img.width);
         let data = img.data.as_ptr();
         let zero = set(0.0);
         let (mut s_b, mut s_bb, mut s_ab) = (zero, zero, zero);
@@ -182,13 +182,13 @@ mod x86 {
             // In range, so truncation is the portable kernel's `as i32`.
             let x0 = _mm256_min_epi32(_mm256_cvttps_epi32(sx), max_x0);
             let y0 = _mm256_min_epi32(_mm256_cvttps_epi32(sy), max_y0);
-            let y1 = _mm256_min_epi32(_mm256_add_epi32(y0, one_i), max_y1);
             let fx = _mm256_sub_ps(sx, _mm256_cvtepi32_ps(x0));
             let fy = _mm256_sub_ps(sy, _mm256_cvtepi32_ps(y0));
             // x0 ≤ width − 2, so bilinear_f32's x1 is x0 + 1: each row's two values are one
-            // 8-byte read, four samples to a gather.
+            // 8-byte read, four samples to a gather. Likewise y0 ≤ height − 2, so its y1 is
+            // y0 + 1: the bottom row starts one stride after the top.
             let at0 = _mm256_add_epi32(_mm256_mullo_epi32(y0, stride), x0);
-            let at1 = _mm256_add_epi32(_mm256_mullo_epi32(y1, stride), x0);
+            let at1 = _mm256_add_epi32(at0, stride);
             // A last run whose samples 4–7 are padding reads 0–3 only (see `pairs`).
             let low = s.count <= k + 4;
             // SAFETY: every index and its right neighbour are pixels of the image (clamped

@@ -164,7 +164,10 @@ pub(crate) mod tests {
             super::flags("`densify.geometric` off; see ingest.radius and `export.json`"),
             "--no-geometric off; see ingest.radius and `export.json`"
         );
-        assert_eq!(super::flags("an open `ingest.radius"), "an open `ingest.radius");
+        assert_eq!(
+            super::flags("an open `ingest.radius"),
+            "an open `ingest.radius"
+        );
         assert_eq!(
             super::flags("`ingest.no_such` and `unit`"),
             "`ingest.no_such` and --unit"

@@ -140,7 +140,9 @@ impl Problem<'_> {
         let (x, y) = (plane.x, plane.y);
         let mut c = self.ncc_cost(patch, src, &h, x, y);
         if self.geometric {
-            let e = self.fb_error(src, plane.point, x, y).unwrap_or(f64::INFINITY);
+            let e = self
+                .fb_error(src, plane.point, x, y)
+                .unwrap_or(f64::INFINITY);
             c += self.opts.geom_regularizer * e.min(self.opts.geom_max_cost);
         }
         c

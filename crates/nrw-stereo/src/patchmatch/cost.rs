@@ -94,7 +94,12 @@ impl Problem<'_> {
         let dp = n.dot(point);
         // K (R + t nᵀ / dp) K⁻¹ = K R K⁻¹ + (K t) (K⁻ᵀ n / dp)ᵀ: a rank-one update whose
         // row does not depend on the source.
-        let row = (!(dp >= -1e-12 * point.length())).then(|| self.k_inv_t * n / dp);
+        // Through the centre when dp ≥ −10⁻¹² |point|; a NaN dp is not counted as through it.
+        let through_centre = matches!(
+            dp.partial_cmp(&(-1e-12 * point.length())),
+            Some(std::cmp::Ordering::Greater | std::cmp::Ordering::Equal)
+        );
+        let row = (!through_centre).then(|| self.k_inv_t * n / dp);
         Plane { x, y, point, row }
     }
 
@@ -183,10 +188,7 @@ impl Problem<'_> {
     ) -> (f64, u32) {
         let m = self.sources.len();
         let costs = self.source_costs(patch, x, y, depth, n, known);
-        let mut order = [0usize; MAX_SOURCES];
-        for (j, o) in order.iter_mut().enumerate() {
-            *o = j;
-        }
+        let mut order: [usize; MAX_SOURCES] = std::array::from_fn(|j| j);
         let order = &mut order[..m];
         order.sort_unstable_by(|&a, &b| costs[a].total_cmp(&costs[b]).then(a.cmp(&b)));
         let k = self.opts.best_k.clamp(1, m);

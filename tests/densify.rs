@@ -766,6 +766,16 @@ fn densify_units_and_finalize_give_the_bytes_of_one_process_and_a_stopped_unit_r
         ],
     )));
     assert!(e.contains("stereo.window_radius = 5 (this run: 3)"), "{e}");
+    // Another preset is other settings too: its name and each value it changes are named.
+    let e = fails(&super::strs(&args(
+        &split,
+        &["--unit", "1/2", "--pass", "photometric", "--preset", "fast"],
+    )));
+    assert!(
+        e.contains("preset = \"default\" (this run: \"fast\")")
+            && e.contains("stereo.iterations = 5 (this run: 3)"),
+        "{e}"
+    );
     for pass in ["photometric", "geometric"] {
         let first = if pass == "photometric" { 1 } else { 0 };
         for i in first..2 {

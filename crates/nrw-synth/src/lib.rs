@@ -37,7 +37,7 @@ pub use spec::{Appearance, SceneSpec, MAX_POINTS};
 use crate::cameras::Shot;
 use crate::geometry::{Landmark, SurfacePoint};
 use crate::look::{gauss, Look};
-use crate::render::{render, Person};
+use crate::render::{render, Person, Sensor};
 use crate::texture::{hash64, to_srgb8};
 
 /// What a generated scene holds, and which simulation stages ran how often.
@@ -285,8 +285,11 @@ impl Scene<'_> {
             shot,
             &look,
             &people,
-            fx.noise,
-            hash64(spec.seed ^ (i as u64 + 1)),
+            &Sensor {
+                noise: fx.noise,
+                noise_seed: hash64(spec.seed ^ (i as u64 + 1)),
+                pixel_samples: spec.cameras.pixel_samples.max(1),
+            },
             counters,
         );
         let observed = observe(

@@ -160,14 +160,23 @@ fn lit(cell: (i32, i32)) -> bool {
     hash64(((cell.0 as i64 as u64) << 32) ^ cell.1 as i64 as u64 ^ 0x5eed) % 10 < 6
 }
 
-/// Render one photo. `noise_seed` makes sensor noise a pure function of (photo, pixel).
+/// How a photo's sensor turns light into pixels.
+pub struct Sensor {
+    /// Noise standard deviation on [0, 1] intensities, `None` when not simulated.
+    pub noise: Option<f64>,
+    /// Makes sensor noise a pure function of (photo, pixel).
+    pub noise_seed: u64,
+    /// Rays a pixel per axis whose mean colour the pixel records (1: the centre ray).
+    pub pixel_samples: u32,
+}
+
+/// Render one photo.
 pub fn render(
     landmark: &Landmark,
     shot: &Shot,
     look: &Look,
     people: &[Person],
-    sensor_noise: Option<f64>,
-    noise_seed: u64,
+    sensor: &Sensor,
     counters: &Counters,
 ) -> PhotoBuffers {
     let (w, h) = (shot.camera.width as usize, shot.camera.height as usize);
@@ -185,8 +194,9 @@ pub fn render(
         look,
         light: &light,
         people,
-        sensor_noise,
-        noise_seed,
+        sensor_noise: sensor.noise,
+        noise_seed: sensor.noise_seed,
+        samples: sensor.pixel_samples.max(1),
         cam_to_world: shot.pose.matrix().transpose(),
         distorted: shot.camera.model.has_distortion(),
     };
@@ -196,7 +206,8 @@ pub fn render(
             photo.pixel(&mut out, x, y, &mut tally);
         }
     }
-    tally.add_to(counters, (w * h) as u64);
+    let per_pixel = photo.samples as u64 * photo.samples as u64 + (photo.samples > 1) as u64;
+    tally.add_to(counters, (w * h) as u64 * per_pixel);
     out
 }
 
@@ -272,6 +283,8 @@ struct Photo<'a> {
     people: &'a [Person],
     sensor_noise: Option<f64>,
     noise_seed: u64,
+    /// Rays a pixel per axis (1: the centre ray).
+    samples: u32,
     cam_to_world: glam::DMat3,
     /// Whether the lens distorts (its rays are found by iteration).
     distorted: bool,
@@ -281,23 +294,20 @@ impl Photo<'_> {
     /// One pixel's colour, depth and label.
     fn pixel(&self, out: &mut PhotoBuffers, x: usize, y: usize, tally: &mut Tally) {
         let i = y * out.width + x;
-        let px = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-        // Pinhole models invert in closed form; only distortion models iterate.
-        tally.inversions += self.distorted as u64;
-        let Some(ray) = self.shot.camera.cam_ray_from_img(px) else {
+        let Some((ray, d, hit)) = self.primary(DVec2::new(x as f64 + 0.5, y as f64 + 0.5), tally)
+        else {
             return;
         };
-        let d = self.cam_to_world * ray;
-        let mut c = match self.hit(d, tally) {
-            None => {
-                out.semantics[i] = ADE_SKY;
-                self.look.sky(d)
-            }
+        match hit {
+            None => out.semantics[i] = ADE_SKY,
             Some(hit) => {
                 out.depth[i] = (hit.0 * ray.z) as f32;
                 out.semantics[i] = hit.3;
-                self.shade(d, hit, tally)
             }
+        }
+        let mut c = match self.samples {
+            1 => self.radiance(d, hit, tally),
+            _ => self.box_filtered(x, y, tally),
         };
         if let Some(g) = self.light.gain {
             tally.exposure += 1;
@@ -319,6 +329,42 @@ impl Photo<'_> {
             }
             out.rgb[i * 3 + k] = v.round().clamp(0.0, 255.0) as u8;
         }
+    }
+
+    /// The ray through image point `px` (camera frame, then world frame) and what it hits;
+    /// `None` where the lens has no ray for the point.
+    fn primary(&self, px: DVec2, tally: &mut Tally) -> Option<(DVec3, DVec3, Option<Hit>)> {
+        // Pinhole models invert in closed form; only distortion models iterate.
+        tally.inversions += self.distorted as u64;
+        let ray = self.shot.camera.cam_ray_from_img(px)?;
+        let d = self.cam_to_world * ray;
+        Some((ray, d, self.hit(d, tally)))
+    }
+
+    /// The linear colour arriving along world direction `d`, which hits `hit`.
+    fn radiance(&self, d: DVec3, hit: Option<Hit>, tally: &mut Tally) -> DVec3 {
+        match hit {
+            None => self.look.sky(d),
+            Some(hit) => self.shade(d, hit, tally),
+        }
+    }
+
+    /// The mean linear colour of `samples × samples` rays spread evenly over pixel (x, y):
+    /// the box filter of a sensor's pixel (rays the lens has none for are left out).
+    fn box_filtered(&self, x: usize, y: usize, tally: &mut Tally) -> DVec3 {
+        let n = self.samples as usize;
+        let (mut sum, mut count) = (DVec3::ZERO, 0u32);
+        for (j, k) in (0..n).flat_map(|j| (0..n).map(move |k| (j, k))) {
+            let px = DVec2::new(
+                x as f64 + (k as f64 + 0.5) / n as f64,
+                y as f64 + (j as f64 + 0.5) / n as f64,
+            );
+            if let Some((_, d, hit)) = self.primary(px, tally) {
+                sum += self.radiance(d, hit, tally);
+                count += 1;
+            }
+        }
+        sum / count.max(1) as f64
     }
 
     /// The first surface or person along direction `d` from the camera centre.

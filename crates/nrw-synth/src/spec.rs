@@ -73,6 +73,10 @@ pub struct CameraSpec {
     pub away_fraction: f64,
     /// One camera shared by all photos (then all photos have one size).
     pub shared: bool,
+    /// Rays a pixel per axis: a pixel's colour is the mean of `n × n` rays spread evenly over
+    /// it, as a sensor integrates its pixel's area (1: the centre ray alone, which aliases fine
+    /// texture seen at a grazing angle, as the ground is). Depth and labels stay the centre's.
+    pub pixel_samples: u32,
     /// Distance range from the façade, metres.
     pub min_distance: f64,
     pub max_distance: f64,
@@ -89,6 +93,7 @@ impl Default for CameraSpec {
             small_fraction: 0.15,
             away_fraction: 0.15,
             shared: false,
+            pixel_samples: 1,
             min_distance: 12.0,
             max_distance: 40.0,
         }
@@ -253,6 +258,12 @@ impl SceneSpec {
         }
         if !(16 <= c.min_size && c.min_size <= c.max_size && c.max_size <= 8192) {
             return bad("cameras.min_size/max_size", "need 16 ≤ min ≤ max ≤ 8192");
+        }
+        if !(1..=16).contains(&c.pixel_samples) {
+            return bad(
+                "cameras.pixel_samples",
+                "must be 1 to 16 rays a pixel per axis",
+            );
         }
         for (k, v) in [
             ("small_fraction", c.small_fraction),

@@ -309,4 +309,63 @@ fn bad_specs_name_the_key() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("unknown field") && e.contains("fog"), "{e}");
+    let e = SceneSpec::from_toml("name='x'\nseed=1\n[cameras]\npixel_samples=0\n", "x.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cameras.pixel_samples"), "{e}");
+}
+
+/// The mean absolute grey step between vertically adjacent pixels that both show `class`,
+/// over every photo of a scene, and how many such pairs there are.
+fn vertical_steps(dir: &Path, class: u8) -> (f64, usize) {
+    let (mut sum, mut pairs) = (0.0, 0);
+    for e in std::fs::read_dir(dir.join("images")).unwrap() {
+        let path = e.unwrap().path();
+        let stem = path.file_stem().unwrap().to_str().unwrap().to_string();
+        let photo = image::open(&path).unwrap().to_luma8();
+        let labels = image::open(dir.join(format!("ground_truth/semantics/{stem}.png")))
+            .unwrap()
+            .to_luma8();
+        for y in 0..photo.height() - 1 {
+            for x in 0..photo.width() {
+                if labels.get_pixel(x, y)[0] == class && labels.get_pixel(x, y + 1)[0] == class {
+                    let (a, b) = (photo.get_pixel(x, y)[0], photo.get_pixel(x, y + 1)[0]);
+                    sum += (a as f64 - b as f64).abs();
+                    pairs += 1;
+                }
+            }
+        }
+    }
+    (sum / pairs.max(1) as f64, pairs)
+}
+
+#[test]
+fn a_pixel_integrates_its_area_where_asked() {
+    // The textured ground seen at a grazing angle: one ray a pixel aliases its fine texture
+    // into noise no two photos share; 3 × 3 rays a pixel average it as a sensor does.
+    let mut spec = tiny("textured");
+    spec.cameras.min_size = 200;
+    spec.cameras.max_size = 220;
+    spec.cameras.count = 2;
+    let (one, _) = run(&spec);
+    spec.cameras.pixel_samples = 3;
+    let (three, _) = run(&spec);
+    let ground = nrw_synth::geometry::Material::Pavement.ade20k();
+    let (aliased, pairs) = vertical_steps(one.path(), ground);
+    let (filtered, pairs3) = vertical_steps(three.path(), ground);
+    assert!(
+        pairs > 2000,
+        "the photos show the ground: {pairs} pixel pairs"
+    );
+    assert_eq!(pairs, pairs3, "labels are the centre ray's at any sampling");
+    assert!(
+        filtered < 0.75 * aliased,
+        "ground steps {filtered:.2} grey levels with 3 × 3 rays against {aliased:.2} with one"
+    );
+    let (a, b) = (files(one.path()), files(three.path()));
+    for (name, bytes) in &a {
+        if name.starts_with("ground_truth/depth") || name.starts_with("ground_truth/semantics") {
+            assert!(b[name] == *bytes, "{name:?}: the truth is the centre ray's");
+        }
+    }
 }

@@ -59,6 +59,7 @@ impl DensifySettings {
 pub(super) struct Settings {
     pub(super) tool_version: String,
     pub(super) max_image_size: Option<u64>,
+    pub(super) preset: crate::settings::densify::DensifyPreset,
     pub(super) max_sources: usize,
     pub(super) geometric: bool,
     pub(super) stereo: PatchMatchOptions,
@@ -70,7 +71,8 @@ impl Settings {
         Settings {
             tool_version: env!("CARGO_PKG_VERSION").to_string(),
             max_image_size: cfg.settings.max_image_size(),
-            max_sources: cfg.settings.max_sources,
+            preset: cfg.settings.preset,
+            max_sources: cfg.settings.matching().max_sources,
             geometric: cfg.settings.geometric,
             stereo: cfg.settings.stereo(),
             fusion: cfg.settings.fusion(),
@@ -79,14 +81,13 @@ impl Settings {
 }
 
 pub(super) fn check(cfg: &DensifyConfig) -> Result<()> {
-    if cfg.settings.max_sources == 0
-        || cfg.settings.max_sources > nrw_stereo::patchmatch::MAX_SOURCES
-    {
+    let m = cfg.settings.matching();
+    if m.max_sources == 0 || m.max_sources > nrw_stereo::patchmatch::MAX_SOURCES {
         return Err(PipelineError::config(
             Setting::Key("densify.max_sources"),
             format!(
                 "is {}; it must be 1 to {}",
-                cfg.settings.max_sources,
+                m.max_sources,
                 nrw_stereo::patchmatch::MAX_SOURCES
             ),
         ));
@@ -103,7 +104,7 @@ pub(super) fn check(cfg: &DensifyConfig) -> Result<()> {
             "is 0; leave it out for the photos' own size",
         ));
     }
-    if cfg.settings.iterations == 0 || cfg.settings.window_radius == 0 || cfg.settings.scales == 0 {
+    if m.iterations == 0 || m.window_radius == 0 || m.scales == 0 {
         return Err(PipelineError::config(
             Setting::Stereo,
             "iterations, window radius and scales must each be at least 1",

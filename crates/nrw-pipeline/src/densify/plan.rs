@@ -30,7 +30,7 @@ pub(super) fn plan(
 ) -> (Vec<Plan>, Vec<Option<DensifyVerdict>>) {
     let sources = nrw_colmap::overlap::source_images(
         rec,
-        cfg.settings.max_sources,
+        cfg.settings.matching().max_sources,
         nrw_colmap::overlap::DEFAULT_MIN_ANGLE_DEG,
     );
     let ranges = nrw_colmap::overlap::depth_ranges(rec);

@@ -26,13 +26,13 @@ fn a_densify_table_of_one_setting_takes_densifys_defaults() {
     assert_eq!(c.settings.max_image_size(), Some(320));
     assert_eq!(
         (
-            c.settings.max_sources,
+            c.settings.matching(),
             c.settings.geometric,
             c.settings.overwrite,
             c.settings.stereo()
         ),
         (
-            defaults.settings.max_sources,
+            defaults.settings.matching(),
             true,
             false,
             defaults.settings.stereo()

@@ -76,6 +76,7 @@ pub struct CameraSpec {
     /// Rays a pixel per axis: a pixel's colour is the mean of `n × n` rays spread evenly over
     /// it, as a sensor integrates its pixel's area (1: the centre ray alone, which aliases fine
     /// texture seen at a grazing angle, as the ground is). Depth and labels stay the centre's.
+    #[serde(skip_serializing_if = "one_ray")]
     pub pixel_samples: u32,
     /// Distance range from the façade, metres.
     pub min_distance: f64,
@@ -98,6 +99,12 @@ impl Default for CameraSpec {
             max_distance: 40.0,
         }
     }
+}
+
+/// Whether a pixel is one ray (the default, left out of a written spec so that the scenes
+/// written before `pixel_samples` existed keep their bytes).
+fn one_ray(n: &u32) -> bool {
+    *n == 1
 }
 
 /// The sparse model's keypoints and tracks.

@@ -289,6 +289,21 @@ mod tests {
         let d = DensifySettings::default();
         assert_eq!(d.stereo(), PatchMatchOptions::default());
         assert_eq!(d.matching().max_sources, DEFAULT_MAX_SOURCES);
+        // Each preset's help line states its values (written by hand: `names` takes a
+        // `&'static str`), so it must say what `values` gives.
+        for p in DensifyPreset::ALL {
+            let (v, help) = (p.values(), p.summary());
+            for part in [
+                format!("{} sources", v.max_sources),
+                format!("{} geometric", v.geom_iterations),
+            ] {
+                assert!(
+                    help.contains(&part),
+                    "{}: {help:?} lacks {part:?}",
+                    p.name()
+                );
+            }
+        }
         let e = "quick".parse::<DensifyPreset>().unwrap_err();
         assert!(e.contains("fast, default, thorough"), "{e}");
     }

@@ -131,6 +131,16 @@ fn fails(args: &[&str]) -> String {
 }
 
 /// A column of a batch by name, as its concrete Arrow type.
+/// The number that follows `before` in `text` (up to the next space or quote), if any.
+fn number_after<T: std::str::FromStr>(text: &str, before: &str) -> Option<T> {
+    text.split(before)
+        .nth(1)?
+        .split([' ', '"'])
+        .next()?
+        .parse()
+        .ok()
+}
+
 fn column<'a, T: 'static>(b: &'a arrow_array::RecordBatch, name: &str) -> &'a T {
     b.column_by_name(name)
         .unwrap_or_else(|| panic!("no column {name}"))

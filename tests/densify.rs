@@ -9,7 +9,7 @@ use glam::DVec3;
 use nrw_colmap::dense::{DenseMap, MapKind, MapPass, Workspace};
 
 use super::shared::shared;
-use super::{assert_same_files, fails, files, nrw, ok};
+use super::{assert_same_files, fails, files, nrw, number_after, ok};
 
 /// The textured scene of scenes/textured.toml at test size (`count` photos, shorter side
 /// 240–280 px), its true surface moved to `dense_truth/` so densify writes `dense/`.
@@ -789,6 +789,19 @@ fn densify_units_and_finalize_give_the_bytes_of_one_process_and_a_stopped_unit_r
     // Finalize with a fusion cache of no room (one view held at a time): the same cloud.
     let e = stderr(&run(&split, &["--finalize", "--fusion-cache-mb", "0"]));
     assert!(e.contains("densified 4 of 4 views"), "{e}");
+    // It says what the cache cost: more reads than views, and the cache that reads each once.
+    let reads: usize = number_after(&e, "fusion read ").expect("map reads reported");
+    assert!(reads > 4, "{e}");
+    assert!(
+        e.contains("of 4 views") && e.contains("views were read again"),
+        "{e}"
+    );
+    let all_mib: f64 = number_after(&e, "MiB of their ").expect("the views' bytes reported");
+    let suggested: f64 = number_after(&e, "; --fusion-cache-mb ").expect("a cache suggested");
+    assert!(
+        suggested + 0.05 >= all_mib && suggested <= all_mib + 1.05,
+        "suggested {suggested} MiB for views of {all_mib} MiB: {e}"
+    );
     assert_same_files(
         &files(&whole),
         &files(&split),

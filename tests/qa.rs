@@ -191,12 +191,7 @@ fn qa_report_renders_in_headless_chromium() {
         dom.contains("data-qa-images=\"ok\""),
         "images failed to load:\n{log}"
     );
-    let count: usize = dom
-        .split("data-qa-image-count=\"")
-        .nth(1)
-        .and_then(|s| s.split('"').next())
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0);
+    let count: usize = number_after(&dom, "data-qa-image-count=\"").unwrap_or(0);
     assert!(count >= 24, "{count} images in the page");
     let console: Vec<&str> = log
         .lines()

@@ -377,6 +377,23 @@ pub fn densify(d: &crate::densify::DensifyReport) -> Report {
         .filter_map(|(what, s)| s.map(|s| format!("{s:.1} s {what}")))
         .collect();
     r.err(format!("fused {} points; {}", d.points, phases.join(", ")));
+    let mib = |b: usize| b as f64 / (1024.0 * 1024.0);
+    let fused_views = d.densified();
+    r.err(format!(
+        "fusion read {} maps of {} views, holding at most {:.1} MiB of their {:.1} MiB (--fusion-cache-mb){}",
+        d.fusion.reads,
+        fused_views,
+        mib(d.fusion.peak_bytes),
+        mib(d.fusion_all_bytes),
+        if d.fusion.reads > fused_views {
+            format!(
+                ": views were read again; --fusion-cache-mb {} reads each once",
+                d.fusion_all_bytes.div_ceil(1024 * 1024)
+            )
+        } else {
+            String::new()
+        }
+    ));
     r.out(d.out.join("fused.ply").to_string());
     r
 }
@@ -385,14 +402,17 @@ pub fn densify(d: &crate::densify::DensifyReport) -> Report {
 pub fn densify_unit(u: &crate::densify::UnitReport) -> Report {
     let mut r = Report::default();
     r.err(format!(
-        "densify unit {} ({} pass): {} of {} views; {} matched, {} found done; {:.1} s",
+        "densify unit {} ({} pass): {} of {} views; {} matched, {} found done; {:.1} s{}",
         u.unit,
         u.pass.name(),
         u.owned,
         u.planned,
         u.computed,
         u.resumed,
-        u.seconds
+        u.seconds,
+        u.undistort_seconds
+            .map(|s| format!(" ({s:.1} s of it undistorting the photos)"))
+            .unwrap_or_default()
     ));
     r.err(match u.pass {
         nrw_colmap::dense::MapPass::Photometric => "next, once every unit of this pass has run: the units of `--pass geometric` (or, with --no-geometric, `--finalize`)",

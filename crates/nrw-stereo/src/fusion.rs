@@ -8,7 +8,7 @@
 //! f32), pixel centres at +0.5 (the model's convention; COLMAP's fusion uses (col, row)).
 //!
 //! Memory: maps are read through a [`MapReader`] into a least-recently-used cache of a given
-//! byte budget (COLMAP's `cache_size`), so fusion holds the cache, one bit per pixel of every
+//! byte budget (COLMAP's `cache_size`, used only with its `use_cache`), so fusion holds the cache, one bit per pixel of every
 //! view (fused or not) and the cloud it builds; the cloud is the same whatever the budget.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -79,6 +79,11 @@ impl FusionMaps {
     /// The bytes these maps hold (what the cache budget counts).
     pub fn bytes(&self) -> usize {
         self.depth.len() * 4 + self.normal.len() * 12 + self.rgb.len()
+    }
+
+    /// The bytes the maps of a view of `pixels` pixels hold (depth, normal, colour).
+    pub fn bytes_for(pixels: usize) -> usize {
+        pixels * (4 + 12 + 3)
     }
 }
 

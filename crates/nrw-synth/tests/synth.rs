@@ -369,3 +369,31 @@ fn a_pixel_integrates_its_area_where_asked() {
         }
     }
 }
+
+#[test]
+fn every_scene_file_in_scenes_parses_and_validates() {
+    let mut names = Vec::new();
+    for e in std::fs::read_dir(scenes()).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            let name = p.file_stem().unwrap().to_string_lossy().into_owned();
+            let text = std::fs::read_to_string(&p).unwrap();
+            let spec = SceneSpec::from_toml(&text, &name)
+                .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            assert_eq!(
+                spec.name,
+                name,
+                "{}: the name inside is the file's",
+                p.display()
+            );
+            names.push(name);
+        }
+    }
+    // The benchmarks' scenes are among them (a renamed file would leave a script behind).
+    for wanted in ["demo", "textured", "wild", "hard", "many", "fisheye"] {
+        assert!(
+            names.iter().any(|n| n == wanted),
+            "{wanted} missing: {names:?}"
+        );
+    }
+}

@@ -47,7 +47,7 @@ pub(super) fn finish(
     }
     write_cfgs(&prep.ws, &prep.entries, &prep.plan)?;
     progress.start("fusing", prep.plan.len() as u64, "views");
-    let (points, pixels) = fuse(
+    let (points, pixels, fusion) = fuse(
         &prep.ws,
         &prep.rec,
         &prep.entries,
@@ -81,6 +81,16 @@ pub(super) fn finish(
             })
             .collect(),
         points,
+        fusion,
+        fusion_all_bytes: prep
+            .plan
+            .iter()
+            .map(|p| {
+                nrw_stereo::FusionMaps::bytes_for(
+                    prep.entries[p.0].width * prep.entries[p.0].height,
+                )
+            })
+            .sum(),
         seconds: [None, None, None, Some(fusing)],
     })
 }
@@ -136,7 +146,7 @@ impl nrw_stereo::MapReader for WorkspaceMaps<'_> {
 }
 
 /// Fuse the final maps into `fused.ply` and `fused.ply.vis`, holding at most `cache_bytes` of
-/// maps; the number of points and each view's depth pixels.
+/// maps; the number of points, each view's depth pixels and what the cache did.
 pub(super) fn fuse(
     ws: &Workspace,
     rec: &Reconstruction,
@@ -144,7 +154,7 @@ pub(super) fn fuse(
     plan: &[Plan],
     opts: &FusionOptions,
     cache_bytes: usize,
-) -> Result<(usize, Vec<usize>)> {
+) -> Result<(usize, Vec<usize>, nrw_stereo::FusionStats)> {
     // The images a walk may step into: COLMAP's fusion takes the 50 most overlapping.
     let overlap = nrw_colmap::overlap::source_images(rec, 50, 0.0);
     let position: BTreeMap<u32, usize> = plan
@@ -174,7 +184,7 @@ pub(super) fn fuse(
         views: plan.iter().map(|(i, _, _)| &entries[*i]).collect(),
         pixels: vec![None; plan.len()],
     };
-    let (cloud, _) = nrw_stereo::fuse(&views, &mut reader, cache_bytes, opts)?;
+    let (cloud, stats) = nrw_stereo::fuse(&views, &mut reader, cache_bytes, opts)?;
     // Visibility names images by their index in the workspace model (by id, as COLMAP reads it).
     let model_index: Vec<u32> = plan.iter().map(|(i, _, _)| *i as u32).collect();
     let origin = rec.scene_origin();
@@ -197,5 +207,5 @@ pub(super) fn fuse(
     )?;
     // Every view starts walks, so every view was read.
     let pixels = reader.pixels.iter().map(|p| p.unwrap_or(0)).collect();
-    Ok((cloud.positions.len(), pixels))
+    Ok((cloud.positions.len(), pixels, stats))
 }

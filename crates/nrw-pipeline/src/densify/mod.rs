@@ -91,6 +91,7 @@ pub fn densify_unit(
         planned: prep.plan.len(),
         computed,
         resumed,
+        undistort_seconds: prep.undistort_seconds,
         seconds: timer.elapsed().as_secs_f64(),
     })
 }

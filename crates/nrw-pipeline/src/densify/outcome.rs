@@ -33,6 +33,11 @@ pub struct DensifyReport {
     pub out: nrw_dataset::Location,
     pub views: Vec<ViewOutcome>,
     pub points: usize,
+    /// Fusion's map reads (more than the views when its cache was too small for a walk's
+    /// views) and the most map bytes it held: what `--fusion-cache-mb` cost.
+    pub fusion: nrw_stereo::FusionStats,
+    /// The bytes of every fused view's maps: the cache that reads each view once.
+    pub fusion_all_bytes: usize,
     /// Seconds of each phase this process ran: undistortion, photometric, geometric, fusion.
     pub seconds: [Option<f64>; 4],
 }
@@ -60,5 +65,7 @@ pub struct UnitReport {
     /// Views matched by this run, and views found done by an earlier (interrupted) one.
     pub computed: usize,
     pub resumed: usize,
+    /// Seconds this invocation spent undistorting photos (`None`: the workspace held them).
+    pub undistort_seconds: Option<f64>,
     pub seconds: f64,
 }

@@ -29,6 +29,7 @@ import os
 import platform
 import re
 import shutil
+import struct
 import subprocess
 import tempfile
 
@@ -55,7 +56,7 @@ def timed(cmd, timeout=None):
 
 
 def make_scene(binary, work, photos, max_size):
-    """scenes/many.toml with `photos` photos whose longer side is at most `max_size`."""
+    """scenes/many.toml with `photos` photos whose shorter side is at most `max_size`."""
     text = open(SPEC).read()
     text = re.sub(r"(?m)^count = \d+", f"count = {photos}", text)
     text = re.sub(r"(?m)^min_size = \d+", f"min_size = {max_size * 9 // 10}", text)
@@ -69,8 +70,6 @@ def make_scene(binary, work, photos, max_size):
 
 def pixels(scene):
     """Mean pixels a photo (the synthetic photos are PNG: the header's size)."""
-    import struct
-
     sizes = []
     images = os.path.join(scene, "images")
     for name in sorted(os.listdir(images)):
@@ -81,9 +80,15 @@ def pixels(scene):
     return sum(sizes) / len(sizes)
 
 
-def run_units(binary, scene, ws, units):
-    """Both passes as `units` units, then finalize: the timings and what finalize printed."""
-    row = {"photometric": [], "geometric": [], "undistort": 0.0}
+def staging(ws):
+    """The folder densify's units build `ws` in until finalize publishes it."""
+    return os.path.join(os.path.dirname(ws), "." + os.path.basename(ws) + ".partial")
+
+
+def run_units(binary, scene, ws, units, keep=False):
+    """Both passes as `units` units, then finalize: the timings and what finalize printed.
+    With `keep`, a copy of the finished passes is kept for fusing again (`refinalize`)."""
+    row = {"photometric": [], "geometric": [], "undistort": 0.0, "ws": ws}
     for pass_ in ("photometric", "geometric"):
         for i in range(units):
             s, mb, err = timed(
@@ -93,14 +98,9 @@ def run_units(binary, scene, ws, units):
             if u:
                 row["undistort"] += float(u.group(1))
             row[pass_].append((s, mb))
-    staging = os.path.join(os.path.dirname(ws), "." + os.path.basename(ws) + ".partial")
-    if not os.path.isdir(staging):
-        cands = [d for d in os.listdir(os.path.dirname(ws)) if "partial" in d]
-        raise SystemExit(f"no staging folder beside {ws}: {cands}")
-    copy = staging + ".copy"
-    shutil.copytree(staging, copy)
-    row["staging_copy"] = (copy, staging)
-    row["ws"] = ws
+    if keep:
+        row["passes_copy"] = staging(ws) + ".copy"
+        shutil.copytree(staging(ws), row["passes_copy"])
     row["fusion"] = finalize(binary, scene, ws, None)
     return row
 
@@ -130,10 +130,8 @@ def finalize(binary, scene, ws, cache_mb, timeout=None):
 
 def refinalize(binary, scene, row, cache_mb, tag, timeout):
     """Fusion again on a copy of the finished passes, with another cache."""
-    copy, _ = row["staging_copy"]
     ws = row["ws"] + f"_{tag}"
-    target = os.path.join(os.path.dirname(ws), "." + os.path.basename(ws) + ".partial")
-    shutil.copytree(copy, target)
+    shutil.copytree(row["passes_copy"], staging(ws))
     return finalize(binary, scene, ws, cache_mb, timeout)
 
 
@@ -148,6 +146,11 @@ def cpu_name():
         if line.startswith("model name"):
             return line.split(":", 1)[1].strip()
     return platform.processor()
+
+
+def view_mib(row):
+    """MiB a view's maps take in fusion's cache (its peak over the views, when all fit)."""
+    return row["fusion"]["cache_peak"] / max(1, row["fusion"]["views"])
 
 
 def per_view(row, n):
@@ -166,7 +169,7 @@ def report(args, rows, small, paper, threads):
         f"Machine: {cpu_name()}; {threads} threads; flags: {cpu_flags()}.",
         "",
         "Scenes: scenes/many.toml (the textured façade, PINHOLE photos 14–24 m away, no "
-        f"weather) with N photos of at most {args.size} px; `densify` with its defaults "
+        f"weather) with N photos whose shorter side is at most {args.size} px; `densify` with its defaults "
         f"(preset `default`) as {args.units} work units a pass, each unit one process run "
         "after the other on this machine (on a cluster, one a machine), then `--finalize`. "
         "Seconds a view = the pass's summed unit seconds (each process timed whole: start, "
@@ -201,9 +204,8 @@ def report(args, rows, small, paper, threads):
         "| cache MiB | views it holds | fusion s | map reads / views | cache held MiB | finalize peak MB | points |",
         "|---|---|---|---|---|---|---|",
     ]
-    view_mib = r1["fusion"]["cache_peak"] / max(1, r1["fusion"]["views"])
     for f in [dict(r1["fusion"], cache_mb=1024)] + small:
-        holds = min(r1["fusion"]["views"], int(f["cache_mb"] / view_mib))
+        holds = min(r1["fusion"]["views"], int(f["cache_mb"] / view_mib(r1)))
         if "timeout" in f:
             lines.append(
                 f"| {f['cache_mb']} | {holds} | over {f['timeout']} (stopped) | | | | |"
@@ -229,9 +231,8 @@ def projection(rows, paper, small):
     fu_paper = fu_px * paper["px"]
     # The small cache that holds about as many of these views as the default 1 GiB holds of
     # the paper-size views (a view's maps and colour: 19 bytes a pixel).
-    view_mib = r1["fusion"]["cache_peak"] / max(1, r1["fusion"]["views"])
     default_holds = 1024 / (paper["px"] * 19 / 2**20)
-    f_small = min(small, key=lambda f: abs(f["cache_mb"] / view_mib - default_holds))
+    f_small = min(small, key=lambda f: abs(f["cache_mb"] / view_mib(r1) - default_holds))
     if "timeout" in f_small:
         thrash = None
         fusion_h = None
@@ -249,7 +250,7 @@ def projection(rows, paper, small):
         f"photometric {ph:.2f} s a view, geometric {ge:.2f} s ({stereo:.2f} s a view for both). "
         f"Fusion: its cost a pixel at N = {n1} ({fu_px * 1e6:.2f} µs) times the photo's pixels, "
         f"{fu_paper:.2f} s a view, times the slowdown of fusion at N = {n1} with a cache of "
-        f"{f_small['cache_mb']} MiB (about {f_small['cache_mb'] / view_mib:.0f} views, as 1 GiB "
+        f"{f_small['cache_mb']} MiB (about {f_small['cache_mb'] / view_mib(r1):.0f} views, as 1 GiB "
         f"holds about {default_holds:.0f} views of {paper['px'] / 1e6:.2f} MP) against a cache "
         "holding every view: "
         + (
@@ -305,10 +306,11 @@ def main():
     os.makedirs(work, exist_ok=True)
     threads = os.cpu_count()
     rows = []
-    for n in [int(x) for x in args.photos.split(",")]:
+    counts = [int(x) for x in args.photos.split(",")]
+    for n in counts:
         scene = make_scene(binary, work, n, args.size)
         ws = os.path.join(work, f"dense{n}")
-        row = run_units(binary, scene, ws, args.units)
+        row = run_units(binary, scene, ws, args.units, keep=n == counts[-1])
         rows.append((n, pixels(scene), row))
         print(f"N = {n}: {per_view(row, n)}", flush=True)
     n1 = rows[-1][0]

@@ -5,7 +5,7 @@
         [--units 4] [--small-caches-mb 168,84,40] [--timeout 300]
 
 For each N it makes scenes/many.toml's synthetic collection with N photos (the textured façade
-seen by N strangers, 160 px at most), then runs `nrw-etl densify` the way a cluster does:
+seen by N strangers, a shorter side of 120 px at most), then runs `nrw-etl densify` the way a cluster does:
 `--unit I/U --pass photometric` for every I, then `--pass geometric`, then `--finalize`, each
 invocation one process under GNU time (wall seconds, peak resident MB) on the machine's
 threads. It reports seconds a view of each pass and of fusion, the units' and fusion's peak

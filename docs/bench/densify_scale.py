@@ -2,20 +2,20 @@
 """Densify of a large collection as work units: regenerates docs/bench/densify_scale.md.
 
     python3 docs/bench/densify_scale.py [--bin target/release/nrw-etl] [--photos 64,256,512]
-        [--units 4] [--small-caches-mb 168,84,40] [--timeout 300]
+        [--units 4] [--small-caches-mb 84,40,16,8,3] [--timeout 600]
 
 For each N it makes scenes/many.toml's synthetic collection with N photos (the textured façade
 seen by N strangers, a shorter side of 120 px at most), then runs `nrw-etl densify` the way a cluster does:
 `--unit I/U --pass photometric` for every I, then `--pass geometric`, then `--finalize`, each
 invocation one process under GNU time (wall seconds, peak resident MB) on the machine's
 threads. It reports seconds a view of each pass and of fusion, the units' and fusion's peak
-memory, fusion's map reads (`fusion read … maps` in finalize's output) and the points, so that
-"seconds a view flat in N" and "fusion bounded by its cache" are figures, not claims.
+memory, fusion's band reads (`fusion read … bands` in finalize's output) and the points, so
+that "seconds a view flat in N" and "fusion bounded by its cache" are figures, not claims.
 
 At the largest N fusion runs again on a copy of the finished passes with smaller caches
-(`--fusion-cache-mb`, each stopped after --timeout seconds): about 480, 240 and 113 of these
-views, the last as many as the default 1 GiB holds of 0.5 MP views, to show what a cache
-smaller than a walk's views costs.
+(`--fusion-cache-mb`, each stopped after --timeout seconds), down to about the share of the
+maps' bytes the default 1 GiB holds of the paper's 7,711 views at 0.5 MP, to show what a cache
+smaller than the maps costs.
 
 Then one 8-photo collection at about 0.5 MP (scenes/many.toml at 816 px), to price a view at
 the paper's size in the same run, and the projection for the paper's 7,711 photos on 1 and
@@ -115,15 +115,20 @@ def finalize(binary, scene, ws, cache_mb, timeout=None):
     s, mb, err = done
     points = int(re.search(r"fused (\d+) points", err).group(1))
     fusing = float(re.search(r"([\d.]+) s fusing", err).group(1))
-    reads = re.search(r"fusion read (\d+) maps of (\d+) views, holding at most ([\d.]+) MiB", err)
+    reads = re.search(
+        r"fusion read (\d+) bands of \d+ rows \((\d+) in (\d+) views\), holding at most ([\d.]+) MiB of their ([\d.]+) MiB",
+        err,
+    )
     return {
         "wall": s,
         "mb": mb,
         "points": points,
         "fusing": fusing,
         "reads": int(reads.group(1)),
-        "views": int(reads.group(2)),
-        "cache_peak": float(reads.group(3)),
+        "bands": int(reads.group(2)),
+        "views": int(reads.group(3)),
+        "cache_peak": float(reads.group(4)),
+        "all_mib": float(reads.group(5)),
         "cache_mb": cache_mb,
     }
 
@@ -148,9 +153,9 @@ def cpu_name():
     return platform.processor()
 
 
-def view_mib(row):
-    """MiB a view's maps take in fusion's cache (its peak over the views, when all fit)."""
-    return row["fusion"]["cache_peak"] / max(1, row["fusion"]["views"])
+def share(f, row):
+    """The share of the views' map bytes a cache of `f["cache_mb"]` MiB holds."""
+    return min(1.0, f["cache_mb"] / row["fusion"]["all_mib"])
 
 
 def per_view(row, n):
@@ -176,7 +181,7 @@ def report(args, rows, small, paper, threads):
         "model, plan, the first unit's undistortion included) over N. Peak memory: GNU time's "
         "maximum resident set of the process.",
         "",
-        "| photos N | px a photo | photometric s/view | geometric s/view | fusion s/view | units' peak MB (largest) | finalize peak MB | fused points | fusion map reads / views | cache held MiB |",
+        "| photos N | px a photo | photometric s/view | geometric s/view | fusion s/view | units' peak MB (largest) | finalize peak MB | fused points | fusion band reads / bands | cache held MiB |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n, px, row in rows:
@@ -185,7 +190,7 @@ def report(args, rows, small, paper, threads):
         f = row["fusion"]
         lines.append(
             f"| {n} | {px:.0f} | {ph:.3f} | {ge:.3f} | {fu:.4f} | {unit_mb:.0f} | "
-            f"{f['mb']:.0f} | {f['points']:,} | {f['reads']} / {f['views']} | {f['cache_peak']:.1f} |"
+            f"{f['mb']:.0f} | {f['points']:,} | {f['reads']} / {f['bands']} | {f['cache_peak']:.1f} |"
         )
     (n0, _, r0), (n1, _, r1) = rows[0], rows[-1]
     a, b = per_view(r0, n0), per_view(r1, n1)
@@ -197,22 +202,23 @@ def report(args, rows, small, paper, threads):
         "",
         f"### Fusion at N = {n1} with smaller caches",
         "",
-        "The same finished passes fused again with `--fusion-cache-mb` set lower. The cloud's "
-        "bytes do not depend on the cache (a test fuses with a cache of one view and compares "
-        "bytes); the reads and seconds do.",
+        "The same finished passes fused again with `--fusion-cache-mb` set lower. Fusion reads "
+        "and holds the maps in bands of 16 rows; the cloud's bytes do not depend on the cache "
+        "(a test fuses with a cache of one band and compares bytes); the reads and seconds do.",
         "",
-        "| cache MiB | views it holds | fusion s | map reads / views | cache held MiB | finalize peak MB | points |",
-        "|---|---|---|---|---|---|---|",
+        "| cache MiB | share of the maps' bytes | fusion s | against all held | band reads / bands | cache held MiB | finalize peak MB | points |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for f in [dict(r1["fusion"], cache_mb=1024)] + small:
-        holds = min(r1["fusion"]["views"], int(f["cache_mb"] / view_mib(r1)))
+        held = f"{share(f, r1):.1%}"
         if "timeout" in f:
             lines.append(
-                f"| {f['cache_mb']} | {holds} | over {f['timeout']} (stopped) | | | | |"
+                f"| {f['cache_mb']} | {held} | over {f['timeout']} (stopped) | | | | | |"
             )
             continue
         lines.append(
-            f"| {f['cache_mb']} | {holds} | {f['fusing']:.1f} | {f['reads']} / {f['views']} | "
+            f"| {f['cache_mb']} | {held} | {f['fusing']:.1f} | "
+            f"{f['fusing'] / r1['fusion']['fusing']:.2f}× | {f['reads']} / {f['bands']} | "
             f"{f['cache_peak']:.1f} | {f['mb']:.0f} | {f['points']:,} |"
         )
     lines += projection(rows, paper, small)
@@ -229,10 +235,10 @@ def projection(rows, paper, small):
     # the paper's photo size; the 8-photo run's own fusion steps into at most 7 views.
     fu_px = r1["fusion"]["fusing"] / (n1 * px1)
     fu_paper = fu_px * paper["px"]
-    # The small cache that holds about as many of these views as the default 1 GiB holds of
-    # the paper-size views (a view's maps and colour: 19 bytes a pixel).
-    default_holds = 1024 / (paper["px"] * 19 / 2**20)
-    f_small = min(small, key=lambda f: abs(f["cache_mb"] / view_mib(r1) - default_holds))
+    # The small cache whose share of these maps' bytes is nearest the share the default 1 GiB
+    # holds of the paper's (a view's maps and colour: 19 bytes a pixel).
+    paper_share = 1024 / (PAPER_PHOTOS * paper["px"] * 19 / 2**20)
+    f_small = min(small, key=lambda f: abs(share(f, r1) - paper_share))
     if "timeout" in f_small:
         thrash = None
         fusion_h = None
@@ -250,9 +256,9 @@ def projection(rows, paper, small):
         f"photometric {ph:.2f} s a view, geometric {ge:.2f} s ({stereo:.2f} s a view for both). "
         f"Fusion: its cost a pixel at N = {n1} ({fu_px * 1e6:.2f} µs) times the photo's pixels, "
         f"{fu_paper:.2f} s a view, times the slowdown of fusion at N = {n1} with a cache of "
-        f"{f_small['cache_mb']} MiB (about {f_small['cache_mb'] / view_mib(r1):.0f} views, as 1 GiB "
-        f"holds about {default_holds:.0f} views of {paper['px'] / 1e6:.2f} MP) against a cache "
-        "holding every view: "
+        f"{f_small['cache_mb']} MiB ({share(f_small, r1):.1%} of the maps' bytes, as 1 GiB holds "
+        f"{paper_share:.1%} of {PAPER_PHOTOS:,} views of {paper['px'] / 1e6:.2f} MP) against a "
+        "cache holding every view: "
         + (
             f"{thrash:.2f}×, so {fu_paper * thrash:.2f} s a view."
             if thrash is not None
@@ -277,10 +283,10 @@ def projection(rows, paper, small):
         "",
         f"Memory at {PAPER_PHOTOS:,} photos: a stereo unit holds one view and its sources "
         f"(its peak does not grow with N: the table above); fusion holds its cache (1 GiB by "
-        f"default), one bit a pixel of every view ({bits_mb:.0f} MB) and the cloud it builds "
-        f"(about {pts_view:,.0f} points a view here, so about "
-        f"{pts_view * PAPER_PHOTOS / 1e6:,.0f} million points at {PAPER_PHOTOS:,} photos; the "
-        "finalize peaks above give its bytes a point).",
+        f"default) and one bit a pixel of every view ({bits_mb:.0f} MB); it writes each point "
+        f"as it is made (about {pts_view:,.0f} points a view here, so about "
+        f"{pts_view * PAPER_PHOTOS / 1e6:,.0f} million points at {PAPER_PHOTOS:,} photos, "
+        "on disk, not in memory).",
         "",
         "Undistortion: a local workspace's first unit undistorts every photo once; on object "
         "storage every invocation undistorts every photo again in its scratch folder (its "
@@ -295,7 +301,7 @@ def main():
     ap.add_argument("--photos", default="64,256,512")
     ap.add_argument("--size", type=int, default=120, help="shorter side of the photos, px")
     ap.add_argument("--units", type=int, default=4)
-    ap.add_argument("--small-caches-mb", default="168,84,40")
+    ap.add_argument("--small-caches-mb", default="84,40,16,8,3")
     ap.add_argument("--timeout", type=int, default=600, help="seconds a small-cache fusion may take")
     ap.add_argument("--paper-size", type=int, default=612, help="shorter side, px (0.5 MP)")
     ap.add_argument("--work", default=None)

@@ -12,6 +12,7 @@
 use std::path::Path;
 
 use crate::error::{ColmapError, Record, Result};
+pub use crate::map_file::MapFile;
 
 /// A depth map (1 channel), a normal map (3 channels) or a confidence map, in float32 as
 /// COLMAP stores them (depth in the camera's z; normals unit vectors in camera space).
@@ -26,7 +27,7 @@ pub struct DenseMap {
 
 /// The longest header COLMAP writes (three decimal numbers and three `&`), with room to spare:
 /// a file whose first `&`s are further in is not a map.
-const MAX_HEADER: usize = 64;
+pub(crate) const MAX_HEADER: usize = 64;
 
 impl DenseMap {
     /// A map of `channels` channels filled with `value`.
@@ -121,7 +122,7 @@ impl DenseMap {
 
 /// The three numbers of a map header and the bytes after its third `&`; `None` when the
 /// header is not three decimal numbers each ended by `&` within [`MAX_HEADER`] bytes.
-fn split_header(bytes: &[u8]) -> Option<([usize; 3], &[u8])> {
+pub(crate) fn split_header(bytes: &[u8]) -> Option<([usize; 3], &[u8])> {
     let mut dims = [0usize; 3];
     let mut at = 0;
     for d in &mut dims {

@@ -378,16 +378,17 @@ pub fn densify(d: &crate::densify::DensifyReport) -> Report {
         .collect();
     r.err(format!("fused {} points; {}", d.points, phases.join(", ")));
     let mib = |b: usize| b as f64 / (1024.0 * 1024.0);
-    let fused_views = d.densified();
     r.err(format!(
-        "fusion read {} maps of {} views, holding at most {:.1} MiB of their {:.1} MiB (--fusion-cache-mb){}",
+        "fusion read {} bands of {} rows ({} in {} views), holding at most {:.1} MiB of their {:.1} MiB (--fusion-cache-mb){}",
         d.fusion.reads,
-        fused_views,
+        nrw_stereo::BAND_ROWS,
+        d.fusion.bands,
+        d.densified(),
         mib(d.fusion.peak_bytes),
         mib(d.fusion_all_bytes),
-        if d.fusion.reads > fused_views {
+        if d.fusion.reads > d.fusion.bands {
             format!(
-                ": views were read again; --fusion-cache-mb {} reads each once",
+                ": bands were read again; --fusion-cache-mb {} reads each once",
                 d.fusion_all_bytes.div_ceil(1024 * 1024)
             )
         } else {

@@ -7,12 +7,13 @@
 //! Differences from COLMAP, each deliberate: positions and projections in f64 (COLMAP's are
 //! f32), pixel centres at +0.5 (the model's convention; COLMAP's fusion uses (col, row)).
 //!
-//! Memory: maps are read through a [`MapReader`] into a least-recently-used cache of a given
-//! byte budget (COLMAP's `cache_size`, used only with its `use_cache`), so fusion holds the cache, one bit per pixel of every
-//! view (fused or not) and the cloud it builds; the cloud is the same whatever the budget.
+//! Memory: maps are read through a [`MapReader`] in bands of [`BAND_ROWS`] rows into a
+//! least-recently-used cache of a given byte budget (COLMAP's `cache_size`, used only with its
+//! `use_cache`, holds whole views), so fusion holds the cache, one bit per pixel of every view
+//! (fused or not) and the cloud it builds; the cloud is the same whatever the budget.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::rc::Rc;
+use std::ops::Range;
 
 use glam::DVec3;
 
@@ -64,7 +65,18 @@ pub struct FusionView {
     pub overlapping: Vec<usize>,
 }
 
-/// One view's final maps, read when a walk needs them and dropped when the cache is full.
+/// Rows of a view that fusion reads and holds as one piece: walks from neighbouring pixels
+/// step into neighbouring rows of the other views, so a cache of bands keeps what the next
+/// walks need where a cache of whole views smaller than the scene reads views again.
+pub const BAND_ROWS: usize = 16;
+
+/// The bands of a view `height` rows tall.
+pub fn bands_of(height: usize) -> usize {
+    height.div_ceil(BAND_ROWS)
+}
+
+/// Some whole rows of a view's final maps, read when a walk needs them and dropped when the
+/// cache is full.
 #[derive(Debug, Clone, Default)]
 pub struct FusionMaps {
     /// Depth per pixel (0 = none), row-major.
@@ -87,80 +99,114 @@ impl FusionMaps {
     }
 }
 
-/// Reads a view's maps on demand, so that fusion holds only the views its cache has room for.
+/// Reads part of a view's maps on demand, so that fusion holds only the bands its cache has
+/// room for.
 pub trait MapReader {
     type Error;
-    /// The maps of view `view` (an index into the view list).
-    fn read(&mut self, view: usize) -> Result<FusionMaps, Self::Error>;
+    /// The maps of the pixels `pixels` (row-major indices `y × width + x`, whole rows) of view
+    /// `view` (an index into the view list).
+    fn read(&mut self, view: usize, pixels: Range<usize>) -> Result<FusionMaps, Self::Error>;
 }
 
 /// Maps already in memory (tests, small scenes): every read is a copy.
 impl MapReader for [FusionMaps] {
     type Error = std::convert::Infallible;
-    fn read(&mut self, view: usize) -> Result<FusionMaps, Self::Error> {
-        Ok(self[view].clone())
+    fn read(&mut self, view: usize, pixels: Range<usize>) -> Result<FusionMaps, Self::Error> {
+        let m = &self[view];
+        Ok(FusionMaps {
+            depth: m.depth[pixels.clone()].to_vec(),
+            normal: m.normal[pixels.clone()].to_vec(),
+            rgb: m.rgb[3 * pixels.start..3 * pixels.end].to_vec(),
+        })
     }
 }
 
-/// What fusion's memory came to: map reads (a view read again was evicted in between) and the
-/// most map bytes held at once.
+/// What fusion's memory came to: band reads (a band read again was evicted in between), the
+/// bands there are, and the most map bytes held at once.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct FusionStats {
     pub reads: usize,
+    pub bands: usize,
     pub peak_bytes: usize,
 }
 
-/// The views' maps, least recently used dropped first when the next read would pass the budget
-/// (one view is always held, however small the budget).
+/// A view's band: (view, band index).
+type BandKey = (usize, usize);
+
+/// The bands held, least recently used dropped first when the next read would pass the budget
+/// (one band is always held, however small the budget).
 struct MapCache<'r, R: MapReader + ?Sized> {
     reader: &'r mut R,
     budget: usize,
-    held: BTreeMap<usize, (Rc<FusionMaps>, u64)>,
+    /// Per view, per band: its maps and last use, when held.
+    held: Vec<Vec<Option<(FusionMaps, u64)>>>,
+    /// Each held band once, at a use no later than its last (a hit only sets the last use;
+    /// eviction moves a band used since to its last use before it drops the oldest).
+    order: BTreeMap<u64, BandKey>,
     bytes: usize,
     tick: u64,
     stats: FusionStats,
 }
 
 impl<'r, R: MapReader + ?Sized> MapCache<'r, R> {
-    fn new(reader: &'r mut R, budget: usize) -> Self {
+    fn new(reader: &'r mut R, views: &[FusionView], budget: usize) -> Self {
         MapCache {
             reader,
             budget,
-            held: BTreeMap::new(),
+            held: views
+                .iter()
+                .map(|v| (0..bands_of(v.height)).map(|_| None).collect())
+                .collect(),
+            order: BTreeMap::new(),
             bytes: 0,
             tick: 0,
-            stats: FusionStats::default(),
+            stats: FusionStats {
+                bands: views.iter().map(|v| bands_of(v.height)).sum(),
+                ..FusionStats::default()
+            },
         }
     }
 
-    /// View `view`'s maps, read if not held.
-    fn get(&mut self, view: usize) -> Result<Rc<FusionMaps>, R::Error> {
+    /// The band of view `view` (of width `width`, height `height`) holding pixel `pixel`, read
+    /// if not held, and the index of its first pixel.
+    fn get(
+        &mut self,
+        view: usize,
+        (width, height): (usize, usize),
+        pixel: usize,
+    ) -> Result<(&FusionMaps, usize), R::Error> {
+        let band = pixel / (width * BAND_ROWS);
+        let first = band * width * BAND_ROWS;
         self.tick += 1;
-        if let Some((maps, used)) = self.held.get_mut(&view) {
-            *used = self.tick;
-            return Ok(maps.clone());
+        if self.held[view][band].is_none() {
+            let end = ((band + 1) * BAND_ROWS).min(height) * width;
+            let maps = self.reader.read(view, first..end)?;
+            let size = maps.bytes();
+            while !self.order.is_empty() && self.bytes + size > self.budget {
+                self.evict_oldest();
+            }
+            self.stats.reads += 1;
+            self.bytes += size;
+            self.stats.peak_bytes = self.stats.peak_bytes.max(self.bytes);
+            self.held[view][band] = Some((maps, self.tick));
+            self.order.insert(self.tick, (view, band));
         }
-        let maps = self.reader.read(view)?;
-        let size = maps.bytes();
-        while !self.held.is_empty() && self.bytes + size > self.budget {
-            self.evict_oldest();
-        }
-        self.stats.reads += 1;
-        self.bytes += size;
-        self.stats.peak_bytes = self.stats.peak_bytes.max(self.bytes);
-        let maps = Rc::new(maps);
-        self.held.insert(view, (maps.clone(), self.tick));
-        Ok(maps)
+        let (maps, used) = self.held[view][band].as_mut().expect("held above");
+        *used = self.tick;
+        Ok((maps, first))
     }
 
     fn evict_oldest(&mut self) {
-        let oldest = self
-            .held
-            .iter()
-            .min_by_key(|(_, (_, used))| *used)
-            .map(|(k, _)| *k);
-        if let Some((maps, _)) = oldest.and_then(|k| self.held.remove(&k)) {
-            self.bytes -= maps.bytes();
+        while let Some((at, (view, band))) = self.order.pop_first() {
+            let used = self.held[view][band].as_ref().map_or(at, |h| h.1);
+            if used > at {
+                self.order.insert(used, (view, band));
+                continue;
+            }
+            if let Some((maps, _)) = self.held[view][band].take() {
+                self.bytes -= maps.bytes();
+            }
+            return;
         }
     }
 }
@@ -226,18 +272,54 @@ struct Cluster {
     seen: BTreeSet<u32>,
 }
 
-/// Fuse the views' maps into one cloud, COLMAP's way, holding at most `cache_bytes` of maps
-/// (and one bit per pixel of every view): the cloud does not depend on the budget, only the
-/// reads do.
+/// One fused point: its position in the scene-local frame, unit normal, colour, and the
+/// images (input indices, ascending) whose pixels it fused.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FusedPoint {
+    pub position: DVec3,
+    pub normal: [f32; 3],
+    pub colour: [u8; 3],
+    pub images: Vec<u32>,
+}
+
+impl FusedCloud {
+    /// Append a point.
+    pub fn push(&mut self, p: FusedPoint) {
+        self.positions.push(p.position);
+        self.normals.push(p.normal);
+        self.colors.push(p.colour);
+        self.visibility.push(p.images);
+    }
+}
+
+/// Fuse the views' maps into one cloud held in memory (tests, small scenes): [`fuse_into`]
+/// collected.
 pub fn fuse<R: MapReader + ?Sized>(
     views: &[FusionView],
     reader: &mut R,
     cache_bytes: usize,
     opts: &FusionOptions,
 ) -> Result<(FusedCloud, FusionStats), R::Error> {
+    let mut cloud = FusedCloud::default();
+    let stats = fuse_into(views, reader, cache_bytes, opts, |p| {
+        cloud.push(p);
+        Ok(())
+    })?;
+    Ok((cloud, stats))
+}
+
+/// Fuse the views' maps COLMAP's way, handing each point to `sink` as it is made, holding at
+/// most `cache_bytes` of maps (and one bit per pixel of every view): the points do not depend
+/// on the budget, only the reads do.
+pub fn fuse_into<R: MapReader + ?Sized>(
+    views: &[FusionView],
+    reader: &mut R,
+    cache_bytes: usize,
+    opts: &FusionOptions,
+    mut sink: impl FnMut(FusedPoint) -> Result<(), R::Error>,
+) -> Result<FusionStats, R::Error> {
     let mut fused = FusedBits::new(views);
-    let mut cache = MapCache::new(reader, cache_bytes);
-    let mut out = FusedCloud::default();
+    let mut cache = MapCache::new(reader, views, cache_bytes);
     let mut queue: Vec<(usize, usize, usize, usize)> = Vec::new();
     for (start, view) in views.iter().enumerate() {
         for row in 0..view.height {
@@ -248,11 +330,13 @@ pub fn fuse<R: MapReader + ?Sized>(
                 queue.clear();
                 queue.push((start, row, col, 0));
                 let cluster = walk(views, &mut cache, &mut fused, &mut queue, opts)?;
-                push_point(&mut out, cluster, opts);
+                if let Some(point) = point_of(cluster, opts) {
+                    sink(point)?;
+                }
             }
         }
     }
-    Ok((out, cache.stats))
+    Ok(cache.stats)
 }
 
 /// One depth-first walk from the pixel on the queue: the pixels that agree with the first.
@@ -273,8 +357,9 @@ fn walk<R: MapReader + ?Sized>(
         if fused.get(i, p) {
             continue;
         }
-        let maps = cache.get(i)?;
-        let d = maps.depth[p] as f64;
+        let (maps, first) = cache.get(i, (img.width, img.height), p)?;
+        let q = p - first;
+        let d = maps.depth[q] as f64;
         if d.is_nan() || d <= 0.0 {
             continue;
         }
@@ -289,7 +374,7 @@ fn walk<R: MapReader + ?Sized>(
                 continue;
             }
         }
-        let nc = maps.normal[p];
+        let nc = maps.normal[q];
         let normal =
             img.rotation.transpose() * DVec3::new(nc[0] as f64, nc[1] as f64, nc[2] as f64);
         if let Some((_, ref_normal)) = reference {
@@ -305,7 +390,7 @@ fn walk<R: MapReader + ?Sized>(
         cluster.z.push(xyz.z);
         for k in 0..3 {
             cluster.n[k].push(normal[k]);
-            cluster.rgb[k].push(maps.rgb[3 * p + k] as f64);
+            cluster.rgb[k].push(maps.rgb[3 * q + k] as f64);
         }
         cluster.seen.insert(i as u32);
         if reference.is_none() {
@@ -337,9 +422,9 @@ fn walk<R: MapReader + ?Sized>(
 }
 
 /// A walk's point, if it gathered enough pixels and its normals do not cancel.
-fn push_point(out: &mut FusedCloud, mut cl: Cluster, opts: &FusionOptions) {
+fn point_of(mut cl: Cluster, opts: &FusionOptions) -> Option<FusedPoint> {
     if cl.x.len() < opts.min_num_pixels.max(1) {
-        return;
+        return None;
     }
     let n = DVec3::new(
         median(&mut cl.n[0]),
@@ -348,17 +433,15 @@ fn push_point(out: &mut FusedCloud, mut cl: Cluster, opts: &FusionOptions) {
     );
     let norm = n.length();
     if norm < f32::EPSILON as f64 {
-        return;
+        return None;
     }
     let n = n / norm;
-    out.positions.push(DVec3::new(
-        median(&mut cl.x),
-        median(&mut cl.y),
-        median(&mut cl.z),
-    ));
-    out.normals.push([n.x as f32, n.y as f32, n.z as f32]);
     let colour = |v: &mut Vec<f64>| median(v).round().clamp(0.0, 255.0) as u8;
     let [r, g, b] = &mut cl.rgb;
-    out.colors.push([colour(r), colour(g), colour(b)]);
-    out.visibility.push(cl.seen.into_iter().collect());
+    Some(FusedPoint {
+        position: DVec3::new(median(&mut cl.x), median(&mut cl.y), median(&mut cl.z)),
+        normal: [n.x as f32, n.y as f32, n.z as f32],
+        colour: [colour(r), colour(g), colour(b)],
+        images: cl.seen.into_iter().collect(),
+    })
 }

@@ -17,7 +17,10 @@ pub mod patchmatch;
 mod rng;
 pub mod view;
 
-pub use fusion::{fuse, FusedCloud, FusionMaps, FusionOptions, FusionStats, FusionView, MapReader};
+pub use fusion::{
+    bands_of, fuse, fuse_into, FusedCloud, FusedPoint, FusionMaps, FusionOptions, FusionStats,
+    FusionView, MapReader, BAND_ROWS,
+};
 pub use patchmatch::{
     filter, geometric, photometric, Hypotheses, PatchMatchOptions, Source, StereoMaps,
 };

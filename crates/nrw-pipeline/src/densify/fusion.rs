@@ -2,12 +2,15 @@
 
 use std::collections::BTreeMap;
 
-use nrw_colmap::dense::{DenseMap, MapKind, MapPass, Workspace};
+use std::ops::Range;
+use std::os::unix::fs::FileExt;
+
+use nrw_colmap::dense::{MapFile, MapKind, MapPass, Workspace};
 use nrw_colmap::Reconstruction;
 use nrw_stereo::FusionOptions;
 
 use super::config::DensifyConfig;
-use super::maps::{map_path, read_map, write_cfgs};
+use super::maps::{map_path, write_cfgs};
 use super::outcome::{DensifyReport, DensifyVerdict, ViewOutcome};
 use super::plan::{last_map, pass_done, Prepared};
 use super::record::publish;
@@ -103,20 +106,54 @@ fn shared_name(prep: &Prepared, path: &std::path::Path) -> Location {
     }
 }
 
-/// Reads a view's final (geometric) maps and colours from the workspace for fusion, and
-/// counts each view's depth pixels the first time it is read.
+/// Reads bands of a view's final (geometric) maps and colours from the workspace for fusion,
+/// and counts each view's depth pixels as its bands are first read.
 pub(super) struct WorkspaceMaps<'a> {
     ws: &'a Workspace,
     views: Vec<&'a Entry>,
-    pixels: Vec<Option<usize>>,
+    /// Per view, its maps once opened and checked.
+    files: Vec<Option<ViewFiles>>,
+    /// Per view, which bands are counted in `pixels`.
+    counted: Vec<Vec<bool>>,
+    pixels: Vec<usize>,
+    colours: ColourScratch,
+}
+
+/// A view's opened maps and its colours' scratch file.
+struct ViewFiles {
+    depth: MapFile,
+    normal: MapFile,
+    rgb: std::path::PathBuf,
+}
+
+/// The views' colours decoded once into raw RGB files, so a band's colours are read like its
+/// maps; the folder is in the staging workspace and removed before it is published.
+struct ColourScratch(std::path::PathBuf);
+
+impl ColourScratch {
+    fn new(ws: &Workspace) -> Result<Self> {
+        let dir = ws.root.join(".fusion-colours");
+        // Left by an interrupted finalize: nothing in it is kept.
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(|e| PipelineError::io(&dir, e))?;
+        }
+        std::fs::create_dir_all(&dir).map_err(|e| PipelineError::io(&dir, e))?;
+        Ok(ColourScratch(dir))
+    }
+}
+
+impl Drop for ColourScratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 impl WorkspaceMaps<'_> {
-    /// A map of view `e`, refused unless it has the view's size and `channels`.
-    fn map(&self, kind: MapKind, e: &Entry, channels: usize) -> Result<DenseMap> {
-        let m = read_map(self.ws, kind, MapPass::Geometric, &e.name)?;
+    /// A map of view `e` opened, refused unless it has the view's size and `channels`.
+    fn open(&self, kind: MapKind, e: &Entry, channels: usize) -> Result<MapFile> {
+        let path = map_path(self.ws, kind, MapPass::Geometric, &e.name)?;
+        let m = MapFile::open(&path)?;
         if (m.width, m.height, m.channels) != (e.width, e.height, channels) {
-            let path = map_path(self.ws, kind, MapPass::Geometric, &e.name)?;
             return Err(PipelineError::input(
                 &path,
                 format!(
@@ -127,26 +164,50 @@ impl WorkspaceMaps<'_> {
         }
         Ok(m)
     }
+
+    /// View `view`'s files, opened and its colours written to the scratch folder on first use.
+    fn files(&mut self, view: usize) -> Result<&ViewFiles> {
+        if self.files[view].is_none() {
+            let e = self.views[view];
+            let rgb = self.colours.0.join(format!("{view}.rgb"));
+            nrw_dataset::atomic::write_bytes_atomic(&rgb, load_rgb(self.ws, e)?.as_raw())?;
+            self.files[view] = Some(ViewFiles {
+                depth: self.open(MapKind::Depth, e, 1)?,
+                normal: self.open(MapKind::Normal, e, 3)?,
+                rgb,
+            });
+        }
+        Ok(self.files[view].as_ref().expect("opened above"))
+    }
 }
 
 impl nrw_stereo::MapReader for WorkspaceMaps<'_> {
     type Error = PipelineError;
 
-    fn read(&mut self, view: usize) -> Result<nrw_stereo::FusionMaps> {
-        let e = self.views[view];
-        let depth = self.map(MapKind::Depth, e, 1)?.data;
-        let normal = self.map(MapKind::Normal, e, 3)?.data;
-        self.pixels[view].get_or_insert(depth.iter().filter(|z| **z > 0.0).count());
+    fn read(&mut self, view: usize, pixels: Range<usize>) -> Result<nrw_stereo::FusionMaps> {
+        let f = self.files(view)?;
+        let depth = f.depth.read_plane(0, pixels.clone())?;
+        let [nx, ny, nz] = [0, 1, 2].map(|c| f.normal.read_plane(c, pixels.clone()));
+        let (nx, ny, nz) = (nx?, ny?, nz?);
+        let mut rgb = vec![0u8; pixels.len() * 3];
+        std::fs::File::open(&f.rgb)
+            .and_then(|file| file.read_exact_at(&mut rgb, 3 * pixels.start as u64))
+            .map_err(|e| PipelineError::io(&f.rgb, e))?;
+        let band = pixels.start / (self.views[view].width * nrw_stereo::BAND_ROWS);
+        if !std::mem::replace(&mut self.counted[view][band], true) {
+            self.pixels[view] += depth.iter().filter(|z| **z > 0.0).count();
+        }
         Ok(nrw_stereo::FusionMaps {
             depth,
-            normal: normal.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-            rgb: load_rgb(self.ws, e)?.into_raw(),
+            normal: (0..pixels.len()).map(|k| [nx[k], ny[k], nz[k]]).collect(),
+            rgb,
         })
     }
 }
 
 /// Fuse the final maps into `fused.ply` and `fused.ply.vis`, holding at most `cache_bytes` of
-/// maps; the number of points, each view's depth pixels and what the cache did.
+/// maps and writing each point as it is made; the number of points, each view's depth pixels
+/// and what the cache did.
 pub(super) fn fuse(
     ws: &Workspace,
     rec: &Reconstruction,
@@ -182,30 +243,28 @@ pub(super) fn fuse(
     let mut reader = WorkspaceMaps {
         ws,
         views: plan.iter().map(|(i, _, _)| &entries[*i]).collect(),
-        pixels: vec![None; plan.len()],
+        files: (0..plan.len()).map(|_| None).collect(),
+        counted: views
+            .iter()
+            .map(|v| vec![false; nrw_stereo::bands_of(v.height)])
+            .collect(),
+        pixels: vec![0; plan.len()],
+        colours: ColourScratch::new(ws)?,
     };
-    let (cloud, stats) = nrw_stereo::fuse(&views, &mut reader, cache_bytes, opts)?;
     // Visibility names images by their index in the workspace model (by id, as COLMAP reads it).
     let model_index: Vec<u32> = plan.iter().map(|(i, _, _)| *i as u32).collect();
     let origin = rec.scene_origin();
-    let ply = nrw_colmap::PointCloud {
-        path: ws.fused_ply(),
-        positions: cloud.positions.iter().map(|p| *p + origin).collect(),
-        colors: Some(cloud.colors.clone()),
-        normals: Some(cloud.normals.clone()),
-    };
-    nrw_colmap::write_ply(&ply, &ws.fused_ply())
-        .map_err(|e| PipelineError::io(ws.fused_ply(), e))?;
-    let vis: Vec<Vec<u32>> = cloud
-        .visibility
-        .iter()
-        .map(|v| v.iter().map(|&k| model_index[k as usize]).collect())
-        .collect();
-    nrw_dataset::atomic::write_bytes_atomic(
-        &ws.fused_vis(),
-        &nrw_colmap::dense::visibility_to_bytes(&vis),
-    )?;
-    // Every view starts walks, so every view was read.
-    let pixels = reader.pixels.iter().map(|p| p.unwrap_or(0)).collect();
-    Ok((cloud.positions.len(), pixels, stats))
+    let (ply, vis) = (ws.fused_ply(), ws.fused_vis());
+    let mut out = nrw_colmap::fused::FusedWriter::create(&ply, &vis)
+        .map_err(|e| PipelineError::io(&ply, e))?;
+    let stats = nrw_stereo::fuse_into(&views, &mut reader, cache_bytes, opts, |p| {
+        let images: Vec<u32> = p.images.iter().map(|&k| model_index[k as usize]).collect();
+        out.push(p.position + origin, p.normal, p.colour, &images)
+            .map_err(|e| PipelineError::io(&ply, e))
+    })?;
+    let points = out.finish().map_err(|e| PipelineError::io(&ply, e))? as usize;
+    // Every pixel starts a walk or was fused by one, so every band was read.
+    let pixels = std::mem::take(&mut reader.pixels);
+    drop(reader);
+    Ok((points, pixels, stats))
 }

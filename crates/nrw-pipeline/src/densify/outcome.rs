@@ -33,8 +33,8 @@ pub struct DensifyReport {
     pub out: nrw_dataset::Location,
     pub views: Vec<ViewOutcome>,
     pub points: usize,
-    /// Fusion's map reads (more than the views when its cache was too small for a walk's
-    /// views) and the most map bytes it held: what `--fusion-cache-mb` cost.
+    /// Fusion's band reads (more than the bands when its cache was too small for its walks'
+    /// bands) and the most map bytes it held: what `--fusion-cache-mb` cost.
     pub fusion: nrw_stereo::FusionStats,
     /// The bytes of every fused view's maps: the cache that reads each view once.
     pub fusion_all_bytes: usize,

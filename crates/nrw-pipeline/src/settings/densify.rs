@@ -164,9 +164,9 @@ pub struct DensifySettings {
     #[arg(long, default_value_t = DensifySettings::default().min_consistent)]
     pub min_consistent: usize,
     /// The most MiB of depth, normal and colour maps fusion holds at once (19 bytes a pixel of
-    /// a view): views beyond it are read again when a walk needs them, pixel by pixel once
-    /// the views outnumber it (finalize prints the size that reads each view once). The cloud
-    /// is the same whatever the size; only the time is not
+    /// a view, read in bands of 16 rows): a band dropped is read again when a walk needs it
+    /// (finalize prints the reads and the size that reads each band once). The cloud is the
+    /// same whatever the size; only the time is not
     #[arg(long, default_value_t = DensifySettings::default().fusion_cache_mb)]
     pub fusion_cache_mb: usize,
     /// Replace an existing workspace at the output (never replaced otherwise; in a pipeline

@@ -12,6 +12,8 @@ mod colmap_dense;
 mod dataset;
 #[path = "densify.rs"]
 mod densify;
+#[path = "docs.rs"]
+mod docs;
 #[path = "duplicates.rs"]
 mod duplicates;
 #[path = "export_models.rs"]

@@ -20,32 +20,81 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         "{err}"
     );
     assert!(!out.exists(), "nothing ran");
-    // sceaux_castle keeps its 11 views, then split asks for the paper's 100: a clear error.
+    // sceaux_castle registers 11 photos and the paper asks for 100 in val: refused before
+    // any stage runs, naming the key and the count.
     let err = failed(&run_pipeline(
         &paper,
         "sceaux_castle",
         &out,
         &["--weights", weights],
     ));
-    assert!(err.contains("--val 100") && err.contains("11"), "{err}");
     assert!(
-        out.join("shards").is_dir(),
-        "ingest ran before split failed"
+        err.contains("`split.val` is 100") && err.contains("registers 11 photos"),
+        "{err}"
     );
-    // The same stages with a small validation set run through to the export.
+    assert!(!out.exists(), "nothing ran before the refusal");
+    // The same with its sparse model only: refused before a dense workspace exists.
+    let sparse_only = tmp.path().join("sceaux_sparse");
+    for dir in ["sparse", "images"] {
+        copy_dir(
+            &data().join("sceaux_castle").join(dir),
+            &sparse_only.join(dir),
+        );
+    }
+    let o = nrw(&[
+        "run",
+        paper.to_str().unwrap(),
+        sparse_only.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--weights",
+        weights,
+    ]);
+    let err = failed(&o);
+    assert!(err.contains("`split.val` is 100"), "{err}");
+    assert!(!sparse_only.join("dense").exists(), "densify ran: {err}");
+    // Keys set on the command line are checked as the file's own, before any stage runs.
+    for (set, says) in [
+        ("split.vall=2", "unknown field `vall`"),
+        ("split.val=abc", "invalid type: string \"abc\""),
+        ("split.val=-1", "invalid value: integer `-1`"),
+        ("splitt.val=2", "unknown field `splitt`"),
+        ("qa.val=2", "unknown field `val`"),
+        ("split.val_fraction=2", "`split.val_fraction` is 2"),
+    ] {
+        let err = failed(&run_pipeline(
+            &paper,
+            "sceaux_castle",
+            &out,
+            &["--weights", weights, "--set", set],
+        ));
+        assert!(err.contains(says), "--set {set}: {err}");
+        assert!(!out.exists(), "--set {set}: nothing ran");
+    }
+    // Not TABLE.KEY=VALUE: a usage error (exit 2) saying the form.
+    let o = run_pipeline(&paper, "sceaux_castle", &out, &["--set", "val=2"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("`val` is not TABLE.KEY"), "{err}");
+    // The same stages with a small validation set, set on the command line, run through to
+    // the export; the manifest records the settings in effect.
     let small = tmp.path().join("small.toml");
-    std::fs::write(
-        &small,
-        std::fs::read_to_string(&paper)
-            .unwrap()
-            .replace("val = 100", "val = 2")
-            .replace("min_dim = 600", "min_dim = 200")
-            .replace("semantics = false", "semantics = false\ncrop = 192")
-            .replace("\"vgg16-512\"", "\"color-stats\""),
-    )
-    .unwrap();
     let out = tmp.path().join("sceaux2");
-    let o = run_pipeline(&small, "sceaux_castle", &out, &[]);
+    let o = run_pipeline(
+        &paper,
+        "sceaux_castle",
+        &out,
+        &[
+            "--set",
+            "split.val=2",
+            "--set",
+            "ingest.min_dim=200",
+            "--set",
+            "export.crop=192",
+            "--set",
+            "style.tier=color-stats",
+        ],
+    );
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(
@@ -63,6 +112,12 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         "{m}"
     );
     assert!(out.join("qa/report.html").is_file());
+    let manifest: serde_json::Value = serde_json::from_str(&m).unwrap();
+    assert_eq!(
+        manifest["parameters"]["min_dim"].as_u64(),
+        Some(200),
+        "--set ingest.min_dim=200 recorded"
+    );
     // sacre_coeur's sparse model keeps nothing: exit 3, later stages skipped. (The paper's
     // [densify] left out: with it, tests/densify.rs shows views kept.)
     let text = std::fs::read_to_string(&paper).unwrap();
@@ -76,9 +131,14 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         &sparse,
         "sacre_coeur",
         &tmp.path().join("sc"),
-        &["--weights", weights],
+        &["--weights", weights, "--set", "split.val=2"],
     );
-    assert_eq!(o.status.code(), Some(3));
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     // A table of one setting runs with the paper's others (once refused with "missing field
     // `min_dim`"): sacre_coeur's sparse renders judged at 99% empty, rendered at the paper's
     // 600 px and filtered at its 450 px, whatever it then keeps (exit 0, or 3 for none).
@@ -109,6 +169,18 @@ fn the_paper_pipeline_runs_its_stages_and_names_too_few_photos() {
         err.contains("small.toml") && err.contains("min_dimm"),
         "{err}"
     );
+}
+
+/// Copy a folder and everything in it.
+fn copy_dir(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for e in std::fs::read_dir(src).unwrap().flatten() {
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dst.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+        }
+    }
 }
 
 /// The stderr of a command that must fail with a clean error exit (as [`fails`] checks).

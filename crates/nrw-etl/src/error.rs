@@ -12,6 +12,10 @@ pub enum EtlError {
     /// A flag's value the library refused, named by the flag.
     #[error("{flag} {problem}")]
     Flag { flag: String, problem: String },
+    /// A problem with a pipeline file's keys (`run`), named as the file spells them: shown
+    /// as it is, never with flags in place of keys.
+    #[error("{0}")]
+    Keys(nrw_pipeline::PipelineError),
 }
 
 /// A stage's error; a setting it names is shown as the flag that sets it.
@@ -38,6 +42,11 @@ pub fn flags(text: &str) -> String {
 }
 
 impl EtlError {
+    /// Whether the message names pipeline keys, which the CLI must not turn into flags.
+    pub fn names_keys(&self) -> bool {
+        matches!(self, EtlError::Keys(_))
+    }
+
     /// Whether the stage stopped on request (exit code 130: run again to resume).
     pub fn interrupted(&self) -> bool {
         matches!(

@@ -76,9 +76,10 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::from(130)
         }
         Err(e) => {
+            let keys = e.names_keys();
             error::error_lines(&e)
                 .iter()
-                .for_each(|l| eprintln!("{}", error::flags(l)));
+                .for_each(|l| eprintln!("{}", if keys { l.clone() } else { error::flags(l) }));
             std::process::ExitCode::FAILURE
         }
     }

@@ -59,6 +59,12 @@ pub enum PipelineError {
         dataset: nrw_dataset::Location,
         problem: String,
     },
+    /// A pipeline key changed on the command line (`TABLE.KEY=VALUE`) that the table refuses.
+    #[error("`{set}`: {problem}")]
+    Override { set: String, problem: String },
+    /// What a pipeline run found wrong before its first stage, every problem at once.
+    #[error("the pipeline cannot run as set (nothing was started):\n  - {}", problems.join("\n  - "))]
+    Preflight { problems: Vec<String> },
     /// Work units that cannot be merged (missing, or run with other parameters).
     #[error("{dataset}: {problem}")]
     Units {

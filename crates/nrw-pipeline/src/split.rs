@@ -34,32 +34,48 @@ impl SplitConfig {
 pub const PAPER_VAL: usize = 100;
 
 impl SplitSettings {
+    /// Refused before any work: a fraction outside [0, 1), or both a count and a fraction.
+    pub fn check(&self) -> Result<()> {
+        if let Some(f) = self.val_fraction.filter(|f| !(0.0..1.0).contains(f)) {
+            return Err(PipelineError::config(
+                Setting::Key("split.val_fraction"),
+                format!("is {f}: a fraction of the kept photos, at least 0 and below 1"),
+            ));
+        }
+        if self.val.is_some() && self.val_fraction.is_some() {
+            return Err(PipelineError::config(
+                Setting::Key("split.val"),
+                format!(
+                    "and {} were both given: give exactly one, a count or a fraction",
+                    Setting::Key("split.val_fraction")
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The validation photos asked for as a count (`val`, or the paper's 100 when neither
+    /// `val` nor `val_fraction` is given); `None` for a fraction or a split file.
+    pub fn val_count(&self) -> Option<usize> {
+        match (self.val, self.val_fraction, &self.from_tsv) {
+            (_, _, Some(_)) | (None, Some(_), _) => None,
+            (Some(v), _, _) => Some(v),
+            (None, None, None) => Some(PAPER_VAL),
+        }
+    }
+
     /// The split of `dataset` these settings ask for: a fraction becomes a count of the
     /// dataset's kept photos here, for the CLI and pipeline files alike.
     pub fn config(&self, dataset: &nrw_dataset::Location) -> Result<SplitConfig> {
+        self.check()?;
         let val = match (self.val, self.val_fraction) {
-            (None, None) => PAPER_VAL,
-            (Some(v), None) => v,
-            (None, Some(f)) if (0.0..1.0).contains(&f) => {
+            (Some(v), _) => v,
+            (None, Some(f)) => {
                 let store = nrw_dataset::Store::open(dataset)?;
                 let kept = nrw_dataset::reader::Dataset::open(store)?.len();
                 ((kept as f64 * f) as usize).max(1)
             }
-            (None, Some(f)) => {
-                return Err(PipelineError::config(
-                    Setting::Key("split.val_fraction"),
-                    format!("is {f}: a fraction of the kept photos, at least 0 and below 1"),
-                ))
-            }
-            (Some(_), Some(_)) => {
-                return Err(PipelineError::config(
-                    Setting::Key("split.val"),
-                    format!(
-                        "and {} were both given: give exactly one, a count or a fraction",
-                        Setting::Key("split.val_fraction")
-                    ),
-                ))
-            }
+            (None, None) => PAPER_VAL,
         };
         Ok(SplitConfig {
             dataset: dataset.clone(),

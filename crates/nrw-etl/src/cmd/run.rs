@@ -31,11 +31,17 @@ pub struct RunArgs {
     /// renders DIR/fused.ply [default: SCENE/dense]
     #[arg(long, value_name = "DIR")]
     pub dense_out: Option<PathBuf>,
+    /// Change one key of the pipeline file for this run, as the file would spell it
+    /// (repeatable): `--set split.val=20 --set export.layout=gsplat`. Checked as the file's own
+    /// keys are (unknown keys and wrong types are refused, naming the key) before any stage
+    /// runs; the effective settings are recorded with the dataset
+    #[arg(long = "set", value_name = "TABLE.KEY=VALUE")]
+    pub set: Vec<nrw_pipeline::runner::Override>,
 }
 
 /// Run `run`; returns whether any view was kept (the caller maps "none" to exit code 3).
 pub fn run(args: &RunArgs) -> Result<bool> {
-    let p = Pipeline::load(&args.pipeline)?;
+    let p = Pipeline::load_with(&args.pipeline, &args.set).map_err(file_setting)?;
     let out = nrw_pipeline::runner::run(
         &p,
         &args.scene,
@@ -68,6 +74,9 @@ fn file_setting(e: nrw_pipeline::PipelineError) -> crate::error::EtlError {
                 setting,
                 problem: problem.replace(&Setting::DenseOut.to_string(), "--dense-out"),
             })
+        }
+        e @ (PipelineError::Preflight { .. } | PipelineError::Override { .. }) => {
+            crate::error::EtlError::Keys(e)
         }
         e => crate::error::EtlError::Pipeline(e),
     }

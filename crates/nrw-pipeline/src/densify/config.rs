@@ -80,7 +80,8 @@ impl Settings {
     }
 }
 
-pub(super) fn check(cfg: &DensifyConfig) -> Result<()> {
+/// Densify's settings refused before any work: each names its key.
+pub(crate) fn check(cfg: &DensifyConfig) -> Result<()> {
     let m = cfg.settings.matching();
     if m.max_sources == 0 || m.max_sources > nrw_stereo::patchmatch::MAX_SOURCES {
         return Err(PipelineError::config(

@@ -170,7 +170,9 @@ impl WorkspaceMaps<'_> {
         if self.files[view].is_none() {
             let e = self.views[view];
             let rgb = self.colours.0.join(format!("{view}.rgb"));
-            nrw_dataset::atomic::write_bytes_atomic(&rgb, load_rgb(self.ws, e)?.as_raw())?;
+            // Scratch, rewritten by a finalize run again: no rename or sync needed.
+            std::fs::write(&rgb, load_rgb(self.ws, e)?.as_raw())
+                .map_err(|err| PipelineError::io(&rgb, err))?;
             self.files[view] = Some(ViewFiles {
                 depth: self.open(MapKind::Depth, e, 1)?,
                 normal: self.open(MapKind::Normal, e, 3)?,

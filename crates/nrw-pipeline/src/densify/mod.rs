@@ -30,7 +30,7 @@ use nrw_colmap::UndistortOptions;
 
 use crate::error::{PipelineError, Result, Setting};
 use crate::{Progress, Unit};
-use config::{check, Settings};
+use config::Settings;
 use fusion::finish;
 use nrw_dataset::resume::{agree, record_bytes, Agreement};
 use nrw_dataset::{Location, Store};
@@ -39,6 +39,7 @@ use record::{claim, settings_differ, settings_of, staging_dir, Record, RECORD};
 use remote::Remote;
 use views::{entries, undistort_views};
 
+pub(crate) use config::check;
 pub use config::{
     DensifyConfig, DEFAULT_FUSION_CACHE_MB, DEFAULT_MAX_IMAGE_SIZE, DEFAULT_MAX_SOURCES,
 };

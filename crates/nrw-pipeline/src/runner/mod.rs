@@ -264,6 +264,7 @@ pub fn run(
         export,
         mut ingest,
     } = StageConfigs::of(p, scene, (out, export_dir), models)?;
+    preflight::preflight(p, scene)?;
     let mut outcome = RunOutcome {
         kept: true,
         dataset: out.clone(),
@@ -373,5 +374,9 @@ pub fn demo(
     Ok((report, out))
 }
 
+mod overrides;
+mod preflight;
 #[cfg(test)]
 mod tests;
+
+pub use overrides::Override;

@@ -13,6 +13,7 @@ use std::path::Path;
 
 use crate::error::{ColmapError, Record, Result};
 pub use crate::map_file::MapFile;
+use crate::map_file::{split_header, MAX_HEADER};
 
 /// A depth map (1 channel), a normal map (3 channels) or a confidence map, in float32 as
 /// COLMAP stores them (depth in the camera's z; normals unit vectors in camera space).
@@ -24,10 +25,6 @@ pub struct DenseMap {
     /// Row-major, interleaved: `data[(y * width + x) * channels + c]`.
     pub data: Vec<f32>,
 }
-
-/// The longest header COLMAP writes (three decimal numbers and three `&`), with room to spare:
-/// a file whose first `&`s are further in is not a map.
-pub(crate) const MAX_HEADER: usize = 64;
 
 impl DenseMap {
     /// A map of `channels` channels filled with `value`.
@@ -118,26 +115,6 @@ impl DenseMap {
         }
         Ok(map)
     }
-}
-
-/// The three numbers of a map header and the bytes after its third `&`; `None` when the
-/// header is not three decimal numbers each ended by `&` within [`MAX_HEADER`] bytes.
-pub(crate) fn split_header(bytes: &[u8]) -> Option<([usize; 3], &[u8])> {
-    let mut dims = [0usize; 3];
-    let mut at = 0;
-    for d in &mut dims {
-        let len = bytes[at..]
-            .iter()
-            .take(MAX_HEADER - at.min(MAX_HEADER))
-            .position(|&b| b == b'&')?;
-        let text = std::str::from_utf8(&bytes[at..at + len]).ok()?;
-        if text.is_empty() || !text.bytes().all(|b| b.is_ascii_digit()) {
-            return None;
-        }
-        *d = text.parse().ok()?;
-        at += len + 1;
-    }
-    Some((dims, &bytes[at..]))
 }
 
 /// `fused.ply.vis`: for each fused point, the indices (in the workspace's image order, not

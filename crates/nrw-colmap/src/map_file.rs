@@ -3,8 +3,31 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::dense::{split_header, MAX_HEADER};
 use crate::error::{ColmapError, Record, Result};
+
+/// The longest header COLMAP writes (three decimal numbers and three `&`), with room to spare:
+/// a file whose first `&`s are further in is not a map.
+pub(crate) const MAX_HEADER: usize = 64;
+
+/// The three numbers of a map header and the bytes after its third `&`; `None` when the
+/// header is not three decimal numbers each ended by `&` within [`MAX_HEADER`] bytes.
+pub(crate) fn split_header(bytes: &[u8]) -> Option<([usize; 3], &[u8])> {
+    let mut dims = [0usize; 3];
+    let mut at = 0;
+    for d in &mut dims {
+        let len = bytes[at..]
+            .iter()
+            .take(MAX_HEADER - at.min(MAX_HEADER))
+            .position(|&b| b == b'&')?;
+        let text = std::str::from_utf8(&bytes[at..at + len]).ok()?;
+        if text.is_empty() || !text.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        *d = text.parse().ok()?;
+        at += len + 1;
+    }
+    Some((dims, &bytes[at..]))
+}
 
 /// A map file opened for reading part of it: its header checked against the file's length, so
 /// fusion can read the rows it needs instead of the whole map.

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use super::Pipeline;
+use super::pipeline::Pipeline;
 use crate::error::{PipelineError, Result};
 
 /// One `--set TABLE.KEY=VALUE`.

@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use super::Pipeline;
+use super::pipeline::Pipeline;
 use crate::error::{PipelineError, Result, Setting};
 
 /// Refuse the run, listing every problem, when a setting cannot work on this scene.

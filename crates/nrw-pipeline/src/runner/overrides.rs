@@ -76,6 +76,9 @@ impl Pipeline {
     /// Parse a pipeline file with `overrides` applied, each checked alone first (so an error
     /// names its key), then the whole as the file's own keys are.
     pub fn load_with(path: &Path, overrides: &[Override]) -> Result<Pipeline> {
+        if overrides.is_empty() {
+            return Pipeline::load(path);
+        }
         let text = std::fs::read_to_string(path).map_err(|e| PipelineError::io(path, e))?;
         let file_error = |source| PipelineError::PipelineFile {
             path: path.into(),
@@ -95,9 +98,6 @@ impl Pipeline {
                     ))
                 })?;
             table.insert(o.key.clone(), o.value.clone());
-        }
-        if overrides.is_empty() {
-            return toml::from_str(&text).map_err(file_error);
         }
         Pipeline::deserialize(toml::Value::Table(doc)).map_err(|e| PipelineError::Override {
             set: overrides
